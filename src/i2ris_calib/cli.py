@@ -1,0 +1,217 @@
+"""Command-line interface: thin wrappers that parse options, load config, call one function.
+
+Heavy imports (cv2, numba, matplotlib) happen inside the commands, so ``--help`` is
+fast. Every user-fixable problem is a :class:`~i2ris_calib.errors.CalibError`,
+printed as one line with exit status 2; ``--debug`` shows the traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+
+from i2ris_calib import __version__
+
+app = typer.Typer(
+    name="i2ris-calib",
+    help="Calibrate the I2RIS snake robot: track markers, sync clocks, fit GPI/EGPI hysteresis, report.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+ConfigOpt = typer.Option(
+    None, "--config", "-c", help="Pipeline TOML (docs/config.md); defaults if omitted."
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"i2ris-calib {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    debug: bool = typer.Option(False, "--debug", help="Show Python tracebacks on errors."),
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version."
+    ),
+) -> None:
+    """I2RIS calibration pipeline."""
+
+
+def _config(path: Path | None):
+    from i2ris_calib.io.config_io import load_config
+
+    return load_config(path)
+
+
+@app.command()
+def simulate(
+    out: Path = typer.Option(..., "--out", "-o", help="Session folder to create."),
+    config: Path | None = ConfigOpt,
+    seed: int | None = typer.Option(None, help="Random seed (overrides [simulate] seed)."),
+    force: bool = typer.Option(False, "--force", help="Replace an existing session folder."),
+) -> None:
+    """Render a synthetic two-microscope session with known ground truth."""
+    cfg = _config(config)
+    from i2ris_calib.io.simulate import write_simulated_session
+
+    write_simulated_session(out, cfg, seed=seed, force=force)
+
+
+@app.command()
+def track(
+    session: Path = typer.Argument(..., help="Session folder (docs/session.md)."),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Output folder (default SESSION/track)."
+    ),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Track the ArUco cube in both videos: pitch and yaw per frame with a quality flag."""
+    cfg = _config(config)
+    from i2ris_calib.io.track import track_session
+
+    track_session(session, out, cfg)
+
+
+@app.command()
+def calibrate(
+    inputs: list[Path] = typer.Argument(
+        ..., help="ChArUco images/videos, or one ROS camera_info YAML."
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="Camera YAML to write (OpenCV FileStorage)."),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Camera intrinsics from ChArUco board views (or convert a ROS camera_info YAML)."""
+    cfg = _config(config)
+    from i2ris_calib.io.calibrate import calibrate_camera_files
+
+    calibrate_camera_files(inputs, out, cfg)
+
+
+@app.command()
+def sync(
+    session: Path = typer.Argument(..., help="Session folder."),
+    angles: Path | None = typer.Option(
+        None, help="Tracked angles CSV (default SESSION/track/angles.csv)."
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Output folder (default SESSION/sync)."
+    ),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Estimate camera/encoder clock offset and drift; write the synced CSV."""
+    cfg = _config(config)
+    from i2ris_calib.io.sync import sync_session
+
+    sync_session(session, angles, out, cfg)
+
+
+@app.command()
+def fit(
+    data: list[Path] = typer.Argument(..., help="Synced CSV file(s) (docs/formats.md)."),
+    axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
+    model: str = typer.Option("all", "--model", help="gpi, egpi or all."),
+    out: Path = typer.Option(Path("fit_out"), "--out", "-o", help="Output folder."),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Fit GPI and EGPI hysteresis models (Levenberg-Marquardt) per motion direction."""
+    cfg = _config(config)
+    from i2ris_calib.io.fit import fit_files
+
+    fit_files(data, axis=axis, model=model, out=out, config=cfg)
+
+
+@app.command("paper-sim")
+def paper_sim(out: Path = typer.Option(..., "--out", "-o", help="Output folder.")) -> None:
+    """Reproduce the paper's simulation verification (Section 3.1, Fig 3c/3d/4)."""
+    from i2ris_calib.io.paper_sim import write_paper_sim
+
+    write_paper_sim(out)
+
+
+@app.command()
+def diagnose(
+    data: Path = typer.Argument(..., help="Synced CSV with both axes."),
+    axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
+    start: str = typer.Option("egpi", "--start", help="Starting model: gpi or egpi."),
+    out: Path = typer.Option(Path("diagnose_out"), "--out", "-o", help="Output folder."),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Find where model and measurement disagree, name the missing effect, add it, refit."""
+    cfg = _config(config)
+    from i2ris_calib.io.diagnose import diagnose_file
+
+    diagnose_file(data, axis=axis, start=start, out=out, config=cfg)
+
+
+@app.command()
+def report(
+    run_dir: Path = typer.Argument(..., help="Run folder written by 'run' (or by track/sync/fit)."),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Output folder (default RUN_DIR/report)."
+    ),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Write a self-contained HTML report and its Markdown twin."""
+    cfg = _config(config)
+    from i2ris_calib.io.report import write_report
+
+    write_report(run_dir, out, cfg)
+
+
+@app.command()
+def run(
+    sessions: list[Path] = typer.Argument(..., help="Session folder(s)."),
+    out: Path = typer.Option(Path("runs"), "--out", "-o", help="Folder for the run outputs."),
+    config: Path | None = ConfigOpt,
+    force: bool = typer.Option(False, "--force", help="Redo every stage even if up to date."),
+    jobs: int = typer.Option(0, "--jobs", "-j", help="Parallel sessions (0 = number of cores)."),
+) -> None:
+    """track -> sync -> fit -> report for each session; stages skipped when up to date."""
+    cfg = _config(config)
+    from i2ris_calib.io.run import run_sessions
+
+    run_sessions(sessions, out=out, config=cfg, force=force, jobs=jobs)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point: one-line errors, no traceback unless --debug.
+
+    Typer handles usage errors, ``--help`` and exit codes itself (it exits through
+    SystemExit); everything else that escapes a command is caught here.
+    """
+    from i2ris_calib.errors import CalibError
+
+    args = sys.argv[1:] if argv is None else list(argv)
+    debug = "--debug" in args
+    try:
+        app(args=args, prog_name="i2ris-calib")
+    except SystemExit as exc:
+        code = exc.code
+        return code if isinstance(code, int) else (0 if code is None else 1)
+    except KeyboardInterrupt:
+        typer.echo("interrupted (no partial outputs were kept)", err=True)
+        return 130
+    except CalibError as exc:
+        if debug:
+            raise
+        typer.echo(f"error: {exc}", err=True)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - last line of defence, see --debug
+        if debug:
+            raise
+        typer.echo(
+            f"internal error: {type(exc).__name__}: {exc} (rerun with --debug for the traceback)",
+            err=True,
+        )
+        return 1
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,28 @@
+"""The whole pipeline's configuration: one TOML file, one section per stage.
+
+Loaded and validated by :func:`i2ris_calib.io.config_io.load_config`; documented in
+``docs/config.md``; example in ``configs/default.toml``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from i2ris_calib.diagnosis.config import DiagnosisConfig
+from i2ris_calib.fitting.config import FitConfig
+from i2ris_calib.report.config import ReportConfig
+from i2ris_calib.simulation.config import SimulationConfig
+from i2ris_calib.sync.config import SyncConfig
+from i2ris_calib.tracking.config import TrackingConfig
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """All stage sections; every key has a default so an empty file is valid."""
+
+    simulate: SimulationConfig = field(default_factory=SimulationConfig)
+    track: TrackingConfig = field(default_factory=TrackingConfig)
+    sync: SyncConfig = field(default_factory=SyncConfig)
+    fit: FitConfig = field(default_factory=FitConfig)
+    diagnose: DiagnosisConfig = field(default_factory=DiagnosisConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)

@@ -1,0 +1,103 @@
+"""The model contract shared by hysteresis models, fitters and the diagnosis workflow.
+
+A model declares its parameters (name, initial value, bounds, fixed flag, unit,
+one-line meaning) and has a pure ``evaluate``. A model is immutable: fitting never
+changes it; ``with_values`` returns a new model.
+
+Design follows astropy.modeling / lmfit: parameters are data, evaluation is a pure
+function of (signals, parameter vector).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One model parameter.
+
+    Attributes
+    ----------
+    name : str
+        Identifier, unique within a model (e.g. ``"a1"``, ``"kappa"``).
+    value : float
+        Initial (or fitted) value.
+    lower, upper : float
+        Bounds used by bounded fits and by start-point sampling.
+    fixed : bool
+        Held at ``value`` during fitting when True.
+    unit : str
+        Unit string, e.g. ``"deg/count"``.
+    doc : str
+        One-line meaning.
+    """
+
+    name: str
+    value: float
+    lower: float = -np.inf
+    upper: float = np.inf
+    fixed: bool = False
+    unit: str = ""
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Signals:
+    """Everything a model may read, all arrays of shape (n,) in time order.
+
+    Attributes
+    ----------
+    v : ndarray, shape (n,)
+        This axis's input (encoder counts; |counts| for a negative-input dataset).
+    t_s : ndarray, shape (n,), optional
+        Sample times in seconds (controller clock). Needed by time-dependent
+        effects (delay, creep, rate dependence).
+    v_other : ndarray, shape (n,), optional
+        The other axis's input (counts), for coupling effects.
+    theta_other_deg : ndarray, shape (n,), optional
+        The other axis's measured angle (deg), for coupling effects.
+    """
+
+    v: np.ndarray
+    t_s: np.ndarray | None = None
+    v_other: np.ndarray | None = None
+    theta_other_deg: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    def take(self, idx: np.ndarray) -> Signals:
+        """Signals restricted to index array or slice ``idx``."""
+
+        def sub(a):
+            return None if a is None else np.asarray(a)[idx]
+
+        return replace(
+            self,
+            v=np.asarray(self.v)[idx],
+            t_s=sub(self.t_s),
+            v_other=sub(self.v_other),
+            theta_other_deg=sub(self.theta_other_deg),
+        )
+
+
+@runtime_checkable
+class Model(Protocol):
+    """A hysteresis (or extended) model: parameters plus a pure evaluate."""
+
+    name: str
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        """Declared parameters, in the order of the value vector."""
+        ...
+
+    def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """Output angle in deg, shape (n,), for parameter vector ``values`` (shape (p,))."""
+        ...
+
+    def with_values(self, values: np.ndarray) -> Model:
+        """A new model whose parameter values are ``values``."""
+        ...

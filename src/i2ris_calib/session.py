@@ -1,0 +1,63 @@
+"""Description of one recording session (``session.toml``), as frozen dataclasses.
+
+The file format is documented in ``docs/session.md``. Paths inside are relative to
+the session folder. Loading lives in :mod:`i2ris_calib.io.session`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+
+@dataclass(frozen=True)
+class EncoderLogSpec:
+    """Where the motor encoder log is and how to read it (controller clock)."""
+
+    file: str = "encoders.csv"
+    format: Literal["csv", "rosbag"] = "csv"
+    time_column: str = "time_s"
+    yaw_column: str = "enc_yaw"
+    pitch_column: str = "enc_pitch"
+    sync_column: str = "sync_flash"
+    # ROS bags (ROS1 .bag or ROS2 folder/.mcap/.db3): one topic per motor.
+    yaw_topic: str = "/i2ris/yaw/encoder"
+    pitch_topic: str = "/i2ris/pitch/encoder"
+    sync_topic: str = ""
+    value_field: str = "data"
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    """One microscope camera: its video, frame timestamps and optics."""
+
+    video: str = ""
+    timestamps: str = ""
+    model: Literal["weak_perspective", "pinhole"] = "weak_perspective"
+    calibration: str = ""  # OpenCV or ROS camera_info YAML (pinhole); optional for weak perspective
+    pixel_size_mm: float = (
+        0.0  # object-space mm per pixel (weak perspective); 0 = derive from marker
+    )
+    marker_id: int = 0
+    # ideal viewing direction of this camera, in the robot base frame
+    view: Literal["top", "side"] = "top"
+
+
+@dataclass(frozen=True)
+class MarkerSpec:
+    """The ArUco cube on the gripper."""
+
+    dictionary: str = "DICT_4X4_50"
+    marker_size_mm: float = 0.8
+    cube_size_mm: float = 1.0
+
+
+@dataclass(frozen=True)
+class SessionSpec:
+    """A whole session: encoder log, cameras (by name) and marker geometry."""
+
+    name: str = "session"
+    encoder: EncoderLogSpec = field(default_factory=EncoderLogSpec)
+    cameras: dict = field(default_factory=dict)  # name -> CameraSpec (built by io.session)
+    marker: MarkerSpec = field(default_factory=MarkerSpec)
+    notes: str = ""

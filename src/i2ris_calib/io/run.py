@@ -1,0 +1,204 @@
+"""``i2ris-calib run``: track -> sync -> fit -> report for one or more sessions.
+
+Each stage writes its outputs atomically and then a stamp file ``.stamp.json`` in its
+folder recording the SHA-256 of its inputs, its config section and the package
+version. A stage is skipped when its stamp matches; the stamp is removed before a
+stage starts, so an interrupted stage is always redone (no half-written output is
+reused). Sessions run in parallel processes.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from i2ris_calib import __version__
+from i2ris_calib.config import PipelineConfig
+from i2ris_calib.errors import CalibError
+from i2ris_calib.io.atomic import write_json
+from i2ris_calib.io.config_io import dataclass_to_dict
+from i2ris_calib.io.provenance import file_sha256
+
+STAMP = ".stamp.json"
+AXES = ("yaw", "pitch")
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One pipeline stage of one session: where it writes and what it depends on."""
+
+    name: str
+    out_dir: Path
+    inputs: tuple[Path, ...]
+    config: Any
+    action: Callable[[], None]
+
+
+def stamp_of(stage: Stage) -> dict[str, Any]:
+    """What a stage's outputs were computed from (inputs' hashes, config, version)."""
+    cfg = json.dumps(dataclass_to_dict(stage.config), sort_keys=True, default=str)
+    return {
+        "stage": stage.name,
+        "version": __version__,
+        "config_sha256": hashlib.sha256(cfg.encode()).hexdigest(),
+        "inputs": {str(p): cached_sha256(p) for p in stage.inputs if p.is_file()},
+    }
+
+
+@functools.lru_cache(maxsize=256)
+def _sha256_keyed(path: str, size: int, mtime_ns: int) -> str:
+    return file_sha256(path)
+
+
+def cached_sha256(path: Path) -> str:
+    """SHA-256 of a file, computed once per (path, size, mtime) in this process."""
+    st = path.stat()
+    return _sha256_keyed(str(path), st.st_size, st.st_mtime_ns)
+
+
+def is_up_to_date(stage: Stage) -> bool:
+    """True when the stage's stamp exists and matches its current inputs and config."""
+    path = stage.out_dir / STAMP
+    if not path.is_file():
+        return False
+    try:
+        return json.loads(path.read_text()) == stamp_of(stage)
+    except (OSError, json.JSONDecodeError):
+        return False
+
+
+def run_stage(stage: Stage, force: bool) -> str:
+    """Run ``stage`` unless up to date; returns ``"ran"`` or ``"up to date"``."""
+    if not force and is_up_to_date(stage):
+        return "up to date"
+    (stage.out_dir / STAMP).unlink(missing_ok=True)
+    stage.action()
+    write_json(stage.out_dir / STAMP, stamp_of(stage))
+    return "ran"
+
+
+def session_inputs(session: Path) -> tuple[Path, ...]:
+    """Every file of a session the track and sync stages read (truth/ excluded)."""
+    return tuple(sorted(p for p in session.iterdir() if p.is_file() and not p.name.startswith(".")))
+
+
+def axis_moves(synced_csv: Path, axis: str, min_span_counts: float = 1.0) -> bool:
+    """True when the synced data contains motion of ``axis`` (its encoder changes)."""
+    import pandas as pd
+
+    col = f"enc_{axis}"
+    enc = pd.read_csv(synced_csv, usecols=lambda c: c == col)
+    return col in enc and float(enc[col].max() - enc[col].min()) >= min_span_counts
+
+
+def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
+    """The ordered stages for one session writing under ``run_dir``."""
+    from i2ris_calib.io.fit import fit_files
+    from i2ris_calib.io.report import write_report
+    from i2ris_calib.io.sync import sync_session
+    from i2ris_calib.io.track import track_session
+
+    track_dir, sync_dir = run_dir / "track", run_dir / "sync"
+    angles, synced = track_dir / "angles.csv", sync_dir / "synced.csv"
+    raw = session_inputs(session)
+    stages = [
+        Stage(
+            "track", track_dir, raw, config.track, lambda: track_session(session, track_dir, config)
+        ),
+        Stage(
+            "sync",
+            sync_dir,
+            (*raw, angles),
+            config.sync,
+            lambda: sync_session(session, angles, sync_dir, config),
+        ),
+    ]
+    for axis in AXES:
+        fit_dir = run_dir / "fit" / axis
+
+        def fit_axis(axis: str = axis, fit_dir: Path = fit_dir) -> None:
+            if axis_moves(synced, axis):
+                fit_files([synced], axis=axis, model="all", out=fit_dir, config=config)
+
+        stages.append(Stage(f"fit {axis}", fit_dir, (synced,), config.fit, fit_axis))
+    fit_jsons = tuple(run_dir / "fit" / a / "fit.json" for a in AXES)
+    stages.append(
+        Stage(
+            "report",
+            run_dir / "report",
+            (angles, synced, *fit_jsons),
+            config.report,
+            lambda: write_report(run_dir, run_dir / "report", config),
+        )
+    )
+    return stages
+
+
+def run_one_session(
+    session: Path, run_dir: Path, config: PipelineConfig, force: bool
+) -> list[tuple[str, str]]:
+    """Run every stage of one session in order; returns (stage, outcome) pairs."""
+    return [(st.name, run_stage(st, force)) for st in session_stages(session, run_dir, config)]
+
+
+def session_name(session: Path) -> str:
+    """The session's name from session.toml (folder name as fallback)."""
+    from i2ris_calib.io.session import load_session
+
+    return load_session(session).name or session.name
+
+
+def run_sessions(
+    sessions: Sequence[Path],
+    out: Path,
+    config: PipelineConfig,
+    force: bool = False,
+    jobs: int = 0,
+) -> dict[str, list[tuple[str, str]]]:
+    """Run the pipeline on every session, in parallel processes; print a summary.
+
+    Parameters
+    ----------
+    sessions : sequence of Path
+        Session folders (docs/session.md).
+    out : Path
+        Run outputs go to ``out/<session name>/``.
+    force : bool
+        Redo every stage even when its stamp says it is up to date.
+    jobs : int
+        Parallel sessions; 0 = number of cores.
+    """
+    from rich.console import Console
+
+    console = Console(stderr=True)
+    names = [session_name(Path(s)) for s in sessions]
+    if len(set(names)) != len(names):
+        raise CalibError(
+            f"two sessions share a name ({', '.join(names)}); give each a unique [name] in session.toml"
+        )
+    run_dirs = {name: Path(out) / name for name in names}
+    jobs = jobs or os.cpu_count() or 1
+    results: dict[str, list[tuple[str, str]]] = {}
+    if jobs == 1 or len(sessions) == 1:
+        for s, name in zip(sessions, names, strict=True):
+            console.print(f"[bold]{name}[/]: {s}")
+            results[name] = run_one_session(Path(s), run_dirs[name], config, force)
+    else:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(sessions))) as pool:
+            futures = {
+                pool.submit(run_one_session, Path(s), run_dirs[name], config, force): name
+                for s, name in zip(sessions, names, strict=True)
+            }
+            for fut in as_completed(futures):
+                results[futures[fut]] = fut.result()
+    for name in names:
+        done = ", ".join(f"{stage}: {outcome}" for stage, outcome in results[name])
+        console.print(f"[green]{name}[/] -> {run_dirs[name] / 'report' / 'report.html'} ({done})")
+    return results

@@ -179,6 +179,14 @@ def run(
     run_sessions(sessions, out=out, config=cfg, force=force, jobs=jobs)
 
 
+@app.command("config")
+def show_config(config: Path | None = ConfigOpt) -> None:
+    """Print the effective configuration (defaults merged with --config) as TOML."""
+    from i2ris_calib.io.config_io import to_toml
+
+    typer.echo(to_toml(_config(config)), nl=False)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: one-line errors, no traceback unless --debug.
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import json
 import sys
 import types
 import typing
@@ -110,7 +111,8 @@ def _coerce(tp: Any, value: Any, where: str) -> Any:
             if len(args) != len(value):
                 raise CalibError(f"{where}: expected {len(args)} values, got {len(value)}")
             return tuple(
-                _coerce(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+                _coerce(a, v, f"{where}[{i}]")
+                for i, (a, v) in enumerate(zip(args, value, strict=True))
             )
         return tuple(value)
     if origin in (dict, Mapping) or tp is dict:
@@ -154,3 +156,46 @@ def load_config(path: str | Path | None = None):
     if path is None:
         return PipelineConfig()
     return dataclass_from_mapping(PipelineConfig, load_toml(path), where=str(path))
+
+
+def to_toml(obj: Any) -> str:
+    """TOML text of a config dataclass tree (tables for nested dataclasses/dicts).
+
+    Round-trips through :func:`dataclass_from_mapping` for the types config uses
+    (str, bool, int, float, tuples/lists of those, nested tables). ``None`` values are
+    omitted (TOML has no null), so they fall back to the field default on reload.
+    """
+    lines: list[str] = []
+    _toml_table(dataclass_to_dict(obj), [], lines)
+    return "\n".join(lines).strip() + "\n"
+
+
+def _toml_table(table: Mapping[str, Any], path: list[str], lines: list[str]) -> None:
+    scalars = {k: v for k, v in table.items() if not isinstance(v, Mapping) and v is not None}
+    tables = {k: v for k, v in table.items() if isinstance(v, Mapping)}
+    if path and (scalars or not tables):
+        lines.append(f"\n[{'.'.join(_toml_key(p) for p in path)}]")
+    for k, v in scalars.items():
+        lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+    for k, v in tables.items():
+        _toml_table(v, [*path, k], lines)
+
+
+def _toml_key(key: str) -> str:
+    return key if key.replace("_", "").replace("-", "").isalnum() else json.dumps(key)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        if v != v or v in (float("inf"), float("-inf")):
+            return {True: "nan"}.get(v != v, "inf" if v > 0 else "-inf")
+        return repr(v)
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")

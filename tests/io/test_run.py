@@ -1,0 +1,60 @@
+"""Stage stamping of `run`: skip when up to date, redo after changes or interruption."""
+
+from dataclasses import dataclass
+
+import pytest
+
+from i2ris_calib.io.run import STAMP, Stage, is_up_to_date, run_stage
+
+
+@dataclass(frozen=True)
+class Cfg:
+    gain: float = 1.0
+
+
+def make_stage(tmp_path, calls, cfg=Cfg(), fail=False):
+    src = tmp_path / "in.txt"
+    out = tmp_path / "stage"
+
+    def action():
+        calls.append(1)
+        out.mkdir(exist_ok=True)
+        if fail:
+            raise KeyboardInterrupt
+        (out / "result.txt").write_text(src.read_text().upper())
+
+    return Stage("demo", out, (src,), cfg, action)
+
+
+def test_skips_when_up_to_date_and_reruns_on_input_change(tmp_path):
+    calls = []
+    (tmp_path / "in.txt").write_text("a")
+    st = make_stage(tmp_path, calls)
+    assert run_stage(st, force=False) == "ran"
+    assert run_stage(st, force=False) == "up to date"
+    assert len(calls) == 1
+    (tmp_path / "in.txt").write_text("b")
+    assert not is_up_to_date(st)
+    assert run_stage(st, force=False) == "ran"
+    assert (tmp_path / "stage" / "result.txt").read_text() == "B"
+
+
+def test_config_change_and_force_rerun(tmp_path):
+    calls = []
+    (tmp_path / "in.txt").write_text("a")
+    run_stage(make_stage(tmp_path, calls), force=False)
+    assert run_stage(make_stage(tmp_path, calls, cfg=Cfg(gain=2.0)), force=False) == "ran"
+    assert run_stage(make_stage(tmp_path, calls, cfg=Cfg(gain=2.0)), force=True) == "ran"
+    assert len(calls) == 3
+
+
+def test_interrupted_stage_is_redone(tmp_path):
+    calls = []
+    (tmp_path / "in.txt").write_text("a")
+    run_stage(make_stage(tmp_path, calls), force=False)
+    (tmp_path / "in.txt").write_text("c")
+    with pytest.raises(KeyboardInterrupt):
+        run_stage(make_stage(tmp_path, calls, fail=True), force=False)
+    assert not (tmp_path / "stage" / STAMP).exists()
+    assert run_stage(make_stage(tmp_path, calls), force=False) == "ran"
+    assert (tmp_path / "stage" / "result.txt").read_text() == "C"

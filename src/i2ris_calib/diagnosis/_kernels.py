@@ -1,0 +1,108 @@
+"""Sequential state loops of the effect catalogue, compiled with numba.
+
+Each loop runs once per model evaluation and the diagnosis evaluates models a few
+thousand times, so the loops are compiled (``cache=True``: compiled once per
+machine). All inputs are float64 arrays of shape (n,).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def play_varying(v, h):
+    """Play (backlash) operator with a time-varying half-width.
+
+    ``u[k] = clip(u[k-1], v[k] - h[k], v[k] + h[k])``, ``u[-1] = v[0]``.
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+        Input (counts).
+    h : ndarray, shape (n,)
+        Half-width of the band, >= 0 (counts).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Output of the operator (counts).
+    """
+    n = v.shape[0]
+    u = np.empty(n)
+    prev = v[0] if n > 0 else 0.0
+    for k in range(n):
+        lo = v[k] - h[k]
+        hi = v[k] + h[k]
+        cur = prev
+        if cur < lo:
+            cur = lo
+        elif cur > hi:
+            cur = hi
+        u[k] = cur
+        prev = cur
+    return u
+
+
+@njit(cache=True)
+def staged_backlash(v, v_flag, width):
+    """Input seen through one more backlash stage engaged below a flag point.
+
+    A slack ``d`` in [0, width] (counts) is taken up while the input falls at or
+    below ``v_flag`` and given back while it rises; the stage's output is
+    ``u = v + d``. So on a falling branch the output holds for ``width`` counts
+    once the input passes ``v_flag`` (the extra dead zone of the stage), and the
+    next rising branch first pays the slack back.
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+        Input (counts).
+    v_flag, width : float
+        Flag point and slack of the stage (counts).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Effective input (counts).
+    """
+    n = v.shape[0]
+    u = np.empty(n)
+    d = 0.0
+    for k in range(n):
+        if k > 0:
+            dv = v[k] - v[k - 1]
+            if dv < 0.0 and v[k] <= v_flag:
+                # only the part of the step below the flag point feeds the slack
+                step = min(-dv, v_flag - v[k])
+                d = min(width, d + step)
+            elif dv > 0.0:
+                d = max(0.0, d - dv)
+        u[k] = v[k] + d
+    return u
+
+
+@njit(cache=True)
+def first_order_lag(y, t, tau):
+    """First-order low-pass of ``y`` sampled at times ``t`` (exact for held input).
+
+    ``x[k] = x[k-1] + (1 - exp(-(t[k]-t[k-1])/tau)) (y[k] - x[k-1])``, ``x[0] = y[0]``.
+
+    Parameters
+    ----------
+    y : ndarray, shape (n,)
+    t : ndarray, shape (n,)
+        Sample times (s), non-decreasing.
+    tau : float
+        Time constant (s), > 0.
+    """
+    n = y.shape[0]
+    x = np.empty(n)
+    if n == 0:
+        return x
+    x[0] = y[0]
+    for k in range(1, n):
+        a = 1.0 - np.exp(-(t[k] - t[k - 1]) / tau)
+        x[k] = x[k - 1] + a * (y[k] - x[k - 1])
+    return x

@@ -1,0 +1,551 @@
+"""The catalogue of candidate effects: model extensions that wrap any base model.
+
+An :class:`Effect` declares its own parameters and transforms the signals going
+into the wrapped model (input-side effects: delay, dead zone, rate-dependent
+backlash, an extra backlash stage) and/or the angle coming out of it
+(output-side effects: coupling, creep, saturation). :class:`EffectModel` joins a
+wrapped model and one effect into a new object that satisfies the
+:class:`~i2ris_calib.hysteresis.model.Model` protocol, so effects stack
+(``EffectModel(EffectModel(base, a), b)``) and the same fitter fits all of them.
+
+Every effect has a *neutral* parameter vector for which the extended model equals
+the wrapped one exactly (zero width, zero gain, zero delay, knee beyond the
+range); the diagnosis starts candidates there or on a small grid around it.
+
+The catalogue is not in the paper (Yue et al. list yaw-pitch coupling as future
+work); each formula below is our choice and is documented in docs/diagnosis.md.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.model import Model, Parameter, Signals
+
+
+@dataclass(frozen=True)
+class EffectParam:
+    """Declaration of one effect parameter (bounds, default, unit, meaning)."""
+
+    name: str
+    default: float
+    lower: float
+    upper: float
+    unit: str
+    doc: str
+
+
+@dataclass(frozen=True)
+class Effect:
+    """Base class of a catalogue entry. Subclasses override the transforms.
+
+    Attributes
+    ----------
+    name : str
+        Catalogue name, e.g. ``"time_delay"``.
+    params : tuple of EffectParam
+        Declared parameters, in the order of the effect's value vector.
+    meaning : str
+        One-line physical meaning.
+    needs : tuple of str
+        Signals fields required (``"t_s"``, ``"other"``).
+    """
+
+    name: str = ""
+    params: tuple[EffectParam, ...] = ()
+    meaning: str = ""
+    needs: tuple[str, ...] = ()
+
+    def neutral(self) -> np.ndarray:
+        """Parameter vector for which the effect does nothing, shape (p,)."""
+        return np.array([p.default for p in self.params], dtype=float)
+
+    def transform_input(self, signals: Signals, p: np.ndarray) -> Signals:
+        """Signals fed to the wrapped model (identity unless overridden)."""
+        return signals
+
+    def transform_output(self, y: np.ndarray, signals: Signals, p: np.ndarray) -> np.ndarray:
+        """Angle (deg) returned by the extended model (identity unless overridden)."""
+        return y
+
+    def start_grid(self, signals: Signals, y_deg: np.ndarray) -> list[np.ndarray]:
+        """Starting parameter vectors for the candidate fit, scaled to the data.
+
+        Parameters
+        ----------
+        signals : Signals
+            Data the candidate is fitted to.
+        y_deg : ndarray, shape (n,)
+            Current model output (deg), for output-side scales.
+        """
+        return [self.neutral()]
+
+    def available(self, signals: Signals) -> str | None:
+        """None when ``signals`` carry what the effect needs, else the reason."""
+        if "t_s" in self.needs and signals.t_s is None:
+            return "needs sample times (t_s)"
+        if "other" in self.needs:
+            other = [
+                a
+                for a in (signals.v_other, signals.theta_other_deg)
+                if a is not None and np.nanstd(np.asarray(a, float)) > 0
+            ]
+            if not other:
+                return "needs the other axis's input or angle, and it does not move"
+        return None
+
+
+def _span(a: np.ndarray) -> float:
+    a = np.asarray(a, float)
+    s = float(np.nanmax(a) - np.nanmin(a)) if a.size else 0.0
+    return s if s > 0 else 1.0
+
+
+def _rate(signals: Signals) -> np.ndarray:
+    """Input rate dv/dt (counts/s), shape (n,), central differences."""
+    v = np.asarray(signals.v, float)
+    t = np.asarray(signals.t_s, float)
+    if v.size < 2:
+        return np.zeros_like(v)
+    return np.gradient(v, t)
+
+
+@dataclass(frozen=True)
+class MultiStageBacklash(Effect):
+    """One more backlash stage engaged below a flag point on falling input."""
+
+    name: str = "multi_stage_backlash"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "v_flag_counts",
+            0.0,
+            -1e9,
+            1e9,
+            "counts",
+            "input below which the stage's slack is taken up on a falling branch",
+        ),
+        EffectParam(
+            "width_counts",
+            0.0,
+            0.0,
+            1e9,
+            "counts",
+            "slack of the stage: input travel during which the output holds",
+        ),
+    )
+    meaning: str = "a further backlash stage with its own flag point (EGPI-like switching)"
+
+    def transform_input(self, signals, p):
+        from i2ris_calib.diagnosis._kernels import staged_backlash
+
+        v = np.ascontiguousarray(signals.v, dtype=float)
+        return replace(signals, v=staged_backlash(v, float(p[0]), float(p[1])))
+
+    def start_grid(self, signals, y_deg):
+        v = np.asarray(signals.v, float)
+        span = _span(v)
+        flags = np.quantile(v, [0.2, 0.35, 0.5, 0.65, 0.8])
+        return [np.array([f, w * span]) for f in flags for w in (0.04, 0.1)]
+
+
+@dataclass(frozen=True)
+class AxisCoupling(Effect):
+    """The other axis's angle and input add linearly to this axis's angle."""
+
+    name: str = "axis_coupling"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "gain_angle",
+            0.0,
+            -2.0,
+            2.0,
+            "deg/deg",
+            "angle added per degree of the other axis's angle",
+        ),
+        EffectParam(
+            "gain_input_deg_per_count",
+            0.0,
+            -1.0,
+            1.0,
+            "deg/count",
+            "angle added per count of the other axis's input",
+        ),
+    )
+    meaning: str = "cross-talk: the other axis's bending or tendon pull moves this axis"
+    needs: tuple[str, ...] = ("other",)
+
+    def transform_output(self, y, signals, p):
+        out = np.array(y, dtype=float)
+        if signals.theta_other_deg is not None:
+            th = np.asarray(signals.theta_other_deg, float)
+            out = out + p[0] * np.where(np.isfinite(th), th, 0.0)
+        if signals.v_other is not None:
+            out = out + p[1] * np.asarray(signals.v_other, float)
+        return out
+
+    def start_grid(self, signals, y_deg):
+        return [self.neutral()]
+
+
+@dataclass(frozen=True)
+class TimeDelay(Effect):
+    """A pure delay between input and output."""
+
+    name: str = "time_delay"
+    params: tuple[EffectParam, ...] = (
+        EffectParam("tau_s", 0.0, 0.0, 5.0, "s", "delay of the output behind the input"),
+    )
+    meaning: str = "transport delay (tendon wave, controller or logging latency)"
+    needs: tuple[str, ...] = ("t_s",)
+
+    def transform_input(self, signals, p):
+        t = np.asarray(signals.t_s, float)
+        v = np.asarray(signals.v, float)
+        return replace(signals, v=np.interp(t - float(p[0]), t, v))
+
+    def start_grid(self, signals, y_deg):
+        t = np.asarray(signals.t_s, float)
+        dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
+        return [np.array([k * dt]) for k in (1, 3, 8, 20)]
+
+
+@dataclass(frozen=True)
+class RateDependence(Effect):
+    """Backlash whose width grows with the (smoothed) input speed."""
+
+    name: str = "rate_dependence"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "gain_s",
+            0.0,
+            0.0,
+            10.0,
+            "s",
+            "extra half-width of the backlash (counts) per count/s of input speed",
+        ),
+        EffectParam(
+            "tau_rate_s",
+            1.0,
+            0.02,
+            30.0,
+            "s",
+            "time constant of the speed average that sets the width",
+        ),
+    )
+    meaning: str = "viscous friction: faster strokes leave a wider backlash"
+    needs: tuple[str, ...] = ("t_s",)
+
+    def half_width_counts(self, signals: Signals, p: np.ndarray) -> np.ndarray:
+        """Backlash half-width h[k] = gain_s * EMA(|dv/dt|) (counts), shape (n,)."""
+        from i2ris_calib.diagnosis._kernels import first_order_lag
+
+        speed = np.abs(_rate(signals))
+        t = np.ascontiguousarray(signals.t_s, dtype=float)
+        return float(p[0]) * first_order_lag(np.ascontiguousarray(speed), t, float(p[1]))
+
+    def transform_input(self, signals, p):
+        from i2ris_calib.diagnosis._kernels import play_varying
+
+        v = np.ascontiguousarray(signals.v, dtype=float)
+        return replace(signals, v=play_varying(v, self.half_width_counts(signals, p)))
+
+    def start_grid(self, signals, y_deg):
+        speed = np.abs(_rate(signals))
+        s95 = float(np.quantile(speed, 0.95)) or 1.0
+        span = _span(signals.v)
+        t = np.asarray(signals.t_s, float)
+        dur = float(t[-1] - t[0]) if t.size > 1 else 1.0
+        taus = [max(0.02, dur / 200), max(0.05, dur / 40)]
+        return [np.array([f * span / s95, tau]) for f in (0.01, 0.03) for tau in taus]
+
+
+@dataclass(frozen=True)
+class Creep(Effect):
+    """Slow first-order relaxation of part of every output change."""
+
+    name: str = "creep"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "gain",
+            0.0,
+            0.0,
+            0.9,
+            "1",
+            "fraction of an output change that arrives slowly",
+        ),
+        EffectParam("tau_s", 1.0, 0.01, 100.0, "s", "time constant of the slow part"),
+    )
+    meaning: str = "visco-elastic creep of tendons and sheath while the input holds"
+    needs: tuple[str, ...] = ("t_s",)
+
+    def transform_output(self, y, signals, p):
+        from i2ris_calib.diagnosis._kernels import first_order_lag
+
+        y = np.ascontiguousarray(y, dtype=float)
+        t = np.ascontiguousarray(signals.t_s, dtype=float)
+        return (1.0 - p[0]) * y + p[0] * first_order_lag(y, t, float(p[1]))
+
+    def start_grid(self, signals, y_deg):
+        return [np.array([g, tau]) for g in (0.05, 0.15) for tau in (0.3, 1.0, 3.0)]
+
+
+@dataclass(frozen=True)
+class DeadZone(Effect):
+    """Input band around each reversal over which the output does not change."""
+
+    name: str = "dead_zone"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "width_counts",
+            0.0,
+            0.0,
+            1e9,
+            "counts",
+            "input travel after a reversal before the output moves",
+        ),
+    )
+    meaning: str = "slack in the tendon: after a reversal the input moves, the tip does not"
+
+    def transform_input(self, signals, p):
+        from i2ris_calib.diagnosis._kernels import play_varying
+
+        v = np.ascontiguousarray(signals.v, dtype=float)
+        h = np.full(v.shape, 0.5 * float(p[0]))
+        return replace(signals, v=play_varying(v, h))
+
+    def start_grid(self, signals, y_deg):
+        span = _span(signals.v)
+        return [np.array([f * span]) for f in (0.01, 0.03, 0.08)]
+
+
+@dataclass(frozen=True)
+class Saturation(Effect):
+    """Output flattening beyond a knee (applied to |angle|, sign kept)."""
+
+    name: str = "saturation"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "knee_deg",
+            1e6,
+            0.0,
+            1e6,
+            "deg",
+            "|angle| above which the output starts to flatten",
+        ),
+        EffectParam(
+            "limit_deg",
+            10.0,
+            0.01,
+            1e3,
+            "deg",
+            "largest |angle| reachable beyond the knee",
+        ),
+    )
+    meaning: str = "the tip runs out of travel: tendon stretch or joint stops near the end"
+
+    def transform_output(self, y, signals, p):
+        y = np.asarray(y, dtype=float)
+        knee, lim = float(p[0]), float(p[1])
+        a = np.abs(y)
+        over = np.maximum(a - knee, 0.0)
+        sat = np.where(a > knee, knee + lim * np.tanh(over / lim), a)
+        return np.sign(y) * sat
+
+    def start_grid(self, signals, y_deg):
+        a = np.abs(np.asarray(y_deg, float))
+        top = float(np.nanmax(a)) if a.size else 1.0
+        return [np.array([q * top, f * top]) for q in (0.6, 0.75, 0.9) for f in (0.05, 0.15, 0.4)]
+
+
+#: The catalogue, by name, in documentation order.
+CATALOGUE: dict[str, Effect] = {
+    e.name: e
+    for e in (
+        MultiStageBacklash(),
+        AxisCoupling(),
+        TimeDelay(),
+        RateDependence(),
+        Creep(),
+        DeadZone(),
+        Saturation(),
+    )
+}
+
+
+def get_effect(name: str) -> Effect:
+    """The catalogue entry ``name``; CalibError with the closest name otherwise."""
+    if name in CATALOGUE:
+        return CATALOGUE[name]
+    close = difflib.get_close_matches(name, list(CATALOGUE), n=1, cutoff=0.5)
+    hint = f"did you mean '{close[0]}'?" if close else f"valid: {', '.join(CATALOGUE)}"
+    raise CalibError(f"unknown effect '{name}' ({hint})")
+
+
+@dataclass(frozen=True)
+class EffectModel:
+    """A model extended by one effect; satisfies the Model protocol.
+
+    Parameters of the wrapped model come first, then the effect's, named
+    ``"<label>.<param>"`` (e.g. ``"time_delay.tau_s"``).
+
+    Attributes
+    ----------
+    inner : Model
+        The wrapped model (a base model or another EffectModel).
+    effect : Effect
+        The catalogue entry.
+    values : tuple of float
+        The effect's parameter values, shape (p_effect,).
+    label : str
+        Prefix of the effect's parameter names (the effect name, suffixed
+        ``_2``, ``_3``... when the same effect is stacked twice).
+    fixed : tuple of bool
+        Fixed flags of the effect's parameters (default all free).
+    """
+
+    inner: Model
+    effect: Effect
+    values: tuple[float, ...]
+    label: str = ""
+    fixed: tuple[bool, ...] = ()
+
+    @property
+    def name(self) -> str:
+        return f"{self.inner.name}+{self.label or self.effect.name}"
+
+    @property
+    def n_inner(self) -> int:
+        """Number of parameters of the wrapped model."""
+        return len(self.inner.parameters)
+
+    @property
+    def parameters(self) -> tuple[Parameter, ...]:
+        label = self.label or self.effect.name
+        fixed = self.fixed or (False,) * len(self.effect.params)
+        own = tuple(
+            Parameter(
+                name=f"{label}.{p.name}",
+                value=float(v),
+                lower=p.lower,
+                upper=p.upper,
+                fixed=bool(f),
+                unit=p.unit,
+                doc=p.doc,
+            )
+            for p, v, f in zip(self.effect.params, self.values, fixed, strict=True)
+        )
+        return tuple(self.inner.parameters) + own
+
+    def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """Angle (deg), shape (n,): the wrapped model on transformed signals, then
+        the output transform."""
+        values = np.asarray(values, dtype=float)
+        m = self.n_inner
+        pin, peff = values[:m], values[m:]
+        y = self.inner.evaluate(self.effect.transform_input(signals, peff), pin)
+        return self.effect.transform_output(y, signals, peff)
+
+    def with_values(self, values: np.ndarray) -> EffectModel:
+        values = np.asarray(values, dtype=float)
+        m = self.n_inner
+        return replace(
+            self,
+            inner=self.inner.with_values(values[:m]),
+            values=tuple(float(x) for x in values[m:]),
+        )
+
+
+def model_values(model: Model) -> np.ndarray:
+    """Current parameter vector of ``model``, shape (p,)."""
+    return np.array([p.value for p in model.parameters], dtype=float)
+
+
+def base_of(model: Model) -> Model:
+    """The innermost (base) model under any stack of effects."""
+    while isinstance(model, EffectModel):
+        model = model.inner
+    return model
+
+
+def effects_of(model: Model) -> list[tuple[str, str, dict[str, float]]]:
+    """Effects of ``model`` innermost first, as (effect name, label, {param: value})."""
+    out = []
+    while isinstance(model, EffectModel):
+        vals = {p.name: float(v) for p, v in zip(model.effect.params, model.values, strict=True)}
+        out.append((model.effect.name, model.label or model.effect.name, vals))
+        model = model.inner
+    return out[::-1]
+
+
+def add_effect(model: Model, name: str, values: Mapping[str, float] | None = None) -> EffectModel:
+    """``model`` extended by catalogue effect ``name``.
+
+    Parameters
+    ----------
+    model : Model
+        Model to wrap (unchanged).
+    name : str
+        Catalogue name (see :data:`CATALOGUE`).
+    values : mapping, optional
+        Effect parameter values by (unprefixed) name; missing ones take the
+        effect's neutral default. Unknown names or values outside the declared
+        bounds raise CalibError.
+    """
+    effect = get_effect(name)
+    values = dict(values or {})
+    known = [p.name for p in effect.params]
+    for key in values:
+        if key not in known:
+            close = difflib.get_close_matches(key, known, n=1, cutoff=0.5)
+            hint = f"did you mean '{close[0]}'?" if close else f"valid: {', '.join(known)}"
+            raise CalibError(f"effect '{name}': unknown parameter '{key}' ({hint})")
+    vec = []
+    for p in effect.params:
+        v = float(values.get(p.name, p.default))
+        if not (p.lower <= v <= p.upper) or not np.isfinite(v):
+            raise CalibError(
+                f"effect '{name}': {p.name} = {v} outside [{p.lower}, {p.upper}] {p.unit}"
+            )
+        vec.append(v)
+    used = {lbl for _, lbl, _ in effects_of(model)}
+    label, k = name, 2
+    while label in used:
+        label, k = f"{name}_{k}", k + 1
+    return EffectModel(inner=model, effect=effect, values=tuple(vec), label=label)
+
+
+def build_model(base: Model, effects: Mapping[str, Mapping[str, float]]) -> Model:
+    """``base`` extended by the given effects, applied in mapping order.
+
+    This is the function the simulator uses to render truth data with hidden
+    effects (``[simulate] effects`` config table). The first effect listed wraps
+    the base model directly; each further one wraps the result (so input-side
+    transforms of later effects act first, output-side ones last).
+
+    Parameters
+    ----------
+    base : Model
+        Base model with its parameter values (e.g. a fitted or truth EGPI).
+    effects : mapping of str to mapping of str to float
+        Effect name -> its parameter values (unprefixed names as declared in
+        :data:`CATALOGUE`; omitted ones take the neutral default).
+
+    Returns
+    -------
+    Model
+        ``base`` itself when ``effects`` is empty, else an :class:`EffectModel`.
+
+    Examples
+    --------
+    >>> m = build_model(egpi, {"time_delay": {"tau_s": 0.15}})  # doctest: +SKIP
+    >>> theta = m.evaluate(Signals(v=v, t_s=t), model_values(m))  # doctest: +SKIP
+    """
+    model = base
+    for name, values in effects.items():
+        model = add_effect(model, name, values)
+    return model

@@ -157,11 +157,12 @@ def report(
     ),
     config: Path | None = ConfigOpt,
 ) -> None:
-    """Write a self-contained HTML report and its Markdown twin."""
+    """Write a self-contained HTML report and its Markdown twin (docs/report.md)."""
     cfg = _config(config)
     from i2ris_calib.io.report import write_report
 
-    write_report(run_dir, out, cfg)
+    page = write_report(run_dir, out, cfg)
+    typer.echo(f"wrote {page} and {page.with_name('report.md')}")
 
 
 @app.command()

@@ -1,0 +1,348 @@
+"""``i2ris-calib report RUN_DIR``: read a run folder, write report.html + report.md.
+
+Reading is strict about what is there and lenient about what is not: a missing
+stage output is recorded in :attr:`RunData.absent` and stated in the report; a
+present but malformed JSON/CSV is a one-line :class:`CalibError` naming the file.
+The output folder is written as a whole (temporary folder, renamed when complete).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.report.data import DiagnosisData, FitData, RunData
+
+AXES = ("yaw", "pitch")
+REPORT_FILES = {"report.html", "report.md", "figures"}
+FIGURE_DIR = "figures"
+
+ANGLES_COLUMNS = {"time_s": True, "yaw_deg": True, "pitch_deg": True, "status": False}
+SYNCED_COLUMNS = {
+    "time_s": True,
+    "enc_yaw": True,
+    "enc_pitch": True,
+    "yaw_deg": True,
+    "pitch_deg": True,
+}
+PREDICTION_COLUMNS = {
+    "dataset": False,
+    "time_s": True,
+    "v": True,
+    "theta_deg": True,
+    "split": False,
+}
+OPTIONAL_NUMERIC = ("reproj_err_px", "gpi_deg", "egpi_deg")
+
+
+class _Reader:
+    """Reads files of one run folder, remembering which exist and which do not."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+        self.absent: dict[str, str] = {}
+        self.read: list[Path] = []
+
+    def path(self, label: str) -> Path | None:
+        p = self.root / label
+        if not p.is_file():
+            self.absent[label] = "not found"
+            return None
+        self.read.append(p)
+        return p
+
+    def json(self, label: str) -> dict[str, Any] | None:
+        p = self.path(label)
+        return None if p is None else read_json_object(p)
+
+    def csv(self, label: str, columns: Mapping[str, bool]) -> pd.DataFrame | None:
+        p = self.path(label)
+        if p is None:
+            return None
+        frame = read_csv_checked(p, columns)
+        if frame.empty:
+            self.absent[label] = "present but has no data rows"
+            return None
+        return frame
+
+
+def read_json_object(path: Path) -> dict[str, Any]:
+    """Parse a JSON file whose top level is an object; CalibError naming the file otherwise."""
+    try:
+        obj = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CalibError(
+            f"{path}: malformed JSON ({exc}); re-run the stage that writes it"
+        ) from None
+    if not isinstance(obj, dict):
+        raise CalibError(
+            f"{path}: expected a JSON object at top level, got {type(obj).__name__}; "
+            "re-run the stage that writes it"
+        )
+    return obj
+
+
+def read_csv_checked(path: Path, columns: Mapping[str, bool]) -> pd.DataFrame:
+    """Read a CSV and check required columns (``name -> must be numeric``).
+
+    Optional numeric columns (:data:`OPTIONAL_NUMERIC`) are checked when present.
+    Raises CalibError naming the file and the column on any problem.
+    """
+    try:
+        frame = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise CalibError(
+            f"{path}: malformed CSV ({msg}); re-run the stage that writes it"
+        ) from None
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise CalibError(
+            f"{path}: missing column(s) {', '.join(missing)} (has: {', '.join(map(str, frame.columns))}); "
+            "see docs/report.md for the expected columns"
+        )
+    numeric = [c for c, is_num in columns.items() if is_num] + [
+        c for c in OPTIONAL_NUMERIC if c in frame.columns
+    ]
+    for c in numeric:
+        if not pd.api.types.is_numeric_dtype(frame[c]):
+            converted = pd.to_numeric(frame[c], errors="coerce")
+            bad = frame[c][converted.isna() & frame[c].notna()]
+            if len(bad):
+                raise CalibError(
+                    f"{path}: column '{c}' has non-numeric value {bad.iloc[0]!r} "
+                    f"(row {int(bad.index[0]) + 2}); re-run the stage that writes it"
+                )
+            frame[c] = converted
+    return frame
+
+
+def check_fit_json(fit: Mapping[str, Any], path: Path) -> None:
+    """Structural checks of a fit.json (schema i2ris-calib.fit/1); CalibError naming the file."""
+    datasets = fit.get("datasets")
+    if datasets is None and not isinstance(fit.get("models"), dict):
+        raise CalibError(f"{path}: no 'datasets' list (schema i2ris-calib.fit/1); re-run 'fit'")
+    if datasets is not None and not (
+        isinstance(datasets, list) and all(isinstance(d, dict) for d in datasets)
+    ):
+        raise CalibError(f"{path}: 'datasets' must be a list of objects; re-run 'fit'")
+    for i, d in enumerate(datasets or [fit]):
+        models = d.get("models")
+        if not isinstance(models, dict):
+            raise CalibError(f"{path}: datasets[{i}] has no 'models' object; re-run 'fit'")
+        for key, rec in models.items():
+            if rec is None:
+                continue
+            if not isinstance(rec, dict):
+                raise CalibError(
+                    f"{path}: datasets[{i}].models.{key} is not an object; re-run 'fit'"
+                )
+            for part in ("params", "stderr", "metrics", "holdout_metrics"):
+                if rec.get(part) is not None and not isinstance(rec[part], dict):
+                    raise CalibError(
+                        f"{path}: datasets[{i}].models.{key}.{part} is not an object; re-run 'fit'"
+                    )
+                for name, val in (rec.get(part) or {}).items():
+                    if val is not None and (
+                        isinstance(val, bool) or not isinstance(val, (int, float))
+                    ):
+                        raise CalibError(
+                            f"{path}: datasets[{i}].models.{key}.{part}.{name} = {val!r} is not "
+                            "a number; re-run 'fit'"
+                        )
+
+
+def png_paths(obj: Any) -> list[str]:
+    """Every string value ending in ``.png`` in a JSON structure, in document order, unique."""
+    out: list[str] = []
+
+    def walk(x: Any) -> None:
+        if isinstance(x, str) and x.lower().endswith(".png") and x not in out:
+            out.append(x)
+        elif isinstance(x, Mapping):
+            for v in x.values():
+                walk(v)
+        elif isinstance(x, list):
+            for v in x:
+                walk(v)
+
+    walk(obj)
+    return out
+
+
+def _axis_order(names: Iterable[str]) -> list[str]:
+    names = set(names)
+    return [a for a in AXES if a in names] + sorted(names - set(AXES))
+
+
+def _load_fits(r: _Reader) -> tuple[FitData, ...]:
+    fit_root = r.root / "fit"
+    found = [p.name for p in fit_root.iterdir() if p.is_dir()] if fit_root.is_dir() else []
+    fits = []
+    for axis in _axis_order(set(found) | set(AXES)):
+        label = f"fit/{axis}/fit.json"
+        fit = r.json(label)
+        if fit is None:
+            continue
+        check_fit_json(fit, r.root / label)
+        pred = r.csv(f"fit/{axis}/predictions.csv", PREDICTION_COLUMNS)
+        if pred is not None and not ({"gpi_deg", "egpi_deg"} & set(pred.columns)):
+            raise CalibError(
+                f"{r.root / f'fit/{axis}/predictions.csv'}: neither gpi_deg nor egpi_deg column; "
+                "re-run 'fit'"
+            )
+        fits.append(FitData(axis=axis, fit=fit, predictions=pred))
+    return tuple(fits)
+
+
+def _load_diagnoses(r: _Reader) -> tuple[DiagnosisData, ...]:
+    root = r.root / "diagnose"
+    if not root.is_dir():
+        return ()
+    out = []
+    for axis in _axis_order(p.name for p in root.iterdir() if (p / "diagnosis.json").is_file()):
+        folder = root / axis
+        diag = r.json(f"diagnose/{axis}/diagnosis.json")
+        md_path = folder / "diagnosis.md"
+        markdown = None
+        if md_path.is_file():
+            r.read.append(md_path)
+            try:
+                markdown = md_path.read_text(encoding="utf-8")
+            except UnicodeDecodeError:
+                raise CalibError(f"{md_path}: not UTF-8 text; re-run 'diagnose'") from None
+        images, missing = {}, []
+        for rel in png_paths(diag):
+            p = (folder / rel).resolve()
+            if p.is_file() and folder.resolve() in p.parents:
+                r.read.append(p)
+                images[rel] = p.read_bytes()
+            else:
+                missing.append(rel)
+        out.append(DiagnosisData(axis, diag, markdown, images, tuple(missing)))
+    return tuple(out)
+
+
+def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
+    """Read every stage output of a run folder.
+
+    Parameters
+    ----------
+    run_dir : path
+        Folder laid out as in docs/report.md (track/, sync/, fit/<axis>/, diagnose/<axis>/).
+
+    Returns
+    -------
+    run : RunData
+        Parsed contents; absent outputs listed in ``run.absent``.
+    inputs : list of Path
+        Files actually read (for the provenance hashes).
+    """
+    root = Path(run_dir)
+    if not root.is_dir():
+        raise CalibError(f"run folder not found: {root} (give the folder written by 'run')")
+    r = _Reader(root)
+    angles = r.csv("track/angles.csv", ANGLES_COLUMNS)
+    track = r.json("track/track.json")
+    sync = r.json("sync/sync.json")
+    synced = r.csv("sync/synced.csv", SYNCED_COLUMNS)
+    fits = _load_fits(r)
+    diagnoses = _load_diagnoses(r)
+    run = RunData(
+        name=root.resolve().name,
+        angles=angles,
+        track=track,
+        sync=sync,
+        synced=synced,
+        fits=fits,
+        diagnoses=diagnoses,
+        absent=dict(r.absent),
+    )
+    return run, r.read
+
+
+def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, Any]:
+    """Provenance block of the report, input paths relative to the run folder."""
+    from i2ris_calib.io.provenance import provenance
+
+    prov = provenance(inputs, config)
+    base = root.resolve()
+    prov["inputs"] = {
+        Path(p).resolve().relative_to(base).as_posix(): h
+        for p, h in zip(inputs, prov["inputs"].values(), strict=True)
+    }
+    return prov
+
+
+def _template(name: str) -> str:
+    return (
+        resources.files("i2ris_calib.report")
+        .joinpath("templates", name)
+        .read_text(encoding="utf-8")
+    )
+
+
+def _check_out(out: Path, root: Path) -> None:
+    """Refuse an output folder that would replace anything but a previous report."""
+    o, r = out.resolve(), root.resolve()
+    if o == r or o in r.parents:
+        raise CalibError(
+            f"--out {out} contains the run folder {root}; choose e.g. {root / 'report'}"
+        )
+    if o.exists():
+        if not o.is_dir():
+            raise CalibError(f"--out {out} is a file; give a folder")
+        extra = sorted(p.name for p in o.iterdir() if p.name not in REPORT_FILES)
+        if extra:
+            raise CalibError(
+                f"--out {out} holds files that are not a report ({', '.join(extra[:3])}); "
+                "the whole folder is replaced, so give an empty or report-only folder"
+            )
+
+
+def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any = None) -> Path:
+    """Write ``report.html``, ``report.md`` and ``figures/*.png`` for a run folder.
+
+    Parameters
+    ----------
+    run_dir : path
+        The run folder.
+    out : path, optional
+        Output folder (default ``RUN_DIR/report``); replaced as a whole.
+    config : PipelineConfig, optional
+        Its ``report`` section sets figure DPI and sizes; recorded in provenance.
+
+    Returns
+    -------
+    Path
+        The written ``report.html``.
+    """
+    from i2ris_calib import __version__
+    from i2ris_calib.io.atomic import atomic_dir
+    from i2ris_calib.io.config_io import load_config
+    from i2ris_calib.report.build import build_document
+    from i2ris_calib.report.render import render_html, render_markdown
+
+    root = Path(run_dir)
+    cfg = config if config is not None else load_config(None)
+    out_dir = Path(out) if out is not None else root / "report"
+    _check_out(out_dir, root)
+    run, inputs = load_run(root)
+    prov = report_provenance(root, inputs, cfg)
+    doc = build_document(run, cfg.report, prov)
+    page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
+    markdown, files = render_markdown(doc, FIGURE_DIR)
+    with atomic_dir(out_dir) as tmp:
+        tmp.chmod(0o755)  # mkdtemp makes it private; a report is meant to be shared
+        (tmp / "report.html").write_text(page, encoding="utf-8")
+        (tmp / "report.md").write_text(markdown, encoding="utf-8")
+        (tmp / FIGURE_DIR).mkdir()
+        for rel, png in files.items():
+            (tmp / rel).write_bytes(png)
+    return out_dir / "report.html"

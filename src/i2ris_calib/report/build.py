@@ -1,0 +1,387 @@
+"""Assemble the report :class:`~i2ris_calib.report.document.Document` from a RunData.
+
+Every section degrades on its own: a stage output that is absent becomes a
+:class:`~i2ris_calib.report.document.Note` saying so, never an exception.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from typing import Any
+
+import pandas as pd
+
+from i2ris_calib.report import figures, tables
+from i2ris_calib.report.config import ReportConfig
+from i2ris_calib.report.data import DiagnosisData, FitData, RunData
+from i2ris_calib.report.document import (
+    Code,
+    Document,
+    Figure,
+    MarkdownFragment,
+    Note,
+    Paragraph,
+    Section,
+    Table,
+)
+
+STAGE_INPUTS = (
+    ("track", "track/angles.csv"),
+    ("track", "track/track.json"),
+    ("sync", "sync/sync.json"),
+    ("sync", "sync/synced.csv"),
+)
+
+
+def build_document(
+    run: RunData, config: ReportConfig | None = None, provenance: Mapping[str, Any] | None = None
+) -> Document:
+    """The whole report for one run.
+
+    Parameters
+    ----------
+    run : RunData
+        Parsed run folder (any part may be missing).
+    config : ReportConfig, optional
+        Figure settings; defaults when omitted.
+    provenance : mapping, optional
+        The report's own provenance block (version, config, input hashes).
+    """
+    cfg = config or ReportConfig()
+    sections = [
+        overview_section(run),
+        accuracy_section(run),
+        fit_figures_section(run, cfg),
+        parameters_section(run),
+    ]
+    if run.diagnoses:
+        sections.append(diagnosis_section(run.diagnoses))
+    sections += [
+        tracking_section(run, cfg),
+        sync_section(run, cfg),
+        provenance_section(run, provenance),
+    ]
+    return Document(
+        title=f"I2RIS calibration report: {run.name}",
+        subtitle="GPI / EGPI hysteresis models (Yue et al.), tracking, clock sync and provenance",
+        sections=tuple(sections),
+    )
+
+
+def _missing(run: RunData, label: str) -> Note:
+    return Note(
+        f"{label}: {run.absent.get(label, 'not found')}. This part of the report is omitted."
+    )
+
+
+def overview_section(run: RunData) -> Section:
+    """Which stage outputs were found, and the headline result per dataset."""
+    rows = []
+    for stage, label in STAGE_INPUTS:
+        rows.append(
+            (stage, label, "missing: " + run.absent[label] if label in run.absent else "found")
+        )
+    for fd in run.fits:
+        pred = (
+            "found"
+            if fd.predictions is not None
+            else "missing: " + run.absent.get(f"fit/{fd.axis}/predictions.csv", "not found")
+        )
+        rows.append(("fit", f"fit/{fd.axis}/fit.json", "found"))
+        rows.append(("fit", f"fit/{fd.axis}/predictions.csv", pred))
+    for label, why in sorted(run.absent.items()):
+        if label.startswith("fit/") and not any(
+            label == f"fit/{fd.axis}/predictions.csv" for fd in run.fits
+        ):
+            rows.append(("fit", label, "missing: " + why))
+    for dd in run.diagnoses:
+        rows.append(("diagnose", f"diagnose/{dd.axis}/diagnosis.json", "found"))
+    if not run.diagnoses:
+        rows.append(("diagnose", "diagnose/<axis>/diagnosis.json", "not run (optional)"))
+    blocks: list = [
+        Table(("stage", "output", "status"), tuple(rows), "Stage outputs read from the run folder.")
+    ]
+    headline = _headline_rows(run.fits)
+    if headline:
+        blocks.append(
+            Table(
+                ("dataset", "EGPI held-out RMSE (deg)", "GPI held-out RMSE (deg)", "GPI / EGPI"),
+                tuple(headline),
+                "Headline: held-out RMSE per dataset (the paper reports GPI 4-7x worse than EGPI).",
+            )
+        )
+    return Section("overview", "Overview", tuple(blocks))
+
+
+def _headline_rows(fits: tuple[FitData, ...]) -> list[tuple[str, ...]]:
+    rows = []
+    for fd in fits:
+        for d in tables.fit_datasets(fd.fit):
+            models = d.get("models", {})
+
+            def rmse(key: str, m: Mapping[str, Any] = models) -> Any:
+                return ((m.get(key) or {}).get("holdout_metrics") or {}).get("rmse_deg")
+
+            ratio = tables.gpi_egpi_ratio(d)
+            rows.append(
+                (
+                    str(d.get("name", fd.axis)),
+                    tables.fmt(rmse("egpi"), 3),
+                    tables.fmt(rmse("gpi"), 3),
+                    tables.fmt(ratio, 2) if ratio is not None else tables.DASH,
+                )
+            )
+    return rows
+
+
+def _no_fit_note(run: RunData) -> Note:
+    absent = [f"{k} ({v})" for k, v in sorted(run.absent.items()) if k.startswith("fit")]
+    why = "; ".join(absent) if absent else "no fit/<axis>/fit.json in the run folder"
+    return Note(f"No fit results: {why}. Run 'i2ris-calib fit ... --out RUN_DIR/fit/<axis>'.")
+
+
+def accuracy_section(run: RunData) -> Section:
+    """Tables shaped like the paper's Tables 1-2, one per axis."""
+    if not run.fits:
+        return Section("accuracy", "Model accuracy (paper Tables 1-2)", (_no_fit_note(run),))
+    blocks = []
+    for fd in run.fits:
+        ds = tables.fit_datasets(fd.fit)
+        blocks.append(
+            tables.metrics_table(fd.axis, ds)
+            if ds
+            else Note(f"fit/{fd.axis}/fit.json has no datasets.")
+        )
+    return Section("accuracy", "Model accuracy (paper Tables 1-2)", tuple(blocks))
+
+
+def _dataset_rows(pred: pd.DataFrame, name: str) -> pd.DataFrame:
+    return pred[pred["dataset"].astype(str) == name]
+
+
+def fit_figures_section(run: RunData, cfg: ReportConfig) -> Section:
+    """Fig-6-like figures per dataset from predictions.csv."""
+    title = "Model vs measurement (paper Fig 6)"
+    if not run.fits:
+        return Section("fig6", title, (_no_fit_note(run),))
+    subs = []
+    for fd in run.fits:
+        blocks: list = []
+        if fd.predictions is None:
+            blocks.append(_missing(run, f"fit/{fd.axis}/predictions.csv"))
+        else:
+            for d in tables.fit_datasets(fd.fit):
+                name = str(d.get("name", fd.axis))
+                rows = _dataset_rows(fd.predictions, name)
+                if rows.empty:
+                    blocks.append(
+                        Note(f"predictions.csv has no rows for dataset '{name}'.", "warn")
+                    )
+                    continue
+                png = figures.fit_figure_png(
+                    rows,
+                    name,
+                    fd.axis,
+                    bool(d.get("abs_fitted", False)),
+                    dpi=cfg.figure_dpi,
+                    max_points=cfg.max_plot_points,
+                )
+                blocks.append(
+                    Figure(f"fig6_{_slug(fd.axis)}_{_slug(name)}", png, _fig6_caption(name, rows))
+                )
+        subs.append(Section(f"fig6-{_slug(fd.axis)}", fd.axis, tuple(blocks)))
+    return Section("fig6", title, (), tuple(subs))
+
+
+def _fig6_caption(name: str, rows: pd.DataFrame) -> str:
+    n_hold = int((rows["split"] == "holdout").sum())
+    return (
+        f"{name}: measured angle (grey dots), GPI and EGPI predictions; left: angle vs encoder "
+        f"input, middle: angle vs time, right: model minus measured vs time. Shaded: held-out "
+        f"samples ({n_hold} of {len(rows)})."
+    )
+
+
+def parameters_section(run: RunData) -> Section:
+    """Fitted parameters with standard errors and fit diagnostics per dataset."""
+    title = "Fitted parameters"
+    if not run.fits:
+        return Section("parameters", title, (_no_fit_note(run),))
+    subs = []
+    for fd in run.fits:
+        blocks: list = []
+        for d in tables.fit_datasets(fd.fit):
+            blocks += [tables.params_table(d), tables.fit_info_table(d)]
+        subs.append(Section(f"parameters-{_slug(fd.axis)}", fd.axis, tuple(blocks)))
+    return Section("parameters", title, (), tuple(subs))
+
+
+def tracking_section(run: RunData, cfg: ReportConfig) -> Section:
+    """Detection rate, reprojection error and flagged frames over time."""
+    blocks: list = []
+    if run.angles is None:
+        blocks.append(_missing(run, "track/angles.csv"))
+    else:
+        summary = tables.tracking_summary(run.angles)
+        blocks.append(tables.tracking_table(summary))
+        png = figures.tracking_figure_png(
+            run.angles, cfg.detection_window_s, dpi=cfg.figure_dpi, max_points=cfg.max_plot_points
+        )
+        blocks.append(
+            Figure(
+                "tracking_quality",
+                png,
+                "Tracking quality over camera time: fused yaw/pitch, detection rate in a moving "
+                "window, reprojection error of measured frames, and the time of every flagged "
+                "(not measured) frame by status.",
+            )
+        )
+    if run.track is None:
+        blocks.append(_missing(run, "track/track.json"))
+    else:
+        blocks.append(
+            tables.key_value_table(run.track, "Summary recorded by the tracker (track/track.json).")
+        )
+    return Section("tracking", "Tracking quality", tuple(blocks))
+
+
+def sync_section(run: RunData, cfg: ReportConfig) -> Section:
+    """Clock offset/drift with uncertainties, and the synced loops."""
+    blocks: list = []
+    if run.sync is None:
+        blocks.append(_missing(run, "sync/sync.json"))
+    else:
+        blocks.append(tables.sync_table(run.sync))
+        blocks.append(tables.key_value_table(run.sync, "Everything recorded in sync/sync.json."))
+    if run.synced is None:
+        blocks.append(_missing(run, "sync/synced.csv"))
+    else:
+        png = figures.synced_figure_png(
+            run.synced, dpi=cfg.figure_dpi, max_points=cfg.max_plot_points
+        )
+        blocks.append(
+            Figure(
+                "synced_loops",
+                png,
+                "Synced samples: tracked angle vs interpolated encoder per axis (raw hysteresis "
+                "loops; a wrong clock offset widens them).",
+            )
+        )
+    return Section("sync", "Clock synchronisation", tuple(blocks))
+
+
+def diagnosis_section(diagnoses: tuple[DiagnosisData, ...]) -> Section:
+    """One subsection per diagnosed axis: named effects, metrics, steps, the stage's own fragment."""
+    return Section(
+        "diagnosis",
+        "Diagnosis (model discrepancy)",
+        (),
+        tuple(_diagnosis_subsection(d) for d in diagnoses),
+    )
+
+
+def _diagnosis_subsection(dd: DiagnosisData) -> Section:
+    diag = dd.diagnosis
+    named = diag.get("named_effects")
+    blocks: list = []
+    if isinstance(named, list):
+        text = (
+            ", ".join(map(str, named))
+            if named
+            else "none (no candidate effect improved the held-out error)"
+        )
+        blocks.append(Paragraph(f"Named effects, in the order added: {text}."))
+    metric_rows = _baseline_final_rows(diag)
+    if metric_rows:
+        blocks.append(
+            Table(("metric", "baseline", "final"), tuple(metric_rows), "Baseline vs final model.")
+        )
+    steps = diag.get("steps")
+    if isinstance(steps, list) and steps:
+        blocks.append(_steps_table(steps))
+    referenced: set[str] = set()
+    fig_names = {
+        rel: f"diagnose_{_slug(dd.axis)}_{_slug(rel.removesuffix('.png'))}" for rel in dd.images
+    }
+    if dd.markdown:
+        referenced = {rel for rel in dd.images if rel in dd.markdown}
+        blocks.append(
+            MarkdownFragment(
+                dd.markdown, {rel: (fig_names[rel], dd.images[rel]) for rel in referenced}
+            )
+        )
+    for rel, png in dd.images.items():
+        if rel not in referenced:
+            blocks.append(Figure(fig_names[rel], png, f"{dd.axis}: {rel}"))
+    for rel in dd.missing_images:
+        blocks.append(
+            Note(f"diagnose/{dd.axis}/{rel} is listed in diagnosis.json but not found.", "warn")
+        )
+    return Section(f"diagnosis-{_slug(dd.axis)}", dd.axis, tuple(blocks))
+
+
+def _baseline_final_rows(diag: Mapping[str, Any]) -> list[tuple[str, str, str]]:
+    base, final = diag.get("baseline"), diag.get("final")
+    if not isinstance(base, Mapping) and not isinstance(final, Mapping):
+        return []
+    b = dict(tables.flatten(base)) if isinstance(base, Mapping) else {}
+    f = dict(tables.flatten(final)) if isinstance(final, Mapping) else {}
+    keys = list(b) + [k for k in f if k not in b]
+    return [(k, tables.fmt(b.get(k)), tables.fmt(f.get(k))) for k in keys]
+
+
+def _steps_table(steps: list) -> Table:
+    keys: list[str] = []
+    flat = []
+    for s in steps:
+        row = dict(tables.flatten(s)) if isinstance(s, Mapping) else {"step": s}
+        flat.append(row)
+        keys += [k for k in row if k not in keys]
+    keys.sort(key=lambda k: (k != "effect", k.startswith("evidence"), k))
+    rows = tuple(tuple(_clip(tables.fmt(r.get(k))) for k in keys) for r in flat)
+    return Table(
+        ("step", *keys), tuple((str(i + 1), *r) for i, r in enumerate(rows)), "Diagnosis steps."
+    )
+
+
+def _clip(text: str, n: int = 160) -> str:
+    return text if len(text) <= n else text[: n - 1] + "…"
+
+
+def provenance_section(run: RunData, report_prov: Mapping[str, Any] | None) -> Section:
+    """Package version, configuration and input hashes of the report and of every stage."""
+    subs = []
+    if report_prov:
+        subs.append(_provenance_subsection("report", "this report", report_prov))
+    sources: list[tuple[str, Any]] = [("track/track.json", run.track), ("sync/sync.json", run.sync)]
+    sources += [(f"fit/{fd.axis}/fit.json", fd.fit) for fd in run.fits]
+    sources += [(f"diagnose/{dd.axis}/diagnosis.json", dd.diagnosis) for dd in run.diagnoses]
+    blocks: list = []
+    for label, obj in sources:
+        if obj is None:
+            continue
+        prov = obj.get("provenance")
+        if isinstance(prov, Mapping):
+            subs.append(_provenance_subsection(_slug(label), label, prov))
+        else:
+            blocks.append(Note(f"{label} has no provenance block.", "warn"))
+    return Section("provenance", "Provenance", tuple(blocks), tuple(subs))
+
+
+def _provenance_subsection(anchor: str, label: str, prov: Mapping[str, Any]) -> Section:
+    blocks: list = [tables.provenance_table(label, prov)]
+    if prov.get("config") is not None:
+        blocks.append(
+            Code(json.dumps(prov["config"], indent=2, sort_keys=True), f"configuration of {label}")
+        )
+    return Section(f"provenance-{anchor}", label, tuple(blocks))
+
+
+def _slug(text: str) -> str:
+    """Lower-case ASCII identifier for anchors and file names (``yaw+`` -> ``yaw_pos``)."""
+    text = str(text)
+    if text.endswith(("+", "-")):
+        text = text[:-1] + ("_pos" if text[-1] == "+" else "_neg")
+    return re.sub(r"[^a-z0-9_]+", "_", text.lower()).strip("_") or "x"

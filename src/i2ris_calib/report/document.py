@@ -1,0 +1,113 @@
+"""A small document model rendered twice: to self-contained HTML and to Markdown.
+
+The report is built once as a tree of :class:`Section` objects holding blocks
+(paragraphs, notes, tables, figures, code, Markdown fragments); the two
+renderers in :mod:`i2ris_calib.report.render` turn the same tree into
+``report.html`` and ``report.md``, so the twins cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Paragraph:
+    """Plain text (no markup); rendered escaped."""
+
+    text: str
+
+
+@dataclass(frozen=True)
+class Note:
+    """A highlighted remark, e.g. a missing stage output.
+
+    ``kind`` is ``"missing"`` (stage output absent), ``"warn"`` or ``"info"``.
+    """
+
+    text: str
+    kind: str = "missing"
+
+
+@dataclass(frozen=True)
+class Table:
+    """A text table: ``header`` of k strings, ``rows`` of k strings each.
+
+    ``group_header`` optionally spans columns above the header: a tuple of
+    ``(label, n_columns)`` pairs whose widths add up to k (HTML only; in Markdown
+    the group label is prefixed to the header cells).
+    """
+
+    header: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    caption: str = ""
+    group_header: tuple[tuple[str, int], ...] = ()
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A PNG figure: ``name`` is the file stem used in the Markdown twin."""
+
+    name: str
+    png: bytes
+    caption: str
+
+
+@dataclass(frozen=True)
+class Code:
+    """Preformatted text (JSON, TOML) shown verbatim."""
+
+    text: str
+    summary: str = ""
+
+
+@dataclass(frozen=True)
+class MarkdownFragment:
+    """A Markdown fragment written by another stage (e.g. diagnosis.md).
+
+    ``images`` maps every image link target used in ``text`` (as written in the
+    fragment) to ``(figure_name, png_bytes)``: HTML inlines the bytes, Markdown
+    rewrites the link to the copied figure file.
+    """
+
+    text: str
+    images: dict[str, tuple[str, bytes]] = field(default_factory=dict)
+
+
+Block = Paragraph | Note | Table | Figure | Code | MarkdownFragment
+
+
+@dataclass(frozen=True)
+class Section:
+    """A titled section; ``anchor`` is its HTML id (unique in the report)."""
+
+    anchor: str
+    title: str
+    blocks: tuple[Block, ...] = ()
+    subsections: tuple[Section, ...] = ()
+
+
+@dataclass(frozen=True)
+class Document:
+    """The whole report: a title, a subtitle line and top-level sections."""
+
+    title: str
+    subtitle: str
+    sections: tuple[Section, ...]
+
+    def figures(self) -> list[Figure]:
+        """Every figure in document order (including fragment images)."""
+        out: list[Figure] = []
+
+        def walk(sec: Section) -> None:
+            for b in sec.blocks:
+                if isinstance(b, Figure):
+                    out.append(b)
+                elif isinstance(b, MarkdownFragment):
+                    out.extend(Figure(n, p, "") for n, p in b.images.values())
+            for s in sec.subsections:
+                walk(s)
+
+        for s in self.sections:
+            walk(s)
+        return out

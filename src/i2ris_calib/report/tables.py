@@ -1,0 +1,314 @@
+"""Report tables (as :class:`~i2ris_calib.report.document.Table`) from parsed run outputs.
+
+Metric names follow the paper (Eq25-27): RMSE (deg), NRMSE (% of the angle range),
+MAE = MAXIMUM absolute error (deg), as in the paper's Tables 1-2.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from i2ris_calib.report.document import Table
+
+DASH = "—"
+MODELS = (("egpi", "EGPI"), ("gpi", "GPI"))  # paper's row order
+METRIC_COLUMNS = (
+    ("rmse_deg", "RMSE (deg)", 3),
+    ("nrmse_pct", "NRMSE (%)", 2),
+    ("max_abs_err_deg", "MAE = max abs err (deg)", 3),
+)
+TRACK_STATUSES = ("measured", "not_found", "ambiguous", "rejected")
+
+
+def fmt(value: Any, digits: int | None = None) -> str:
+    """Text for a table cell: fixed ``digits`` decimals, or 6 significant digits.
+
+    None, NaN and missing values become an em dash; booleans and strings pass through.
+    """
+    if value is None:
+        return DASH
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        if not math.isfinite(float(value)):
+            return DASH
+        return f"{float(value):.{digits}f}" if digits is not None else f"{float(value):.6g}"
+    if isinstance(value, (list, tuple)):
+        return ", ".join(fmt(v, digits) for v in value) if value else DASH
+    if isinstance(value, Mapping):
+        return ", ".join(f"{k}={fmt(v, digits)}" for k, v in value.items()) if value else DASH
+    return str(value)
+
+
+def fit_datasets(fit: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """The dataset records of a fit.json (the single-dataset top-level form included)."""
+    datasets = fit.get("datasets")
+    if isinstance(datasets, list) and datasets:
+        return [d for d in datasets if isinstance(d, dict)]
+    if isinstance(fit.get("models"), dict):
+        name = f"{fit.get('axis', '')}{fit.get('direction', '')}" or "dataset"
+        return [{"name": name, "direction": fit.get("direction", ""), "models": fit["models"]}]
+    return []
+
+
+def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
+    """Paper-shaped accuracy table for one axis (like Tables 1-2).
+
+    Rows: model (EGPI, GPI) x data split (fitted, held-out). Column groups: one per
+    dataset (motion direction), each with RMSE (deg), NRMSE (%), MAE (deg).
+    """
+    header = ["model", "data"]
+    groups: list[tuple[str, int]] = [("", 2)]
+    for d in datasets:
+        header += [label for _, label, _ in METRIC_COLUMNS]
+        groups.append((_dataset_label(d), len(METRIC_COLUMNS)))
+    rows = []
+    for key, label in MODELS:
+        if not any(key in d.get("models", {}) for d in datasets):
+            continue
+        for split_key, split_label in (("metrics", "fitted"), ("holdout_metrics", "held-out")):
+            row = [label, split_label]
+            for d in datasets:
+                m = (d.get("models", {}).get(key) or {}).get(split_key) or {}
+                row += [fmt(m.get(k), digits) for k, _, digits in METRIC_COLUMNS]
+            rows.append(tuple(row))
+    return Table(
+        header=tuple(header),
+        rows=tuple(rows),
+        group_header=tuple(groups),
+        caption=f"{axis}: model accuracy per motion direction (MAE is the maximum absolute "
+        "error, as in the paper; held-out = samples not used for fitting).",
+    )
+
+
+def _dataset_label(d: Mapping[str, Any]) -> str:
+    label = str(d.get("name", "dataset"))
+    if d.get("abs_fitted"):
+        label += " (|input| -> |angle|)"
+    return label
+
+
+def gpi_egpi_ratio(dataset: Mapping[str, Any], split_key: str = "holdout_metrics") -> float | None:
+    """GPI RMSE / EGPI RMSE for one dataset on ``split_key`` (None when not available)."""
+    models = dataset.get("models", {})
+    try:
+        g = float(models["gpi"][split_key]["rmse_deg"])
+        e = float(models["egpi"][split_key]["rmse_deg"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return g / e if e > 0 and math.isfinite(g) and math.isfinite(e) else None
+
+
+def params_table(dataset: Mapping[str, Any]) -> Table:
+    """Fitted parameters with standard errors, one column pair per model.
+
+    The relative standard error (stderr / |value|, %) flags poorly determined
+    parameters.
+    """
+    models = [(k, lab) for k, lab in MODELS if isinstance(dataset.get("models", {}).get(k), dict)]
+    names: list[str] = []
+    for k, _ in models:
+        for n in dataset["models"][k].get("params", {}) or {}:
+            if n not in names:
+                names.append(n)
+    header = ["parameter"]
+    for _, lab in models:
+        header += [f"{lab} value", f"{lab} stderr", f"{lab} rel. stderr (%)"]
+    rows = []
+    for n in names:
+        row = [n]
+        for k, _ in models:
+            rec = dataset["models"][k]
+            val = (rec.get("params") or {}).get(n)
+            se = (rec.get("stderr") or {}).get(n)
+            row += [fmt(val), fmt(se), fmt(_relative_pct(val, se), 1)]
+        rows.append(tuple(row))
+    return Table(
+        header=tuple(header),
+        rows=tuple(rows),
+        caption=f"{_dataset_label(dataset)}: fitted parameters (stderr from the LM Jacobian; "
+        "— = not a parameter of that model or not estimable).",
+    )
+
+
+def _relative_pct(value: Any, stderr: Any) -> float | None:
+    try:
+        v, s = float(value), float(stderr)
+    except (TypeError, ValueError):
+        return None
+    return 100.0 * s / abs(v) if v != 0 else None
+
+
+FIT_INFO_KEYS = (
+    ("converged", "converged"),
+    ("nfev", "function evals"),
+    ("n_samples", "samples"),
+    ("v_f", "flag point v_f (counts)"),
+    ("aic", "AIC"),
+    ("bic", "BIC"),
+    ("message", "optimizer message"),
+)
+
+
+def fit_info_table(dataset: Mapping[str, Any]) -> Table:
+    """Convergence and information criteria per model for one dataset."""
+    models = [(k, lab) for k, lab in MODELS if isinstance(dataset.get("models", {}).get(k), dict)]
+    rows = tuple(
+        (lab, *(fmt(dataset["models"][k].get(key)) for key, _ in FIT_INFO_KEYS))
+        for k, lab in models
+    )
+    return Table(
+        header=("model", *(label for _, label in FIT_INFO_KEYS)),
+        rows=rows,
+        caption=f"{_dataset_label(dataset)}: fit diagnostics.",
+    )
+
+
+def tracking_summary(angles: pd.DataFrame) -> dict[str, Any]:
+    """Frame counts per status, detection rate and reprojection-error statistics.
+
+    Parameters
+    ----------
+    angles : DataFrame
+        track/angles.csv with ``status`` and (optionally) ``reproj_err_px``.
+
+    Returns
+    -------
+    dict
+        ``n_frames``, ``counts`` (status -> int), ``detection_rate`` (measured /
+        frames, 0-1), ``reproj_median_px``, ``reproj_p95_px``, ``reproj_max_px``
+        (over measured frames with a finite error; NaN when none), ``duration_s``.
+    """
+    status = angles["status"].astype(str)
+    counts = {s: int((status == s).sum()) for s in TRACK_STATUSES}
+    for s in sorted(set(status) - set(TRACK_STATUSES)):
+        counts[s] = int((status == s).sum())
+    n = len(angles)
+    err = (
+        angles.loc[status == "measured", "reproj_err_px"].to_numpy(dtype=float)
+        if "reproj_err_px" in angles
+        else np.array([])
+    )
+    err = err[np.isfinite(err)]
+    t = angles["time_s"].to_numpy(dtype=float)
+    stat = lambda f: float(f(err)) if err.size else float("nan")  # noqa: E731
+    return {
+        "n_frames": n,
+        "counts": counts,
+        "detection_rate": counts["measured"] / n if n else float("nan"),
+        "reproj_median_px": stat(np.median),
+        "reproj_p95_px": stat(lambda e: np.percentile(e, 95)),
+        "reproj_max_px": stat(np.max),
+        "duration_s": float(np.nanmax(t) - np.nanmin(t)) if n else float("nan"),
+    }
+
+
+def tracking_table(summary: Mapping[str, Any]) -> Table:
+    """Key/value table of :func:`tracking_summary`."""
+    n = summary["n_frames"]
+    rows = [
+        ("frames", fmt(n)),
+        ("duration (s, camera clock)", fmt(summary["duration_s"], 2)),
+        ("detection rate (%)", fmt(100 * summary["detection_rate"], 1)),
+    ]
+    for s, c in summary["counts"].items():
+        rows.append((f"frames {s}", f"{c} ({fmt(100 * c / n if n else None, 1)} %)"))
+    rows += [
+        ("reprojection error median (px)", fmt(summary["reproj_median_px"], 3)),
+        ("reprojection error 95th percentile (px)", fmt(summary["reproj_p95_px"], 3)),
+        ("reprojection error max (px)", fmt(summary["reproj_max_px"], 3)),
+    ]
+    return Table(
+        header=("quantity", "value"),
+        rows=tuple(rows),
+        caption="Tracking quality computed from track/angles.csv (reprojection error over "
+        "measured frames only).",
+    )
+
+
+def flatten(
+    obj: Mapping[str, Any], prefix: str = "", skip: Iterable[str] = ("provenance",)
+) -> list[tuple[str, Any]]:
+    """(dotted key, scalar) pairs of a nested JSON mapping, ``skip`` keys left out.
+
+    Lists of scalars stay one value; lists of mappings are indexed (``steps.0.effect``).
+    """
+    out: list[tuple[str, Any]] = []
+    skip = tuple(skip)
+    for k, v in obj.items():
+        if k in skip:
+            continue
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out += flatten(v, f"{key}.", skip)
+        elif isinstance(v, list) and v and all(isinstance(x, Mapping) for x in v):
+            for i, x in enumerate(v):
+                out += flatten(x, f"{key}.{i}.", skip)
+        else:
+            out.append((key, v))
+    return out
+
+
+def key_value_table(
+    obj: Mapping[str, Any], caption: str, skip: Iterable[str] = ("provenance",)
+) -> Table:
+    """Every scalar of a JSON mapping as a (key, value) row."""
+    return Table(
+        header=("key", "value"),
+        rows=tuple((k, fmt(v)) for k, v in flatten(obj, skip=skip)),
+        caption=caption,
+    )
+
+
+def find_stderr(obj: Mapping[str, Any], name: str) -> Any:
+    """Standard error recorded beside ``name`` in a JSON mapping, or None.
+
+    Accepts ``<name>_stderr``, ``<stem>_stderr_<unit>`` (e.g. ``offset_stderr_s``
+    for ``offset_s``), ``<name>_std``/``_se``/``_sigma`` and a ``stderr`` sub-mapping.
+    """
+    stem, _, unit = name.rpartition("_")
+    cands = [f"{name}_{tag}" for tag in ("stderr", "std", "se", "sigma", "err")]
+    cands += [f"{stem}_{tag}_{unit}" for tag in ("stderr", "std", "se", "sigma", "err")]
+    for c in cands:
+        if c in obj:
+            return obj[c]
+    for sub in ("stderr", "standard_errors", "std"):
+        if isinstance(obj.get(sub), Mapping) and name in obj[sub]:
+            return obj[sub][name]
+    return None
+
+
+def sync_table(sync: Mapping[str, Any]) -> Table:
+    """Clock offset and drift with standard errors, then the method."""
+    rows = []
+    for name, label, digits in (("offset_s", "offset (s)", 6), ("drift_ppm", "drift (ppm)", 3)):
+        val, se = sync.get(name), find_stderr(sync, name)
+        rows.append((label, fmt(val, digits), fmt(se, digits)))
+    rows.append(("method", fmt(sync.get("method")), ""))
+    return Table(
+        header=("quantity", "estimate", "standard error"),
+        rows=tuple(rows),
+        caption="t_ctrl = offset_s + (1 + drift_ppm * 1e-6) * t_cam (controller clock from "
+        "camera clock).",
+    )
+
+
+def provenance_table(label: str, prov: Mapping[str, Any]) -> Table:
+    """Package version, Python and SHA-256 of every input file of one output."""
+    rows = [
+        ("package version", fmt(prov.get("version"))),
+        ("python", fmt(prov.get("python"))),
+    ]
+    for path, digest in (prov.get("inputs") or {}).items():
+        rows.append((f"input {path}", f"sha256 {digest}"))
+    for k, v in prov.items():
+        if k not in ("package", "version", "python", "config", "inputs"):
+            rows.append((k, fmt(v)))
+    return Table(header=("item", "value"), rows=tuple(rows), caption=f"Provenance of {label}.")

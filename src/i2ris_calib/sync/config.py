@@ -1,13 +1,74 @@
-"""Configuration of the sync stage (TOML section, see docs/config.md)."""
+"""Configuration of the sync stage (TOML section ``[sync]``, see docs/sync.md)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True)
 class SyncConfig:
-    """Settings of the sync stage. Units are in the field names."""
+    """Settings of the sync stage. Units are in the field names.
+
+    Clock convention (COMMON.md): ``t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam``.
+    """
+
+    # "auto": event when the encoder log has a sync_flash edge and the video shows it,
+    # else "model". "xcorr" exists for comparison only (biased by hysteresis).
+    method: Literal["auto", "event", "model", "xcorr"] = "auto"
+
+    # --- encoder log validation
+    max_gap_s: float = 0.25  # longest allowed interval between two encoder samples
+    min_overlap_frames: int = 10  # fewer mapped frames inside the log range is an error
+
+    # --- sync event (LED flash seen as a jump of the mean grey level)
+    flash_cameras: tuple[str, ...] = ()  # cameras whose mean_gray_<camera> to use; () = all
+    flash_min_contrast_gray: float = 20.0  # min jump of mean grey level (0-255) for a flash
+    exposure_s: float = 0.0  # exposure time; 0 = whole frame interval (global shutter, 100% duty)
+    frame_time_ref: Literal["start", "middle", "end"] = "middle"  # where in the exposure time_s is
+    log_edge_at: Literal["first_on", "midpoint"] = "first_on"  # edge time in the encoder log
+    use_falling_edges: bool = True  # use LED-off edges as well as LED-on edges
+    max_edge_residual_s: float = 0.02  # a camera edge farther than this from its log edge: no match
+    min_drift_span_s: float = 5.0  # fit drift only if the matched edges span this long
+
+    # --- offset search (model and xcorr)
+    offset_guess_s: float = 0.0  # prior offset (ctrl - cam); used when offset_search_s > 0
+    offset_search_s: float = 0.0  # search +- this around offset_guess_s; 0 = whole overlap
+    xcorr_rate_hz: float = 200.0  # resampling rate of the derivative cross-correlation
+    drift_windows: int = 3  # windows for the drift estimate of xcorr/model (1 = no drift)
+    estimate_drift: bool = True  # False: drift fixed at 0 ppm for model/xcorr
+
+    # --- joint offset + hysteresis model profile
+    model: Literal["egpi", "gpi"] = "egpi"
+    profile_halfwidth_s: float = 0.08  # coarse profile +- around the xcorr offset
+    profile_step_s: float = 0.01  # coarse grid step
+    profile_tol_s: float = 0.0002  # golden-section refinement tolerance
+    min_axis_range_counts: float = 50.0  # an axis whose encoder spans less is not used
+
+    seed: int = 0  # reserved for randomised starts of the model fits
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
+        positive = {
+            "max_gap_s": self.max_gap_s,
+            "xcorr_rate_hz": self.xcorr_rate_hz,
+            "profile_halfwidth_s": self.profile_halfwidth_s,
+            "profile_step_s": self.profile_step_s,
+            "profile_tol_s": self.profile_tol_s,
+            "max_edge_residual_s": self.max_edge_residual_s,
+        }
+        for name, value in positive.items():
+            if not value > 0:
+                raise ValueError(f"{name} must be > 0, got {value}")
+        if self.exposure_s < 0:
+            raise ValueError(f"exposure_s must be >= 0 (0 = frame interval), got {self.exposure_s}")
+        if self.offset_search_s < 0:
+            raise ValueError(f"offset_search_s must be >= 0, got {self.offset_search_s}")
+        if self.profile_step_s > self.profile_halfwidth_s:
+            raise ValueError("profile_step_s must not exceed profile_halfwidth_s")
+        if self.drift_windows < 1:
+            raise ValueError(f"drift_windows must be >= 1, got {self.drift_windows}")
+        if self.min_overlap_frames < 1:
+            raise ValueError(f"min_overlap_frames must be >= 1, got {self.min_overlap_frames}")
+        if self.flash_min_contrast_gray <= 0:
+            raise ValueError("flash_min_contrast_gray must be > 0")

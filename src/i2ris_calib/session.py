@@ -12,19 +12,28 @@ from typing import Literal
 
 @dataclass(frozen=True)
 class EncoderLogSpec:
-    """Where the motor encoder log is and how to read it (controller clock)."""
+    """Where the motor encoder log is and how to read it (controller clock).
+
+    Documented in ``docs/sync.md``. ``file`` is relative to the session folder: a CSV
+    file, a ROS1 ``.bag`` file, or a ROS2 bag folder (``metadata.yaml`` + ``.db3``/``.mcap``).
+    """
 
     file: str = "encoders.csv"
     format: Literal["csv", "rosbag"] = "csv"
+    # CSV: one row per sample; sync_column is optional (absent = no sync event).
     time_column: str = "time_s"
+    time_unit_s: float = 1.0  # seconds per unit of the time column/stamps (1e-9 for ns)
     yaw_column: str = "enc_yaw"
     pitch_column: str = "enc_pitch"
     sync_column: str = "sync_flash"
     # ROS bags (ROS1 .bag or ROS2 folder/.mcap/.db3): one topic per motor.
     yaw_topic: str = "/i2ris/yaw/encoder"
     pitch_topic: str = "/i2ris/pitch/encoder"
-    sync_topic: str = ""
-    value_field: str = "data"
+    sync_topic: str = ""  # "" = no sync event logged
+    value_field: str = "data"  # message field holding the count (dotted path allowed)
+    value_index: int = 0  # element of value_field when it is an array (JointState.position)
+    sync_field: str = "data"  # message field of sync_topic, nonzero = LED on
+    time_source: Literal["log", "header"] = "log"  # bag receive time or msg.header.stamp
 
 
 @dataclass(frozen=True)

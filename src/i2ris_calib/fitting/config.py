@@ -1,13 +1,82 @@
-"""Configuration of the fitting stage (TOML section, see docs/config.md)."""
+"""Configuration of the fitting stage (TOML section ``[fit]``, see docs/fit.md)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+_METHODS = ("lm", "trf")
+
 
 @dataclass(frozen=True)
 class FitConfig:
-    """Settings of the fitting stage. Units are in the field names."""
+    """Settings of the fitting stage. Units are in the field names.
+
+    Attributes
+    ----------
+    method : str
+        ``"lm"`` (unbounded Levenberg-Marquardt, as the paper) or ``"trf"`` (bounded).
+    n_starts : int
+        Data-driven starts per EGPI fit (the first is the plain data-driven one).
+    n_starts_gpi : int
+        Starts per GPI fit.
+    seed : int
+        Seed of the start variations.
+    max_nfev : int
+        Model evaluations allowed per start (then flagged not converged).
+    n_operators : int
+        n, the number of non-zero thresholds (n + 1 play operators, Eq14).
+    deadband_counts : float
+        Dead band of ``v'`` (counts); negative = automatic (1 % of the input range).
+    fixed_gpi, fixed_egpi : tuple of str
+        Parameters held at their start value. ``lam`` by default: lam and the
+        envelope scale are exactly redundant (docs/models.md).
+    fit_flag_point : bool
+        Fit the EGPI flag point v_f (profile search) instead of keeping the
+        data-driven estimate.
+    holdout_fraction : float
+        Fraction of loading cycles held out for validation (0 = none).
+    zero_band_counts : float
+        |input| at or below this belongs to no motion-direction dataset.
+    min_block_samples : int
+        Motion-direction blocks with fewer samples are ignored.
+    """
+
+    method: str = "lm"
+    n_starts: int = 3
+    n_starts_gpi: int = 2
+    seed: int = 0
+    max_nfev: int = 3000
+    n_operators: int = 30
+    deadband_counts: float = -1.0
+    fixed_gpi: tuple[str, ...] = ("lam",)
+    fixed_egpi: tuple[str, ...] = ("lam",)
+    fit_flag_point: bool = True
+    holdout_fraction: float = 0.25
+    zero_band_counts: float = 5.0
+    min_block_samples: int = 50
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
+        if self.method not in _METHODS:
+            raise ValueError(f"method '{self.method}' is not one of {', '.join(_METHODS)}")
+        if self.n_starts < 1 or self.n_starts_gpi < 1:
+            raise ValueError("n_starts and n_starts_gpi must be >= 1")
+        if self.max_nfev < 10:
+            raise ValueError("max_nfev must be >= 10")
+        if self.n_operators < 1:
+            raise ValueError("n_operators must be >= 1")
+        if not 0.0 <= self.holdout_fraction < 1.0:
+            raise ValueError("holdout_fraction must be in [0, 1)")
+        if self.zero_band_counts < 0:
+            raise ValueError("zero_band_counts must be >= 0")
+        known_gpi = {"a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn"}
+        known_egpi = known_gpi | {"a5", "a6", "kappa", "v_f"}
+        for key, names, known in (
+            ("fixed_gpi", self.fixed_gpi, known_gpi),
+            ("fixed_egpi", self.fixed_egpi, known_egpi),
+        ):
+            bad = set(names) - known
+            if bad:
+                raise ValueError(
+                    f"{key}: unknown parameter(s) {sorted(bad)}; valid: {', '.join(sorted(known))}"
+                )

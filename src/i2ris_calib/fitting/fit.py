@@ -1,0 +1,298 @@
+"""Levenberg-Marquardt fitting of hysteresis models (Eq24), robust to poor starts.
+
+:func:`fit_model` minimises ``L = sum_k (y[k] - theta[k])^2`` over the free
+parameters with scipy's ``least_squares`` (``method="lm"``: MINPACK
+Levenberg-Marquardt, unbounded, as the paper; ``"trf"``: bounded trust region),
+from several data-driven starts (:mod:`.initial`), keeping the best. A free flag
+point ``v_f`` is fitted by a profile search (the output is piecewise constant in
+v_f, so finite-difference derivatives are useless): a grid over v_f with the other
+parameters fixed, then LM again, repeated. NaN angles leave the loss but the model
+always runs over the whole input sequence (the operator state needs every sample).
+
+The fitted result is a new object; the input model is never changed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, metrics
+from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.models import as_signals
+
+PROFILE_PARAMS = ("v_f",)
+_BIG = 1e6
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Outcome of :func:`fit_model`.
+
+    Attributes
+    ----------
+    model : Model
+        New model carrying the fitted values (fixed parameters unchanged).
+    params, stderr : dict
+        Fitted value and standard error per parameter name (stderr 0 for fixed
+        parameters, NaN where the Jacobian is rank deficient, and for a profiled v_f).
+    covariance : ndarray, shape (p, p)
+        Covariance of all parameters in model order (zero rows/columns for fixed ones).
+    residuals : ndarray, shape (n,)
+        ``y - theta`` (deg) at every sample (NaN where theta is NaN).
+    metrics : Metrics
+        Eq25-27 on the samples used in the loss.
+    holdout_metrics : Metrics
+        Eq25-27 on the held-out samples (all NaN when none).
+    aic, bic : float
+        Gaussian information criteria ``n ln(RSS/n) + 2k`` and ``n ln(RSS/n) + k ln n``
+        over the n fitted samples, k free parameters.
+    converged : bool
+        Optimiser reported convergence (not the evaluation limit) with a finite cost.
+    message : str
+        Optimiser message of the best start.
+    nfev : int
+        Model evaluations in total (all starts, Jacobians, profile searches).
+    n_samples : int
+        Samples in the loss.
+    free : tuple of str
+        Names of the fitted parameters.
+    """
+
+    model: Model
+    params: dict[str, float]
+    stderr: dict[str, float]
+    covariance: np.ndarray
+    residuals: np.ndarray
+    metrics: Metrics
+    holdout_metrics: Metrics
+    aic: float
+    bic: float
+    converged: bool
+    message: str
+    nfev: int
+    n_samples: int
+    free: tuple[str, ...] = ()
+    starts_tried: int = 1
+    extra: dict = field(default_factory=dict)
+
+    def predict(self, signals: Signals | np.ndarray) -> np.ndarray:
+        """Fitted model output (deg) for ``signals``."""
+        s = as_signals(signals)
+        return self.model.evaluate(s, np.array([p.value for p in self.model.parameters]))
+
+
+class _Counter:
+    def __init__(self, model, signals, theta, used):
+        self.model, self.signals, self.theta, self.used = model, signals, theta, used
+        self.n = 0
+
+    def residuals(self, full: np.ndarray) -> np.ndarray:
+        self.n += 1
+        y = self.model.evaluate(self.signals, full)
+        r = (y - self.theta)[self.used]
+        return np.where(np.isfinite(r), r, _BIG)
+
+
+def _validate(signals: Signals, theta: np.ndarray, n_free: int, used: np.ndarray) -> None:
+    v = np.asarray(signals.v, dtype=float)
+    if v.ndim != 1 or theta.shape != v.shape:
+        raise CalibError(
+            f"fit: input has {v.shape} samples but angle has {theta.shape}; give one angle per input sample"
+        )
+    if not np.all(np.isfinite(v)):
+        raise CalibError(
+            "fit: the input contains NaN/inf; remove or interpolate those rows before fitting"
+        )
+    if np.ptp(v) == 0:
+        raise CalibError(
+            "fit: the input is constant; a hysteresis model needs the input to move (check the axis/column)"
+        )
+    if used.sum() <= n_free:
+        raise CalibError(
+            f"fit: only {int(used.sum())} usable samples for {n_free} free parameters; record more data or fix parameters"
+        )
+
+
+def _lsq(counter, x0_full, free, lower, upper, method, max_nfev):
+    def fun(x):
+        full = x0_full.copy()
+        full[free] = x
+        return counter.residuals(full)
+
+    x0 = x0_full[free]
+    if method == "trf":
+        lo, hi = lower[free], upper[free]
+        x0 = np.clip(x0, lo + 1e-12 * np.abs(lo), hi - 1e-12 * np.abs(hi))
+        res = least_squares(
+            fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev
+        )
+    elif method == "lm":
+        res = least_squares(fun, x0, method="lm", x_scale="jac", max_nfev=max_nfev)
+    else:
+        raise CalibError(f"fit: unknown method '{method}'; use 'lm' or 'trf'")
+    full = x0_full.copy()
+    full[free] = res.x
+    return full, res
+
+
+def _profile(counter, full, idx, grid):
+    """Best value of parameter ``idx`` on ``grid`` with the others held; returns (value, cost)."""
+    best = (full[idx], float(np.sum(counter.residuals(full) ** 2)))
+    trial = full.copy()
+    for g in grid:
+        trial[idx] = g
+        c = float(np.sum(counter.residuals(trial) ** 2))
+        if c < best[1]:
+            best = (g, c)
+    return best
+
+
+def _refine_profiled(counter, full, pidx, v, lower, upper):
+    """Coarse-to-fine grid over each profiled parameter (v_f) around its value."""
+    span = float(np.ptp(v))
+    for idx in pidx:
+        lo, hi = max(lower[idx], v.min()), min(upper[idx], v.max())
+        centre = full[idx]
+        for width, n in ((0.15 * span, 31), (0.01 * span, 21)):
+            grid = np.clip(np.linspace(centre - width, centre + width, n), lo, hi)
+            centre, _ = _profile(counter, full, idx, grid)
+            full = full.copy()
+            full[idx] = centre
+    return full
+
+
+def fit_model(
+    model: Model,
+    signals: Signals | np.ndarray,
+    theta_deg: np.ndarray,
+    *,
+    fit_mask: np.ndarray | None = None,
+    holdout_mask: np.ndarray | None = None,
+    starts: list[np.ndarray] | None = None,
+    method: str = "lm",
+    max_nfev: int | None = 3000,
+    profile_rounds: int = 2,
+) -> FitResult:
+    """Fit ``model`` to measured angles by least squares (Eq24).
+
+    Parameters
+    ----------
+    model : Model
+        Model with parameter declarations (values = default start, fixed flags, bounds).
+    signals : Signals or ndarray, shape (n,)
+        Input (counts); a bare array is taken as ``Signals(v=...)``.
+    theta_deg : ndarray, shape (n,)
+        Measured angle (deg); NaN samples leave the loss.
+    fit_mask, holdout_mask : ndarray of bool, shape (n,), optional
+        Samples used in the loss (default: all finite ones not held out) and held-out
+        samples (metrics only).
+    starts : list of ndarray, shape (p,), optional
+        Start vectors (all parameters, model order); default ``[model values]``.
+        Use :func:`i2ris_calib.fitting.initial.start_values` for data-driven starts.
+    method : {"lm", "trf"}
+        Unbounded Levenberg-Marquardt or bounded trust-region reflective.
+    max_nfev : int, optional
+        Evaluation limit per start (the result is flagged not converged when hit).
+    profile_rounds : int
+        Grid-then-LM rounds when a profiled parameter (``v_f``) is free.
+
+    Returns
+    -------
+    FitResult
+
+    Raises
+    ------
+    CalibError
+        Shape mismatch, non-finite or constant input, fewer usable samples than
+        free parameters.
+    """
+    s = as_signals(signals)
+    v = np.asarray(s.v, dtype=float)
+    theta = np.asarray(theta_deg, dtype=float)
+    params = model.parameters
+    names = tuple(p.name for p in params)
+    lower = np.array([p.lower for p in params])
+    upper = np.array([p.upper for p in params])
+    is_free = np.array([not p.fixed for p in params])
+    pidx = [i for i, nm in enumerate(names) if nm in PROFILE_PARAMS and is_free[i]]
+    lsq_free = np.flatnonzero(is_free & ~np.isin(np.arange(len(names)), pidx))
+    hold = np.zeros(theta.shape, bool) if holdout_mask is None else np.asarray(holdout_mask, bool)
+    used = np.isfinite(theta) & ~hold
+    if fit_mask is not None:
+        used &= np.asarray(fit_mask, bool)
+    _validate(s, theta, int(is_free.sum()), used)
+    counter = _Counter(model, s, theta, used)
+    starts = [np.array([p.value for p in params], dtype=float)] if not starts else starts
+
+    best = None
+    for x0 in starts:
+        full = np.asarray(x0, dtype=float).copy()
+        res = None
+        for rnd in range(max(1, profile_rounds) if pidx else 1):
+            if pidx:
+                full = _refine_profiled(counter, full, pidx, v, lower, upper)
+            if lsq_free.size:
+                full, res = _lsq(counter, full, lsq_free, lower, upper, method, max_nfev)
+            if rnd == 0 and not pidx:
+                break
+        cost = float(np.sum(counter.residuals(full) ** 2))
+        if best is None or cost < best[0]:
+            best = (cost, full, res)
+    cost, full, res = best
+    return _result(
+        model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts)
+    )
+
+
+def _result(
+    model, s, theta, used, hold, full, res, names, is_free, pidx, nfev, n_starts
+) -> FitResult:
+    fitted = model.with_values(full)
+    y = model.evaluate(s, full)
+    resid = y - theta
+    n = int(used.sum())
+    k = int(is_free.sum())
+    rss = float(np.sum(resid[used] ** 2))
+    p = len(names)
+    cov = np.zeros((p, p))
+    stderr = dict.fromkeys(names, 0.0)
+    lsq_idx = [i for i in np.flatnonzero(is_free) if i not in pidx]
+    if res is not None and lsq_idx and n > k:
+        J = np.asarray(res.jac, dtype=float)
+        s2 = rss / (n - k)
+        u, sv, vt = np.linalg.svd(J, full_matrices=False)
+        tol = sv.max() * max(J.shape) * np.finfo(float).eps if sv.size else 0.0
+        ok = sv > tol
+        c = (vt[ok].T / sv[ok] ** 2) @ vt[ok] * s2
+        for a, ia in enumerate(lsq_idx):
+            for b, ib in enumerate(lsq_idx):
+                cov[ia, ib] = c[a, b]
+        rank_def = not ok.all()
+        for a, ia in enumerate(lsq_idx):
+            stderr[names[ia]] = float("nan") if rank_def else float(np.sqrt(max(c[a, a], 0.0)))
+    for i in pidx:
+        stderr[names[i]] = float("nan")
+    converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)
+    message = "profile search only" if res is None else str(res.message)
+    ln = n * np.log(rss / n) if rss > 0 else -np.inf
+    return FitResult(
+        model=fitted,
+        params=dict(zip(names, map(float, full), strict=True)),
+        stderr=stderr,
+        covariance=cov,
+        residuals=resid,
+        metrics=metrics(theta, y, used),
+        holdout_metrics=metrics(theta, y, hold) if hold.any() else NAN_METRICS,
+        aic=float(ln + 2 * k),
+        bic=float(ln + k * np.log(n)),
+        converged=converged,
+        message=message,
+        nfev=int(nfev),
+        n_samples=n,
+        free=tuple(names[i] for i in np.flatnonzero(is_free)),
+        starts_tried=n_starts,
+    )

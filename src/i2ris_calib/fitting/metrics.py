@@ -1,0 +1,70 @@
+"""Error metrics exactly as the paper's Eq25-27."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Fit quality (Eq25-27).
+
+    Attributes
+    ----------
+    rmse_deg : float
+        Root-mean-square error (deg), Eq25.
+    nrmse_pct : float
+        RMSE / (max(theta) - min(theta)) * 100 (%), Eq26.
+    max_abs_err_deg : float
+        MAXIMUM absolute error (deg); the paper calls it MAE, Eq27.
+    n_samples : int
+        Number of finite samples the metrics were computed on.
+    """
+
+    rmse_deg: float
+    nrmse_pct: float
+    max_abs_err_deg: float
+    n_samples: int = 0
+
+    def as_dict(self) -> dict[str, float]:
+        """``{"rmse_deg", "nrmse_pct", "max_abs_err_deg"}`` (the fit.json record)."""
+        d = asdict(self)
+        d.pop("n_samples")
+        return d
+
+
+NAN_METRICS = Metrics(float("nan"), float("nan"), float("nan"), 0)
+
+
+def metrics(
+    theta_deg: np.ndarray, predicted_deg: np.ndarray, mask: np.ndarray | None = None
+) -> Metrics:
+    """RMSE, NRMSE and max |error| (Eq25-27) over samples where both are finite.
+
+    Parameters
+    ----------
+    theta_deg, predicted_deg : ndarray, shape (n,)
+        Measured and modelled angle (deg).
+    mask : ndarray of bool, shape (n,), optional
+        Restrict to these samples (e.g. the held-out cycles).
+
+    Returns
+    -------
+    Metrics
+        All NaN (n_samples = 0) when no sample is usable; NRMSE is NaN when the
+        measured range is zero.
+    """
+    theta = np.asarray(theta_deg, dtype=float)
+    pred = np.asarray(predicted_deg, dtype=float)
+    ok = np.isfinite(theta) & np.isfinite(pred)
+    if mask is not None:
+        ok &= np.asarray(mask, dtype=bool)
+    if not ok.any():
+        return NAN_METRICS
+    err = pred[ok] - theta[ok]
+    rmse = float(np.sqrt(np.mean(err**2)))
+    span = float(theta[ok].max() - theta[ok].min())
+    nrmse = rmse / span * 100.0 if span > 0 else float("nan")
+    return Metrics(rmse, nrmse, float(np.max(np.abs(err))), int(ok.sum()))

@@ -1,13 +1,97 @@
-"""Configuration of the simulation stage (TOML section, see docs/config.md)."""
+"""Configuration of the simulation stage (TOML section ``[simulate]``, see docs/simulation.md)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Literal
+
+DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
 
 
 @dataclass(frozen=True)
 class SimulationConfig:
-    """Settings of the simulation stage. Units are in the field names."""
+    """Settings of ``i2ris-calib simulate``. Units are in the field names.
+
+    Grouped as: video/optics, scene, image degradations, motion (Fig-5-like input),
+    clocks and events, hidden effects. Every field is documented in docs/simulation.md.
+    """
+
+    seed: int = 0
+    # --- video and optics -------------------------------------------------------
+    width_px: int = 1280
+    height_px: int = 1024
+    fps: float = 30.0
+    video_format: Literal["mkv", "mp4"] = "mkv"  # mkv = lossless FFV1, mp4 = lossy mp4v
+    focal_px: float = 50000.0  # pinhole focal length; long = near-orthographic microscope
+    marker_size_px: float = 200.0  # marker edge in pixels at the straight pose
+    misalignment_deg: float = 3.0  # each camera's axis tilted by this, about a random axis
+    write_calibration: bool = True  # write <camera>.yaml with the true intrinsics
+    # --- scene ------------------------------------------------------------------
+    dictionary: str = "DICT_4X4_50"
+    marker_ids: tuple[int, int] = (0, 1)  # (top, side)
+    marker_size_mm: float = 0.8
+    cube_size_mm: float = 1.0
+    pivot_mm: float = 1.5  # cube centre is this far distal of the bending pivot
+    background_gray: float = 70.0
+    face_gray: float = 215.0
+    ink_gray: float = 30.0
+    # --- image degradations -----------------------------------------------------
+    blur_sigma_px: float = 1.2  # defocus (Gaussian) at the focal plane
+    depth_blur_px_per_mm: float = 1.0  # extra blur per mm out of the focal plane
+    noise_sigma: float = 2.0  # sensor noise, grey levels (0-255)
+    illumination_falloff: float = 0.25  # relative brightness loss at the image corners
+    illumination_gradient: float = 0.10  # left-right brightness ramp (fraction)
+    motion_blur_samples: int = 1  # sub-frame renders averaged per frame (1 = off)
+    exposure_s: float = 0.01  # exposure time (motion blur)
+    # --- motion: Fig-5-like encoder input per dataset ---------------------------
+    datasets: tuple[str, ...] = DATASETS
+    amplitude_counts: tuple[float, float] = (4000.0, 4000.0)  # (yaw, pitch) peak |input|
+    cycles: int = 2  # ramp out and back this many times per dataset
+    cycle_fractions: tuple[float, ...] = (0.6, 1.0)  # peak of each cycle / amplitude
+    ramp_s: float = 5.0  # duration of one full ramp 0 -> amplitude
+    pause_s: float = 1.0  # pause at each peak and after each return
+    rest_s: float = 1.5  # rest at zero at the start of each dataset
+    settle_s: float = 1.0  # end-of-dataset residual angle relaxed to 0 over this time
+    encoder_rate_hz: float = 100.0
+    models: dict = field(default_factory=dict)  # per-dataset parameter overrides
+    # --- clocks and events ------------------------------------------------------
+    offset_s: float = 12.5  # t_ctrl = offset_s + (1 + drift_ppm 1e-6) t_cam
+    drift_ppm: float = 80.0
+    camera_start_s: float = 0.0  # camera-clock time of the first frame
+    second_camera_phase_s: float = 0.0  # side-camera frame times lag the top camera by this
+    timestamp_jitter_s: float = 0.0  # Gaussian jitter of frame times (s)
+    sync_flash: bool = True
+    flash_times_s: tuple[float, ...] = ()  # camera clock; () = 0.5 s after start and before end
+    flash_duration_s: float = 0.2
+    flash_gain: float = 0.35  # relative brightness increase while the LED is on
+    drop_fraction: float = 0.0  # fraction of frames missing from each video
+    occlusions: int = 0  # number of occlusion events per camera
+    occlusion_s: float = 0.4  # duration of one occlusion event
+    # --- hidden effects (applied by i2ris_calib.diagnosis.effects) ----------------
+    effects: dict = field(default_factory=dict)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
+        if self.width_px < 64 or self.height_px < 64:
+            raise ValueError("width_px and height_px must be >= 64")
+        if self.fps <= 0 or self.encoder_rate_hz <= 0:
+            raise ValueError("fps and encoder_rate_hz must be > 0")
+        if self.focal_px <= 0 or self.marker_size_px < 12:
+            raise ValueError("focal_px must be > 0 and marker_size_px >= 12")
+        if not 0 < self.marker_size_mm < self.cube_size_mm:
+            raise ValueError("marker_size_mm must be > 0 and smaller than cube_size_mm")
+        bad = [d for d in self.datasets if d not in DATASETS]
+        if bad or not self.datasets:
+            raise ValueError(f"datasets must be taken from {', '.join(DATASETS)}; got {bad}")
+        if self.cycles < 1 or len(self.cycle_fractions) < 1:
+            raise ValueError("cycles must be >= 1 and cycle_fractions non-empty")
+        if min(self.ramp_s, self.pause_s, self.rest_s, self.settle_s) < 0 or self.ramp_s == 0:
+            raise ValueError("ramp_s must be > 0; pause_s, rest_s, settle_s >= 0")
+        if not 0 <= self.drop_fraction < 0.5:
+            raise ValueError("drop_fraction must be in [0, 0.5)")
+        if self.noise_sigma < 0 or self.blur_sigma_px < 0 or self.motion_blur_samples < 1:
+            raise ValueError("noise_sigma, blur_sigma_px >= 0 and motion_blur_samples >= 1")
+        if len(set(self.marker_ids)) != 2:
+            raise ValueError("marker_ids must be two different ids")
+        if not -0.99 < self.illumination_falloff < 0.99:
+            raise ValueError("illumination_falloff must be in (-0.99, 0.99)")

@@ -99,7 +99,7 @@ def overview_section(run: RunData) -> Section:
     for dd in run.diagnoses:
         rows.append(("diagnose", f"diagnose/{dd.axis}/diagnosis.json", "found"))
     if not run.diagnoses:
-        rows.append(("diagnose", "diagnose/<axis>/diagnosis.json", "not run (optional)"))
+        rows.append(("diagnose", "diagnose/AXIS/diagnosis.json", "not run (optional)"))
     blocks: list = [
         Table(("stage", "output", "status"), tuple(rows), "Stage outputs read from the run folder.")
     ]
@@ -137,16 +137,25 @@ def _headline_rows(fits: tuple[FitData, ...]) -> list[tuple[str, ...]]:
 
 
 def _no_fit_note(run: RunData) -> Note:
-    absent = [f"{k} ({v})" for k, v in sorted(run.absent.items()) if k.startswith("fit")]
-    why = "; ".join(absent) if absent else "no fit/<axis>/fit.json in the run folder"
-    return Note(f"No fit results: {why}. Run 'i2ris-calib fit ... --out RUN_DIR/fit/<axis>'.")
+    absent = [f"{k}: {v}" for k, v in run.absent.items() if k.endswith("/fit.json")]
+    why = "; ".join(absent) if absent else "no fit/AXIS/fit.json in the run folder"
+    return Note(f"No fit results ({why}). Run 'i2ris-calib fit ... --out RUN_DIR/fit/AXIS'.")
+
+
+def _missing_fit_notes(run: RunData) -> list[Note]:
+    """Notes for expected axes without fit.json when other axes were fitted."""
+    return [
+        Note(f"{k}: {v}; this axis is not shown.")
+        for k, v in run.absent.items()
+        if k.startswith("fit/") and k.endswith("/fit.json")
+    ]
 
 
 def accuracy_section(run: RunData) -> Section:
     """Tables shaped like the paper's Tables 1-2, one per axis."""
     if not run.fits:
         return Section("accuracy", "Model accuracy (paper Tables 1-2)", (_no_fit_note(run),))
-    blocks = []
+    blocks: list = _missing_fit_notes(run)
     for fd in run.fits:
         ds = tables.fit_datasets(fd.fit)
         blocks.append(

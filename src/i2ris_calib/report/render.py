@@ -222,9 +222,9 @@ def _figure_file(name: str, png: bytes, fdir: str, files: dict[str, bytes]) -> s
 
 def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
     if isinstance(b, Paragraph):
-        return [b.text]
+        return [_md_text(b.text)]
     if isinstance(b, Note):
-        return [f"> **{NOTE_LABELS.get(b.kind, 'Note')}:** {b.text}"]
+        return [f"> **{NOTE_LABELS.get(b.kind, 'Note')}:** {_md_text(b.text)}"]
     if isinstance(b, Table):
         return _md_table(b)
     if isinstance(b, Figure):
@@ -242,8 +242,14 @@ def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
     raise TypeError(f"unknown block {type(b).__name__}")
 
 
+def _md_text(text: str) -> str:
+    """Plain text made inert in Markdown: no HTML tags, no line breaks."""
+    return text.replace("\n", " ").replace("<", "\\<")
+
+
 def _md_inline(text: str) -> str:
-    return text.replace("\n", " ").replace("|", "\\|").replace("_", "\\_").replace("*", "\\*")
+    """Plain text for captions (rendered in italics): emphasis markers escaped too."""
+    return _md_text(text).replace("|", "\\|").replace("_", "\\_").replace("*", "\\*")
 
 
 def _md_table(t: Table) -> list[str]:
@@ -251,9 +257,12 @@ def _md_table(t: Table) -> list[str]:
     if t.group_header:
         labels = [label for label, n in t.group_header for _ in range(n)]
         header = [f"{g} {h}".strip() for g, h in zip(labels, header, strict=True)]
-    cell = lambda s: s.replace("\n", " ").replace("|", "\\|")  # noqa: E731
+    cell = lambda s: _md_text(s).replace("|", "\\|")  # noqa: E731
+    numeric = [
+        bool(t.rows) and all(_NUMBER.match(r[j]) for r in t.rows) for j in range(len(header))
+    ]
     out = ["| " + " | ".join(cell(h) for h in header) + " |"]
-    out.append("|" + "|".join("---" if i == 0 else "---:" for i in range(len(header))) + "|")
+    out.append("|" + "|".join("---:" if num else "---" for num in numeric) + "|")
     out += ["| " + " | ".join(cell(c) for c in row) + " |" for row in t.rows]
     if t.caption:
         out += ["", f"_{_md_inline(t.caption)}_"]

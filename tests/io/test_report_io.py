@@ -1,0 +1,198 @@
+"""`i2ris-calib report RUN_DIR`: reading run folders, writing the report, bad input."""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import importlib.util
+import re
+from pathlib import Path
+
+import pytest
+
+from i2ris_calib.cli import main
+from i2ris_calib.config import PipelineConfig
+from i2ris_calib.errors import CalibError
+from i2ris_calib.io.report import load_run, png_paths, write_report
+from i2ris_calib.report.config import ReportConfig
+
+_spec = importlib.util.spec_from_file_location(
+    "report_runfolder", Path(__file__).parents[1] / "report" / "runfolder.py"
+)
+runfolder = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(runfolder)
+
+CFG = PipelineConfig(report=ReportConfig(figure_dpi=40))
+
+
+@pytest.fixture
+def run_dir(tmp_path):
+    root = tmp_path / "session_a"
+    runfolder.make_run_folder(root, diagnosis=True)
+    return root
+
+
+def test_write_report_outputs_and_markdown_links(run_dir):
+    page = write_report(run_dir, None, CFG)
+    out = run_dir / "report"
+    assert page == out / "report.html"
+    assert sorted(p.name for p in out.iterdir()) == ["figures", "report.html", "report.md"]
+    md = (out / "report.md").read_text()
+    links = re.findall(r"\]\((figures/[^)]+\.png)\)", md)
+    files = sorted(p.relative_to(out).as_posix() for p in (out / "figures").iterdir())
+    assert sorted(set(links)) == files and len(files) == 8
+    html = page.read_text()
+    # Every PNG beside the Markdown is also inlined in the HTML, byte for byte.
+    inlined = {base64.b64decode(s) for s in re.findall(r"data:image/png;base64,([^\"]+)", html)}
+    assert {(out / f).read_bytes() for f in files} == inlined
+    assert "0.250000" in html and "0.250000" in md  # sync offset (s), shown in both twins
+    assert not list(run_dir.glob(".report.tmp-*"))
+
+
+def test_report_provenance_hashes_inputs_relative_to_run(run_dir):
+    run, inputs = load_run(run_dir)
+    write_report(run_dir, None, CFG)
+    md = (run_dir / "report" / "report.md").read_text()
+    for rel in (
+        "track/angles.csv",
+        "sync/sync.json",
+        "fit/yaw/predictions.csv",
+        "diagnose/yaw/plots/step1_after.png",
+    ):
+        digest = hashlib.sha256((run_dir / rel).read_bytes()).hexdigest()
+        assert f"| input {rel} | sha256 {digest} |" in md
+
+
+def test_report_is_deterministic(run_dir, tmp_path):
+    write_report(run_dir, tmp_path / "r1", CFG)
+    write_report(run_dir, tmp_path / "r2", CFG)
+    for name in ("report.html", "report.md", "figures/fig6_yaw_yaw_pos.png"):
+        assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes()
+
+
+def test_empty_run_folder_gives_a_report_that_says_what_is_missing(tmp_path, capsys):
+    root = tmp_path / "empty"
+    root.mkdir()
+    assert main(["report", str(root)]) == 0
+    md = (root / "report" / "report.md").read_text()
+    for label in (
+        "track/angles.csv",
+        "track/track.json",
+        "sync/sync.json",
+        "sync/synced.csv",
+        "fit/yaw/fit.json",
+        "fit/pitch/fit.json",
+    ):
+        assert f"{label}: not found" in md
+    assert "report.html" in capsys.readouterr().out
+
+
+def test_partial_run_and_header_only_csv(tmp_path):
+    root = tmp_path / "partial"
+    runfolder.make_run_folder(root, sync=False, fit_axes=("yaw",), predictions=False)
+    (root / "track" / "angles.csv").write_text(
+        "frame,time_s,yaw_deg,pitch_deg,status,reproj_err_px\n"
+    )
+    run, _ = load_run(root)
+    assert run.angles is None and run.absent["track/angles.csv"] == "present but has no data rows"
+    assert [f.axis for f in run.fits] == ["yaw"] and run.fits[0].predictions is None
+    write_report(root, None, CFG)
+    md = (root / "report" / "report.md").read_text()
+    assert "fit/yaw/predictions.csv: not found" in md and "sync/sync.json: not found" in md
+
+
+def _one_line_error(args, capsys) -> str:
+    rc = main(args)
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert err.startswith("error: ") and len(err.strip().splitlines()) == 1
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize(
+    ("rel", "content", "expect"),
+    [
+        ("sync/sync.json", '{"offset_s": 0.1,', "malformed JSON"),
+        ("track/track.json", "[1, 2]", "expected a JSON object"),
+        ("fit/yaw/fit.json", '{"schema": "i2ris-calib.fit/1", "axis": "yaw"}', "no 'datasets'"),
+        (
+            "fit/yaw/fit.json",
+            '{"datasets": [{"name": "yaw+", "models": {"gpi": {"metrics": {"rmse_deg": "big"}}}}]}',
+            "rmse_deg = 'big' is not a number",
+        ),
+        ("sync/synced.csv", "time_s,enc_yaw\n0,1\n", "missing column(s) enc_pitch"),
+        (
+            "track/angles.csv",
+            "time_s,yaw_deg,pitch_deg,status\n0,1,x1,measured\n",
+            "column 'pitch_deg' has non-numeric value 'x1' (row 2)",
+        ),
+        ("fit/pitch/predictions.csv", 'dataset,time_s,v,theta_deg,split\n"a,1\n', "malformed CSV"),
+        (
+            "fit/pitch/predictions.csv",
+            "dataset,time_s,v,theta_deg,split\na,1,2,3,fit\n",
+            "neither gpi_deg nor egpi_deg",
+        ),
+        ("diagnose/yaw/diagnosis.json", "{nope}", "malformed JSON"),
+    ],
+)
+def test_malformed_input_is_one_line_error_naming_the_file(run_dir, capsys, rel, content, expect):
+    (run_dir / rel).write_text(content)
+    with pytest.raises(CalibError, match=re.escape(expect)):
+        load_run(run_dir)
+    err = _one_line_error(["report", str(run_dir)], capsys)
+    assert str(run_dir / rel) in err and expect in err
+    assert not (run_dir / "report").exists()  # nothing half-written
+
+
+def test_missing_run_dir_and_unsafe_out(tmp_path, run_dir, capsys):
+    assert "run folder not found" in _one_line_error(["report", str(tmp_path / "nope")], capsys)
+    assert "contains the run folder" in _one_line_error(
+        ["report", str(run_dir), "--out", str(run_dir)], capsys
+    )
+    other = tmp_path / "precious"
+    other.mkdir()
+    (other / "notes.txt").write_text("keep me")
+    assert "not a report" in _one_line_error(["report", str(run_dir), "--out", str(other)], capsys)
+    assert (other / "notes.txt").read_text() == "keep me"
+
+
+def test_rerun_replaces_the_previous_report(tmp_path):
+    run_dir = tmp_path / "s"
+    runfolder.make_run_folder(run_dir, fit_axes=())
+    write_report(run_dir, None, CFG)
+    stale = run_dir / "report" / "figures" / "stale.png"
+    stale.write_bytes(b"old")
+    (run_dir / "sync" / "synced.csv").unlink()
+    write_report(run_dir, None, CFG)
+    assert not stale.exists() and not (run_dir / "report" / "figures" / "synced_loops.png").exists()
+    assert "sync/synced.csv: not found" in (run_dir / "report" / "report.md").read_text()
+
+
+def test_diagnosis_missing_image_is_a_warning(tmp_path):
+    root = tmp_path / "s"
+    runfolder.make_run_folder(root, fit_axes=(), track=False, sync=False)
+    runfolder.write_diagnosis(root, "pitch", with_missing_image=True)
+    run, _ = load_run(root)
+    assert run.diagnoses[0].missing_images == ("plots/gone.png",)
+    assert set(run.diagnoses[0].images) == {"plots/step1_before.png", "plots/step1_after.png"}
+    write_report(root, None, CFG)
+    md = (root / "report" / "report.md").read_text()
+    assert "diagnose/pitch/plots/gone.png is listed in diagnosis.json but not found" in md
+    assert "![residual before step 1](figures/diagnose_pitch_plots_step1_before.png)" in md
+
+
+def test_png_paths_walks_nested_json():
+    obj = {"a": "x.png", "steps": [{"plots": ["y.PNG", "x.png"]}, {"n": 1}], "b": "z.csv"}
+    assert png_paths(obj) == ["x.png", "y.PNG"]
+
+
+def test_config_section_is_validated(tmp_path, run_dir, capsys):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[report]\nfigure_dpi = 5\n")
+    err = _one_line_error(["report", str(run_dir), "--config", str(cfg)], capsys)
+    assert "figure_dpi" in err
+    cfg.write_text("[report]\nfigure_dpl = 80\n")
+    assert "did you mean 'figure_dpi'" in _one_line_error(
+        ["report", str(run_dir), "--config", str(cfg)], capsys
+    )

@@ -1,0 +1,183 @@
+"""Document assembly: every section present with data, and each degrades alone."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import pytest
+
+from i2ris_calib.report.build import build_document
+from i2ris_calib.report.config import ReportConfig
+from i2ris_calib.report.data import RunData
+from i2ris_calib.report.document import Figure, MarkdownFragment, Note, Paragraph, Section, Table
+
+CFG = ReportConfig(figure_dpi=40)
+REAL_FIGURE_TESTS = {"test_complete_run_has_every_section_and_figure"}
+
+
+@pytest.fixture(autouse=True)
+def fast_figures(request, monkeypatch):
+    """Stub the matplotlib figures (tested in test_figures.py) unless a test asks for real ones.
+
+    The stub still records which data each figure was given, one tiny PNG per call.
+    """
+    if request.node.name in REAL_FIGURE_TESTS:
+        return
+    from runfolder import tiny_png
+
+    from i2ris_calib.report import figures
+
+    for name in ("fit_figure_png", "tracking_figure_png", "synced_figure_png"):
+        monkeypatch.setattr(figures, name, lambda *a, **k: tiny_png())
+
+
+def _walk(sections):
+    for s in sections:
+        yield s
+        yield from _walk(s.subsections)
+
+
+def _blocks(doc, anchor: str, kind=object):
+    sec = next(s for s in _walk(doc.sections) if s.anchor == anchor)
+    return [b for s in _walk((sec,)) for b in s.blocks if isinstance(b, kind)]
+
+
+def test_complete_run_has_every_section_and_figure(run_data):
+    run, truth = run_data
+    doc = build_document(run, CFG, {"version": "0.1.0", "inputs": {"a": "b"}, "config": {"x": 1}})
+    anchors = [s.anchor for s in doc.sections]
+    assert anchors == [
+        "overview",
+        "accuracy",
+        "fig6",
+        "parameters",
+        "diagnosis",
+        "tracking",
+        "sync",
+        "provenance",
+    ]
+    names = [f.name for f in doc.figures()]
+    # 4 Fig-6 figures (2 axes x 2 directions), tracking, synced loops, 2 diagnosis PNGs.
+    assert sorted(n for n in names if n.startswith("fig6_")) == [
+        "fig6_pitch_pitch_neg",
+        "fig6_pitch_pitch_pos",
+        "fig6_yaw_yaw_neg",
+        "fig6_yaw_yaw_pos",
+    ]
+    assert {"tracking_quality", "synced_loops"} <= set(names) and len(names) == 8
+    assert not _blocks(doc, "overview", Note)
+    acc = _blocks(doc, "accuracy", Table)
+    assert [t.caption.split(":")[0] for t in acc] == ["yaw", "pitch"]
+
+
+def test_headline_ratio_from_fit_json(run_data):
+    run, truth = run_data
+    doc = build_document(run, CFG)
+    headline = _blocks(doc, "overview", Table)[1]
+    d = truth["fit"]["yaw"]["datasets"][0]
+    e = d["models"]["egpi"]["holdout_metrics"]["rmse_deg"]
+    g = d["models"]["gpi"]["holdout_metrics"]["rmse_deg"]
+    assert headline.rows[0] == ("yaw+", f"{e:.3f}", f"{g:.3f}", f"{g / e:.2f}")
+
+
+def test_empty_run_states_every_missing_output():
+    absent = {
+        k: "not found"
+        for k in (
+            "track/angles.csv",
+            "track/track.json",
+            "sync/sync.json",
+            "sync/synced.csv",
+            "fit/yaw/fit.json",
+            "fit/pitch/fit.json",
+        )
+    }
+    doc = build_document(RunData("empty", absent=absent), CFG)
+    assert doc.figures() == []
+    notes = " ".join(b.text for s in _walk(doc.sections) for b in s.blocks if isinstance(b, Note))
+    for label in absent:
+        assert label in notes
+    assert "diagnosis" not in [s.anchor for s in doc.sections]
+
+
+@pytest.mark.parametrize("missing", ["angles", "track", "sync", "synced", "predictions"])
+def test_each_missing_part_degrades_alone(run_data, missing):
+    run, _ = run_data
+    label = {
+        "angles": "track/angles.csv",
+        "track": "track/track.json",
+        "sync": "sync/sync.json",
+        "synced": "sync/synced.csv",
+        "predictions": "fit/yaw/predictions.csv",
+    }[missing]
+    if missing == "predictions":
+        run = replace(
+            run,
+            fits=(replace(run.fits[0], predictions=None), run.fits[1]),
+            absent={label: "not found"},
+        )
+    else:
+        run = replace(run, **{missing: None}, absent={label: "not found"})
+    doc = build_document(run, CFG)
+    notes = [b.text for s in _walk(doc.sections) for b in s.blocks if isinstance(b, Note)]
+    assert any(label in n for n in notes)
+    full = len(build_document(run_data[0], CFG).figures())
+    lost = {"angles": 1, "track": 0, "sync": 0, "synced": 1, "predictions": 2}[missing]
+    assert len(doc.figures()) == full - lost
+
+
+def test_predictions_without_a_dataset_row_is_a_warning(run_data):
+    run, _ = run_data
+    pred = run.fits[0].predictions
+    run = replace(run, fits=(replace(run.fits[0], predictions=pred[pred["dataset"] == "yaw+"]),))
+    doc = build_document(run, CFG)
+    warns = [b.text for b in _blocks(doc, "fig6", Note)]
+    assert warns == ["predictions.csv has no rows for dataset 'yaw-'."]
+
+
+def test_diagnosis_section_shows_effects_steps_fragment_and_unreferenced_plots(run_data):
+    run, truth = run_data
+    doc = build_document(run, CFG)
+    sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
+    paras = [b.text for b in sec.blocks if isinstance(b, Paragraph)]
+    assert paras == ["Named effects, in the order added: axis_coupling."]
+    tables_ = [b for b in sec.blocks if isinstance(b, Table)]
+    base_final = dict((r[0], r[1:]) for r in tables_[0].rows)
+    assert base_final["holdout_rmse_deg"] == ("0.91", "0.31")
+    steps = tables_[1]
+    assert steps.header[:2] == ("step", "effect") and steps.rows[0][:2] == ("1", "axis_coupling")
+    frag = next(b for b in sec.blocks if isinstance(b, MarkdownFragment))
+    assert list(frag.images) == ["plots/step1_before.png"]  # the one the fragment references
+    figs = [b for b in sec.blocks if isinstance(b, Figure)]
+    assert [f.name for f in figs] == ["diagnose_yaw_plots_step1_after"]
+
+
+def test_no_named_effect_is_said(run_data):
+    run, _ = run_data
+    dd = replace(
+        run.diagnoses[0],
+        diagnosis={**run.diagnoses[0].diagnosis, "named_effects": []},
+        markdown=None,
+        missing_images=("plots/gone.png",),
+    )
+    doc = build_document(replace(run, diagnoses=(dd,)), CFG)
+    sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
+    assert sec.blocks[0].text.startswith("Named effects, in the order added: none")
+    assert any(isinstance(b, Note) and "plots/gone.png" in b.text for b in sec.blocks)
+    assert isinstance(sec, Section)
+
+
+def test_provenance_lists_every_stage_json(run_data):
+    run, _ = run_data
+    doc = build_document(run, CFG, {"version": "0.1.0", "inputs": {}, "config": {}})
+    labels = [
+        s.title for s in next(s for s in doc.sections if s.anchor == "provenance").subsections
+    ]
+    assert labels == [
+        "this report",
+        "track/track.json",
+        "sync/sync.json",
+        "fit/yaw/fit.json",
+        "fit/pitch/fit.json",
+        "diagnose/yaw/diagnosis.json",
+    ]

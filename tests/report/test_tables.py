@@ -1,0 +1,196 @@
+"""Report tables against the truth written into synthetic run folders."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from runfolder import FLAGGED, N_FRAMES, write_fit
+
+from i2ris_calib.report import tables
+
+
+@pytest.fixture
+def yaw_fit(tmp_path):
+    return write_fit(tmp_path, "yaw")
+
+
+def test_metrics_table_is_paper_shaped_and_shows_fit_json_numbers(yaw_fit):
+    ds = tables.fit_datasets(yaw_fit)
+    t = tables.metrics_table("yaw", ds)
+    # Rows: EGPI before GPI (paper order), fitted then held-out.
+    assert [r[:2] for r in t.rows] == [
+        ("EGPI", "fitted"),
+        ("EGPI", "held-out"),
+        ("GPI", "fitted"),
+        ("GPI", "held-out"),
+    ]
+    assert sum(n for _, n in t.group_header) == len(t.header) == 2 + 3 * len(ds)
+    assert [g for g, _ in t.group_header][1:] == ["yaw+", "yaw- (|input| -> |angle|)"]
+    for row, (model, split) in zip(
+        t.rows,
+        [
+            ("egpi", "metrics"),
+            ("egpi", "holdout_metrics"),
+            ("gpi", "metrics"),
+            ("gpi", "holdout_metrics"),
+        ],
+        strict=True,
+    ):
+        for j, d in enumerate(ds):
+            m = d["models"][model][split]
+            cells = row[2 + 3 * j : 5 + 3 * j]
+            assert cells == (
+                f"{m['rmse_deg']:.3f}",
+                f"{m['nrmse_pct']:.2f}",
+                f"{m['max_abs_err_deg']:.3f}",
+            )
+    # Known construction: EGPI error 0.2 sin(.), GPI 1.2 sin(.) -> max abs 0.2 / 1.2 deg (+-2e-3).
+    assert abs(float(t.rows[0][4]) - 0.2) < 2e-3 and abs(float(t.rows[2][4]) - 1.2) < 2e-3
+
+
+def test_metrics_table_with_one_model_and_null_metrics(yaw_fit):
+    ds = tables.fit_datasets(yaw_fit)
+    del ds[0]["models"]["egpi"], ds[1]["models"]["egpi"]
+    ds[0]["models"]["gpi"]["holdout_metrics"] = {"rmse_deg": None, "nrmse_pct": None}
+    t = tables.metrics_table("yaw", ds)
+    assert [r[0] for r in t.rows] == ["GPI", "GPI"]
+    assert t.rows[1][2:5] == (tables.DASH,) * 3
+
+
+def test_single_dataset_top_level_form():
+    fit = {"axis": "pitch", "direction": "+", "models": {"gpi": {"metrics": {"rmse_deg": 1.0}}}}
+    ds = tables.fit_datasets(fit)
+    assert ds[0]["name"] == "pitch+" and ds[0]["models"] is fit["models"]
+    assert tables.fit_datasets({"axis": "yaw"}) == []
+
+
+def test_gpi_egpi_ratio(yaw_fit):
+    d = tables.fit_datasets(yaw_fit)[0]
+    g = d["models"]["gpi"]["holdout_metrics"]["rmse_deg"]
+    e = d["models"]["egpi"]["holdout_metrics"]["rmse_deg"]
+    assert tables.gpi_egpi_ratio(d) == pytest.approx(g / e, rel=1e-12)
+    # 1.2 sin vs 0.2 sin over whole periods: ratio 6 within 2 %.
+    assert tables.gpi_egpi_ratio(d) == pytest.approx(6.0, rel=0.02)
+    d["models"]["egpi"]["holdout_metrics"]["rmse_deg"] = None
+    assert tables.gpi_egpi_ratio(d) is None
+
+
+def test_params_table_values_stderr_and_relative_error(yaw_fit):
+    d = tables.fit_datasets(yaw_fit)[0]
+    t = tables.params_table(d)
+    assert t.header == (
+        "parameter",
+        "EGPI value",
+        "EGPI stderr",
+        "EGPI rel. stderr (%)",
+        "GPI value",
+        "GPI stderr",
+        "GPI rel. stderr (%)",
+    )
+    rows = {r[0]: r for r in t.rows}
+    assert set(rows) == set(d["models"]["egpi"]["params"]) | set(d["models"]["gpi"]["params"])
+    # stderr was written as 1 % of the value, except the last parameter (null).
+    assert rows["a1"][3] == "1.0" and rows["a1"][6] == "1.0"
+    assert rows["kappa"][2] == tables.DASH and rows["kappa"][4] == tables.DASH  # GPI has no kappa
+    assert rows["a1"][1] == f"{d['models']['egpi']['params']['a1']:.6g}"
+
+
+def test_fit_info_table(yaw_fit):
+    d = tables.fit_datasets(yaw_fit)[0]
+    t = tables.fit_info_table(d)
+    assert [r[0] for r in t.rows] == ["EGPI", "GPI"]
+    assert t.rows[0][1] == "yes" and t.rows[0][2] == str(d["models"]["egpi"]["nfev"])
+
+
+def _angles(status: list[str], err: list[float]) -> pd.DataFrame:
+    n = len(status)
+    return pd.DataFrame({"time_s": np.arange(n) * 0.1, "status": status, "reproj_err_px": err})
+
+
+def test_tracking_summary_known_counts_and_error_stats():
+    status = ["measured"] * N_FRAMES
+    for s, idx in FLAGGED.items():
+        for i in idx:
+            status[i] = s
+    n_meas = status.count("measured")
+    err = np.full(N_FRAMES, np.nan)
+    err[np.array(status) == "measured"] = np.linspace(0.1, 1.1, n_meas)
+    # A huge error on a flagged frame must not count (measured frames only).
+    err[FLAGGED["rejected"][0]] = 99.0
+    s = tables.tracking_summary(_angles(status, list(err)))
+    assert s["counts"] == {"measured": 555, "not_found": 30, "ambiguous": 10, "rejected": 5}
+    assert s["detection_rate"] == pytest.approx(555 / 600, abs=1e-12)
+    assert s["reproj_median_px"] == pytest.approx(0.6, abs=1e-9)
+    assert s["reproj_p95_px"] == pytest.approx(1.05, abs=1e-9)
+    assert s["reproj_max_px"] == pytest.approx(1.1, abs=1e-12)
+    assert s["duration_s"] == pytest.approx(59.9, abs=1e-9)
+    rows = dict(tables.tracking_table(s).rows)
+    assert rows["detection rate (%)"] == "92.5"
+    assert rows["frames not_found"] == "30 (5.0 %)"
+
+
+def test_tracking_summary_unknown_status_and_no_error_column():
+    a = pd.DataFrame({"time_s": [0.0, 1.0, 2.0], "status": ["measured", "occluded", "measured"]})
+    s = tables.tracking_summary(a)
+    assert s["counts"]["occluded"] == 1 and s["detection_rate"] == pytest.approx(2 / 3)
+    assert math.isnan(s["reproj_median_px"])
+
+
+@pytest.mark.parametrize(
+    "record",
+    [
+        {"offset_s": 0.25, "offset_stderr_s": 4e-4},
+        {"offset_s": 0.25, "offset_s_stderr": 4e-4},
+        {"offset_s": 0.25, "stderr": {"offset_s": 4e-4}},
+        {"offset_s": 0.25, "offset_std_s": 4e-4},
+    ],
+)
+def test_find_stderr_naming_variants(record):
+    assert tables.find_stderr(record, "offset_s") == 4e-4
+    assert tables.find_stderr(record, "drift_ppm") is None
+
+
+def test_sync_table():
+    t = tables.sync_table(
+        {
+            "offset_s": 0.25,
+            "drift_ppm": 15.0,
+            "offset_stderr_s": 4e-4,
+            "drift_stderr_ppm": 2.5,
+            "method": "event",
+        }
+    )
+    assert t.rows == (
+        ("offset (s)", "0.250000", "0.000400"),
+        ("drift (ppm)", "15.000", "2.500"),
+        ("method", "event", ""),
+    )
+
+
+def test_fmt_and_flatten():
+    assert tables.fmt(None) == tables.fmt(float("nan")) == tables.DASH
+    assert tables.fmt(True) == "yes" and tables.fmt(np.int64(3)) == "3"
+    assert tables.fmt(0.123456789) == "0.123457" and tables.fmt(2.0, 2) == "2.00"
+    flat = tables.flatten(
+        {"a": {"b": 1, "provenance": {"x": 1}}, "steps": [{"e": "x"}, {"e": "y"}], "l": [1, 2]}
+    )
+    assert flat == [("a.b", 1), ("steps.0.e", "x"), ("steps.1.e", "y"), ("l", [1, 2])]
+
+
+def test_provenance_table_lists_every_input_hash():
+    prov = {
+        "version": "0.1.0",
+        "python": "3.11",
+        "inputs": {"a.csv": "ab" * 32, "b.mkv": "cd" * 32},
+        "config": {"x": 1},
+        "git": "abc",
+    }
+    rows = dict(tables.provenance_table("fit.json", prov).rows)
+    assert (
+        rows["input a.csv"] == "sha256 " + "ab" * 32
+        and rows["input b.mkv"] == "sha256 " + "cd" * 32
+    )
+    assert rows["package version"] == "0.1.0" and rows["git"] == "abc"

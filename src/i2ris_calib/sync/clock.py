@@ -58,6 +58,7 @@ def clock_from_offsets(
     offsets_s: np.ndarray,
     sd_s: np.ndarray,
     fit_drift: bool = True,
+    scale: str = "if_larger",
 ) -> tuple[float, float, np.ndarray, float]:
     """Weighted line ``offset(t) = o + d*1e-6*t`` through local offset estimates.
 
@@ -71,6 +72,9 @@ def clock_from_offsets(
         Their standard deviations, s (> 0).
     fit_drift : bool
         Fit the slope; False (or a single point) holds drift at 0.
+    scale : {"if_larger", "always"}
+        Scale the covariance by the reduced chi-square when it exceeds 1 (default:
+        ``sd_s`` are trusted as a floor), or always (``sd_s`` are only relative weights).
 
     Returns
     -------
@@ -96,8 +100,10 @@ def clock_from_offsets(
     dof = t.size - a.shape[1]
     resid = yw - aw @ coef
     chi2_red = float(resid @ resid / dof) if dof > 0 else float("nan")
-    if dof > 0 and chi2_red > 1:
+    if dof > 0 and (chi2_red > 1 or scale == "always"):
         cov_c = cov_c * chi2_red
+    elif scale == "always":
+        cov_c = cov_c * np.nan
     if not fit_drift:
         o_c, d = float(coef[0]), 0.0
         cov = np.array([[cov_c[0, 0], 0.0], [0.0, 0.0]])

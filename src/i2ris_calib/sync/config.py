@@ -23,10 +23,12 @@ class SyncConfig:
 
     # --- sync event (LED flash seen as a jump of the mean grey level)
     flash_cameras: tuple[str, ...] = ()  # cameras whose mean_gray_<camera> to use; () = all
-    flash_min_contrast_gray: float = 20.0  # min jump of mean grey level (0-255) for a flash
+    flash_min_contrast_gray: float = 8.0  # min jump of mean grey level (0-255) for a flash
     exposure_s: float = 0.0  # exposure time; 0 = whole frame interval (global shutter, 100% duty)
     frame_time_ref: Literal["start", "middle", "end"] = "middle"  # where in the exposure time_s is
-    log_edge_at: Literal["first_on", "midpoint"] = "first_on"  # edge time in the encoder log
+    # edge time in the log: "midpoint" = the LED switched somewhere between the last off and the
+    # first on sample (state sampled by the logger); "first_on" = at the first on sample
+    log_edge_at: Literal["first_on", "midpoint"] = "midpoint"
     use_falling_edges: bool = True  # use LED-off edges as well as LED-on edges
     max_edge_residual_s: float = 0.02  # a camera edge farther than this from its log edge: no match
     min_drift_span_s: float = 5.0  # fit drift only if the matched edges span this long
@@ -35,6 +37,7 @@ class SyncConfig:
     offset_guess_s: float = 0.0  # prior offset (ctrl - cam); used when offset_search_s > 0
     offset_search_s: float = 0.0  # search +- this around offset_guess_s; 0 = whole overlap
     xcorr_rate_hz: float = 200.0  # resampling rate of the derivative cross-correlation
+    xcorr_smooth_s: float = 0.2  # Savitzky-Golay window of the derivatives
     drift_windows: int = 3  # windows for the drift estimate of xcorr/model (1 = no drift)
     estimate_drift: bool = True  # False: drift fixed at 0 ppm for model/xcorr
 
@@ -52,6 +55,7 @@ class SyncConfig:
         positive = {
             "max_gap_s": self.max_gap_s,
             "xcorr_rate_hz": self.xcorr_rate_hz,
+            "xcorr_smooth_s": self.xcorr_smooth_s,
             "profile_halfwidth_s": self.profile_halfwidth_s,
             "profile_step_s": self.profile_step_s,
             "profile_tol_s": self.profile_tol_s,

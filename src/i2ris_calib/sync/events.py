@@ -38,12 +38,26 @@ class Edge:
         True for LED on, False for LED off.
     source : str
         Camera name, or ``"log"``.
+    frames_t_s, frac, frac_sd, exposure_s, ref
+        Camera edges only: timestamps and observed lit fractions of the frames
+        around the edge, the fraction's sd, the exposure and its time reference.
+    t_lo_s, t_hi_s
+        Log edges only: the interval the edge is known to lie in.
     """
 
     t_s: float
     sd_s: float
     rising: bool
     source: str
+    # camera edges: the frames around the edge, for the joint clock likelihood
+    frames_t_s: np.ndarray | None = None
+    frac: np.ndarray | None = None
+    frac_sd: float = 0.0
+    exposure_s: float = 0.0
+    ref: str = "middle"
+    # log edges: the edge lies in [t_lo_s, t_hi_s] (uniform)
+    t_lo_s: float = 0.0
+    t_hi_s: float = 0.0
 
 
 def two_level_split(g: np.ndarray, iters: int = 20) -> tuple[float, float]:
@@ -199,10 +213,23 @@ def camera_edges(t_s: np.ndarray, gray: np.ndarray, camera: str, cfg: SyncConfig
         idx = np.arange(max(k - 3, lo_b), min(k + 3, hi_b))
         frac = (g[idx] - lo_lvl) / (hi_lvl - lo_lvl)
         n_lvl = max(min(win_before.size, win_after.size), 1)
+        frac_sd = noise / (hi_lvl - lo_lvl)
         te, sd = subframe_edge_time(
-            t[idx], frac, noise / (hi_lvl - lo_lvl), exposure, cfg.frame_time_ref, rising, n_lvl
+            t[idx], frac, frac_sd, exposure, cfg.frame_time_ref, rising, n_lvl
         )
-        edges.append(Edge(te, sd, rising, camera))
+        edges.append(
+            Edge(
+                te,
+                sd,
+                rising,
+                camera,
+                frames_t_s=t[idx],
+                frac=frac,
+                frac_sd=float(frac_sd * np.sqrt(1.0 + np.pi / 2 / n_lvl)),
+                exposure_s=exposure,
+                ref=cfg.frame_time_ref,
+            )
+        )
     return edges
 
 
@@ -235,11 +262,11 @@ def log_edges(flash: Channel, at: str) -> list[Edge]:
     edges = []
     for i in k:
         t0, t1 = float(flash.t_s[i - 1]), float(flash.t_s[i])
-        if at == "midpoint":
-            te, sd = 0.5 * (t0 + t1), (t1 - t0) / np.sqrt(12.0)
-        else:
-            te, sd = t1, TIME_FLOOR_S
-        edges.append(Edge(te, max(sd, TIME_FLOOR_S), bool(v[i]), "log"))
+        lo = t0 if at == "midpoint" else t1
+        sd = (t1 - lo) / np.sqrt(12.0)
+        edges.append(
+            Edge(0.5 * (lo + t1), max(sd, TIME_FLOOR_S), bool(v[i]), "log", t_lo_s=lo, t_hi_s=t1)
+        )
     return edges
 
 
@@ -304,11 +331,116 @@ def _pairs_for_offset(cam, log, offset_s, drift_ppm, tol):
     return pairs
 
 
-def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> ClockModel:
-    """Offset and drift from matched LED edges (weighted line, see clock_from_offsets).
+def edge_log_likelihood(
+    cam: Edge, log: Edge, offset_c_s: np.ndarray, drift_ppm: np.ndarray, t_c_s: float
+) -> np.ndarray:
+    """Log-likelihood of one matched edge's frame brightnesses on a grid of clocks.
 
-    Drift is fitted when the matched edges span at least ``cfg.min_drift_span_s``
-    of camera time; otherwise it is held at 0 ppm (stderr NaN).
+    For each clock (offset at camera time ``t_c_s``, drift) the logged edge time,
+    uniform in ``[log.t_lo_s, log.t_hi_s]``, maps to an interval of camera edge times
+    ``u``; the frames' lit fractions predicted by :func:`lit_fraction` are compared
+    with the observed ones (Gaussian, sd ``cam.frac_sd``) and the likelihood is
+    averaged over that interval exactly, through the cumulative integral of the
+    likelihood on a fine ``u`` grid. Flat stretches (an edge between two exposures)
+    stay flat: the constraint is a hard interval, softened only by the noise.
+
+    Parameters
+    ----------
+    offset_c_s, drift_ppm : ndarray, shape (G,)
+        Grid of clocks; ``t_ctrl = offset_c_s + t_c_s + (1 + drift*1e-6) * (t_cam - t_c_s)``.
+
+    Returns
+    -------
+    ndarray, shape (G,)
+    """
+    start, end = exposure_windows(cam.frames_t_s, cam.exposure_s, cam.ref)
+    step = max(cam.exposure_s * cam.frac_sd / 4.0, 1e-7)
+    grid = np.arange(start.min() - step, end.max() + 2 * step, step)
+    sse = (((lit_fraction(grid, start, end, cam.rising) - cam.frac) / cam.frac_sd) ** 2).sum(axis=1)
+    sse_min = float(sse.min())
+    like = np.exp(-0.5 * (sse - sse_min))
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (like[1:] + like[:-1]) * step)])
+
+    def integral(u: np.ndarray) -> np.ndarray:
+        """Cumulative likelihood, extended linearly (constant likelihood) beyond the grid."""
+        inside = np.interp(u, grid, cum)
+        below = np.minimum(u - grid[0], 0.0) * like[0]
+        above = np.maximum(u - grid[-1], 0.0) * like[-1]
+        return inside + below + above
+
+    scale = 1.0 + drift_ppm * 1e-6
+    u_lo = t_c_s + (log.t_lo_s - offset_c_s - t_c_s) / scale
+    u_hi = t_c_s + (log.t_hi_s - offset_c_s - t_c_s) / scale
+    width = u_hi - u_lo
+    if log.t_hi_s > log.t_lo_s:
+        mean_like = (integral(u_hi) - integral(u_lo)) / width
+    else:
+        mean_like = np.interp(u_hi, grid, like)
+    return -0.5 * sse_min + np.log(np.maximum(mean_like, 1e-300))
+
+
+def posterior_clock(
+    pairs: list[tuple[Edge, Edge]],
+    t_c_s: float,
+    centre: tuple[float, float],
+    halfwidth: tuple[float, float],
+    fit_drift: bool,
+    n_grid: int = 121,
+    max_rounds: int = 6,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Posterior mean and covariance of (offset at ``t_c_s``, drift) on an adaptive grid.
+
+    Flat prior; likelihood = product of :func:`edge_log_likelihood` over matched
+    edges. The grid is widened while posterior mass sits on its border and narrowed
+    while the posterior is under-resolved.
+
+    Returns
+    -------
+    mean : ndarray, shape (2,)
+        (offset_c_s, drift_ppm).
+    cov : ndarray, shape (2, 2)
+    """
+    c = np.array(centre, dtype=float)
+    h = np.array(halfwidth, dtype=float)
+    if not fit_drift:
+        h[1] = 0.0
+    for _ in range(max_rounds):
+        o_ax = c[0] + np.linspace(-h[0], h[0], n_grid)
+        d_ax = c[1] + (np.linspace(-h[1], h[1], n_grid) if fit_drift else np.zeros(1))
+        oo, dd = (a.ravel() for a in np.meshgrid(o_ax, d_ax, indexing="ij"))
+        ll = sum(edge_log_likelihood(ce, le, oo, dd, t_c_s) for ce, le in pairs)
+        w = np.exp(ll - ll.max())
+        w /= w.sum()
+        mean = np.array([w @ oo, w @ dd])
+        dev = np.stack([oo - mean[0], dd - mean[1]])
+        cov = (dev * w) @ dev.T
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        w2 = w.reshape(o_ax.size, d_ax.size)
+        border = w2[[0, -1], :].sum() + (w2[:, [0, -1]].sum() if fit_drift else 0.0)
+        steps = 2 * h / (n_grid - 1)
+        axes = [0, 1] if fit_drift else [0]
+        if border > 1e-4:
+            c, h = mean, h * 2.0
+        elif any(sd[a] < 3 * steps[a] for a in axes):
+            c, h = mean, np.maximum(6 * sd, h / 8)
+        else:
+            break
+        if not fit_drift:
+            h[1] = 0.0
+    if not fit_drift:
+        cov[1, :] = cov[:, 1] = 0.0
+    return mean, cov
+
+
+def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> ClockModel:
+    """Offset and drift from LED edges matched between video and encoder log.
+
+    A weighted line through the per-edge times (:func:`clock_from_offsets`) gives a
+    start; the estimate is then the posterior mean of (offset, drift) given every
+    matched frame's brightness (:func:`posterior_clock`), which combines the
+    interval constraints of many edges far better than averaging their midpoints.
+    Drift is fitted when the matched edges span at least ``cfg.min_drift_span_s``;
+    otherwise it is held at 0 ppm (stderr NaN).
 
     Raises
     ------
@@ -325,14 +457,22 @@ def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> Cloc
     off = np.array([g.t_s - c.t_s for c, g in pairs])
     sd = np.array([np.hypot(c.sd_s, g.sd_s) for c, g in pairs])
     fit_drift = bool(np.ptp(t) >= cfg.min_drift_span_s)
-    o, d, cov, chi2 = clock_from_offsets(t, off, sd, fit_drift=fit_drift)
+    o0, d0, cov0, chi2 = clock_from_offsets(t, off, sd, fit_drift=fit_drift)
+    t_c = float(np.average(t, weights=1 / sd**2))
+    centre = (o0 + d0 * 1e-6 * t_c, d0)
+    j = np.array([1.0, t_c * 1e-6])
+    sd_c = float(np.sqrt(j @ cov0 @ j))
+    halfwidth = (5 * max(sd_c, 2e-4), 5 * max(np.sqrt(cov0[1, 1]), 1.0))
+    mean, cov_c = posterior_clock(pairs, t_c, centre, halfwidth, fit_drift)
+    jac = np.array([[1.0, -t_c * 1e-6], [0.0, 1.0]])
+    o, d, cov = mean[0] - mean[1] * 1e-6 * t_c, mean[1], jac @ cov_c @ jac.T
     resid = off - (o + d * 1e-6 * t)
     evidence = {
         "n_camera_edges": len(cam),
         "n_log_edges": len(log),
         "n_matched": len(pairs),
         "drift_fitted": fit_drift,
-        "chi2_reduced": chi2,
+        "line_fit": {"offset_s": o0, "drift_ppm": d0, "chi2_reduced": chi2},
         "edges": [
             {
                 "camera": c.source,
@@ -340,6 +480,7 @@ def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> Cloc
                 "t_cam_s": c.t_s,
                 "t_cam_sd_s": c.sd_s,
                 "t_ctrl_s": g.t_s,
+                "t_ctrl_sd_s": g.sd_s,
                 "residual_s": float(r),
             }
             for (c, g), r in zip(pairs, resid, strict=True)

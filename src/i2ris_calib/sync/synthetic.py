@@ -135,6 +135,7 @@ def make_sync_case(
     max_counts: float = 6000.0,
     slope_deg: float = 40.0 / 6000.0,
     kappa: float = 2.0,
+    log_edge: str = "sampled",
 ) -> SyntheticSync:
     """A seeded synthetic sync case with known offset and drift.
 
@@ -164,6 +165,10 @@ def make_sync_case(
         random fraction of the frame interval).
     max_counts, slope_deg, kappa
         Trajectory amplitude (counts), envelope slope (deg/count), stage-2 regulator.
+    log_edge : {"sampled", "tick"}
+        "sampled": the LED switches at arbitrary times and the log samples its state
+        (``sync.log_edge_at = "midpoint"``, like ``i2ris-calib simulate``); "tick": the
+        LED switches at logged ticks (``log_edge_at = "first_on"``).
     """
     rng = np.random.default_rng(seed)
     drift = 1.0 + drift_ppm * 1e-6
@@ -201,10 +206,14 @@ def make_sync_case(
     flash_state = np.zeros_like(t_ctrl)
     on_intervals = []
     for on_rel, length in flashes:
-        k_on = int(np.searchsorted(t_ctrl, t_cam_ctrl[0] + on_rel))
-        k_off = int(np.searchsorted(t_ctrl, t_cam_ctrl[0] + on_rel + length))
+        t_on = t_cam_ctrl[0] + on_rel + rng.uniform(0, 1 / log_rate_hz)
+        t_off = t_on + length
+        k_on, k_off = np.searchsorted(t_ctrl, [t_on, t_off])
         flash_state[k_on:k_off] = 1.0
-        on_intervals.append((t_ctrl[k_on], t_ctrl[k_off]))  # LED switched at logged ticks
+        if log_edge == "tick":  # LED switched at logged controller ticks
+            t_on, t_off = t_ctrl[k_on], t_ctrl[k_off]
+        # "sampled": LED switched at t_on/t_off, the log samples its state
+        on_intervals.append((t_on, t_off))
     exposure = exposure_frac * interval
     for i, cam in enumerate(cameras):
         shift = 0.0 if i == 0 else rng.uniform(0, interval)

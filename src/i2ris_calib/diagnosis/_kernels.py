@@ -106,3 +106,19 @@ def first_order_lag(y, t, tau):
         a = 1.0 - np.exp(-(t[k] - t[k - 1]) / tau)
         x[k] = x[k - 1] + a * (y[k] - x[k - 1])
     return x
+
+
+@njit(cache=True)
+def held_speed(speed, threshold):
+    """Speed while moving, held at its last moving value while the input stops.
+
+    ``s[k] = speed[k]`` if ``speed[k] > threshold`` else ``s[k-1]`` (``s[-1] = 0``).
+    """
+    n = speed.shape[0]
+    out = np.empty(n)
+    prev = 0.0
+    for k in range(n):
+        if speed[k] > threshold:
+            prev = speed[k]
+        out[k] = prev
+    return out

@@ -1,4 +1,4 @@
-"""Configuration of the diagnosis stage (TOML section, see docs/config.md)."""
+"""Configuration of the diagnosis stage (TOML section ``[diagnose]``, see docs/diagnosis.md)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,61 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class DiagnosisConfig:
-    """Settings of the diagnosis stage. Units are in the field names."""
+    """Settings of the diagnosis stage. Units are in the field names.
+
+    Attributes
+    ----------
+    candidates : tuple of str
+        Effects to try (catalogue names); empty = the whole catalogue.
+    max_steps : int
+        Most effects added.
+    holdout_every : int
+        Every ``holdout_every``-th loading cycle is held out (from the third on).
+    alpha : float
+        Significance level of the one-sided paired test over held-out strokes.
+    min_rel_improvement : float
+        Smallest relative decrease of the held-out RMSE that can name an effect.
+    min_delta_bic : float
+        Smallest BIC decrease (on the fitted samples) that can name an effect.
+    max_samples : int
+        Signals are decimated to at most this many samples for the search.
+    max_nfev : int
+        Cap on least-squares iterations of each candidate's joint refit.
+    profile_nfev : int
+        Cap on least-squares iterations of the base refit at each grid start.
+    start_max_nfev : int
+        Cap on least-squares iterations when the starting model is polished.
+    """
+
+    candidates: tuple[str, ...] = ()
+    max_steps: int = 3
+    holdout_every: int = 3
+    alpha: float = 0.01
+    min_rel_improvement: float = 0.05
+    min_delta_bic: float = 10.0
+    max_samples: int = 4000
+    max_nfev: int = 30
+    profile_nfev: int = 4
+    start_max_nfev: int = 60
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
+        from i2ris_calib.diagnosis.effects import CATALOGUE
+
+        bad = [c for c in self.candidates if c not in CATALOGUE]
+        if bad:
+            raise ValueError(f"candidates: unknown effect(s) {bad}; valid: {', '.join(CATALOGUE)}")
+        if self.max_steps < 0:
+            raise ValueError("max_steps must be >= 0")
+        if self.holdout_every < 2:
+            raise ValueError("holdout_every must be >= 2")
+        if not 0 < self.alpha < 1:
+            raise ValueError("alpha must be in (0, 1)")
+        if not 0 <= self.min_rel_improvement < 1:
+            raise ValueError("min_rel_improvement must be in [0, 1)")
+        if self.min_delta_bic < 0:
+            raise ValueError("min_delta_bic must be >= 0")
+        if self.max_samples < 100:
+            raise ValueError("max_samples must be >= 100")
+        if min(self.max_nfev, self.start_max_nfev, self.profile_nfev) < 1:
+            raise ValueError("max_nfev, profile_nfev and start_max_nfev must be >= 1")

@@ -149,8 +149,8 @@ class MultiStageBacklash(Effect):
     def start_grid(self, signals, y_deg):
         v = np.asarray(signals.v, float)
         span = _span(v)
-        flags = np.quantile(v, [0.2, 0.35, 0.5, 0.65, 0.8])
-        return [np.array([f, w * span]) for f in flags for w in (0.04, 0.1)]
+        flags = np.nanmin(v) + span * np.linspace(0.1, 0.9, 9)
+        return [np.array([f, w * span]) for f in flags for w in (0.03, 0.08)]
 
 
 @dataclass(frozen=True)
@@ -216,7 +216,7 @@ class TimeDelay(Effect):
 
 @dataclass(frozen=True)
 class RateDependence(Effect):
-    """Backlash whose width grows with the (smoothed) input speed."""
+    """Backlash whose width grows with the speed of the current stroke."""
 
     name: str = "rate_dependence"
     params: tuple[EffectParam, ...] = (
@@ -226,27 +226,22 @@ class RateDependence(Effect):
             0.0,
             10.0,
             "s",
-            "extra half-width of the backlash (counts) per count/s of input speed",
-        ),
-        EffectParam(
-            "tau_rate_s",
-            1.0,
-            0.02,
-            30.0,
-            "s",
-            "time constant of the speed average that sets the width",
+            "backlash half-width (counts) per count/s of stroke speed",
         ),
     )
     meaning: str = "viscous friction: faster strokes leave a wider backlash"
     needs: tuple[str, ...] = ("t_s",)
 
     def half_width_counts(self, signals: Signals, p: np.ndarray) -> np.ndarray:
-        """Backlash half-width h[k] = gain_s * EMA(|dv/dt|) (counts), shape (n,)."""
-        from i2ris_calib.diagnosis._kernels import first_order_lag
+        """Backlash half-width ``h = gain_s * S`` (counts), shape (n,).
 
-        speed = np.abs(_rate(signals))
-        t = np.ascontiguousarray(signals.t_s, dtype=float)
-        return float(p[0]) * first_order_lag(np.ascontiguousarray(speed), t, float(p[1]))
+        ``S`` is the input speed (5-sample moving average of |dv/dt|, counts/s)
+        while the input moves, held at its last moving value while the input
+        stops (below 5 % of the 95th-percentile speed).
+        """
+        from i2ris_calib.diagnosis._kernels import held_speed
+
+        return float(p[0]) * held_speed(*_stroke_speed(signals))
 
     def transform_input(self, signals, p):
         from i2ris_calib.diagnosis._kernels import play_varying
@@ -255,13 +250,18 @@ class RateDependence(Effect):
         return replace(signals, v=play_varying(v, self.half_width_counts(signals, p)))
 
     def start_grid(self, signals, y_deg):
-        speed = np.abs(_rate(signals))
-        s95 = float(np.quantile(speed, 0.95)) or 1.0
+        s95 = float(np.quantile(np.abs(_rate(signals)), 0.95)) or 1.0
         span = _span(signals.v)
-        t = np.asarray(signals.t_s, float)
-        dur = float(t[-1] - t[0]) if t.size > 1 else 1.0
-        taus = [max(0.02, dur / 200), max(0.05, dur / 40)]
-        return [np.array([f * span / s95, tau]) for f in (0.01, 0.03) for tau in taus]
+        return [np.array([f * span / s95]) for f in (0.005, 0.015, 0.04)]
+
+
+def _stroke_speed(signals: Signals) -> tuple[np.ndarray, float]:
+    """Smoothed speed |dv/dt| (counts/s), shape (n,), and the 'moving' threshold."""
+    speed = np.abs(_rate(signals))
+    if speed.size >= 5:
+        speed = np.convolve(speed, np.full(5, 0.2), mode="same")
+    thr = 0.05 * float(np.quantile(speed, 0.95)) if speed.size else 0.0
+    return np.ascontiguousarray(speed), thr
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,149 @@
+"""The diagnosis as a JSON-ready record and as a Markdown report section.
+
+Both are pure functions of a :class:`~i2ris_calib.diagnosis.workflow.Diagnosis`;
+the io layer writes them (``diagnosis.json``, ``diagnosis.md``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of
+from i2ris_calib.diagnosis.workflow import Diagnosis
+
+
+def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
+    """``diagnosis.json`` content (without schema/source/provenance, added by io).
+
+    Parameters
+    ----------
+    diag : Diagnosis
+    figures : list of str
+        Figure file names: ``figures[0]`` shows the starting model's residual,
+        ``figures[i]`` the residual after step i.
+    """
+    steps = []
+    for i, s in enumerate(diag.steps):
+        steps.append(
+            {
+                "effect": s.effect,
+                "meaning": CATALOGUE[s.effect].meaning,
+                "params": effects_of(s.model_after)[-1][2],
+                "model_params": {p.name: float(p.value) for p in s.model_after.parameters},
+                "fit_rmse_before_deg": s.before.fit_rmse_deg,
+                "fit_rmse_after_deg": s.after.fit_rmse_deg,
+                "holdout_rmse_before_deg": s.before.holdout_rmse_deg,
+                "holdout_rmse_after_deg": s.after.holdout_rmse_deg,
+                "delta_bic": s.comparison.delta_bic,
+                "evidence": s.comparison.as_dict(),
+                "location_before": list(s.sentences_before),
+                "candidates": [c.as_dict() for c in s.candidates],
+                "figures": {"before": figures[i], "after": figures[i + 1]},
+            }
+        )
+    return {
+        "baseline": diag.baseline.as_dict(),
+        "final": diag.final.as_dict(),
+        "named_effects": diag.named_effects,
+        "steps": steps,
+        "stopped_because": _stop_reason(diag),
+        "last_candidates": [c.as_dict() for c in diag.last_candidates],
+        "location_final": list(diag.sentences_final),
+        "residual_analysis_final": diag.analysis_final,
+        "decimation": diag.decimation,
+        "holdout_fraction": float(np.mean(diag.holdout)),
+        "notes": list(diag.notes),
+        "figures": figures,
+    }
+
+
+def _stop_reason(diag: Diagnosis) -> str:
+    if not diag.last_candidates:
+        return "max_steps reached" if diag.steps else "no candidate fitted"
+    return "no candidate effect improved the held-out error significantly"
+
+
+def _fmt(x) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, float):
+        return f"{x:.3g}"
+    return str(x)
+
+
+def diagnosis_markdown(rec: dict) -> str:
+    """Markdown section (``## Model diagnosis``) for the report, from the record."""
+    b, f = rec["baseline"], rec["final"]
+    named = rec["named_effects"]
+    axis = rec.get("axis", "")
+    lines = [
+        f"## Model diagnosis{f' ({axis})' if axis else ''}",
+        "",
+        f"Starting model: **{rec.get('start', '?')}**. "
+        + (
+            f"Effects named, in order: **{', '.join(named)}**."
+            if named
+            else "No missing effect was found: no candidate improved the held-out error "
+            "by more than noise explains."
+        ),
+        "",
+        "| model | fitted RMSE (deg) | held-out RMSE (deg) | BIC |",
+        "|---|---|---|---|",
+        f"| start | {_fmt(b['fit_rmse_deg'])} | {_fmt(b['holdout_rmse_deg'])} | {b['bic']:.1f} |",
+        f"| final | {_fmt(f['fit_rmse_deg'])} | {_fmt(f['holdout_rmse_deg'])} | {f['bic']:.1f} |",
+        "",
+        f"![residual of the starting model]({rec['figures'][0]})",
+        "",
+    ]
+    for i, s in enumerate(rec["steps"], start=1):
+        ev = s["evidence"]
+        lines += [
+            f"### Step {i}: {s['effect']}",
+            "",
+            f"*{s['meaning']}.* Where the disagreement was:",
+            "",
+            *[f"- {x}" for x in s["location_before"]],
+            "",
+            "Fitted effect parameters: "
+            + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in s["params"].items())
+            + ".",
+            "",
+            f"Held-out RMSE {_fmt(s['holdout_rmse_before_deg'])} -> "
+            f"{_fmt(s['holdout_rmse_after_deg'])} deg ({100 * ev['rel_improvement']:.0f}% lower), "
+            f"held-out SSE reduction z = {ev['z']:.1f} (p = {ev['p_value']:.2g}), "
+            f"{ev['units_improved']}/{ev['n_units']} held-out strokes improved, "
+            f"BIC change {s['delta_bic']:.1f}.",
+            "",
+            "| candidate | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += _candidate_rows(s["candidates"], s["effect"])
+        lines += ["", f"![residual after {s['effect']}]({s['figures']['after']})", ""]
+    lines += ["### Remaining residual", "", *[f"- {x}" for x in rec["location_final"]], ""]
+    if rec["last_candidates"]:
+        lines += [
+            "Last round (nothing named):",
+            "",
+            "| candidate | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
+            "|---|---|---|---|---|---|",
+            *_candidate_rows(rec["last_candidates"], None),
+            "",
+        ]
+    for n in rec.get("notes", []):
+        lines.append(f"Note: {n}")
+    return "\n".join(lines).rstrip() + "\n"
+
+
+def _candidate_rows(cands: list[dict], chosen: str | None) -> list[str]:
+    rows = []
+    for c in cands:
+        if "skipped" in c:
+            rows.append(f"| {c['effect']} | skipped: {c['skipped']} | | | | |")
+            continue
+        e = c["evidence"]
+        rows.append(
+            f"| {c['effect']} | {_fmt(c['metrics']['holdout_rmse_deg'])} | "
+            f"{100 * e['rel_improvement']:.1f}% | {e['z']:.1f} | {e['delta_bic']:.1f} | "
+            f"{'yes' if c['effect'] == chosen else 'no'} |"
+        )
+    return rows

@@ -1,0 +1,94 @@
+"""Extended models <-> plain dicts (the ``final_model.json`` format, docs/diagnosis.md).
+
+Format ``i2ris-calib.model/1``::
+
+    {"schema": "i2ris-calib.model/1",
+     "base": {"kind": "egpi", "n": 30, "deadband_counts": 0.0,
+              "params": {"a1": ..., "v_f": ...}, "fixed": ["v_f"]},
+     "effects": [{"name": "time_delay", "label": "time_delay", "params": {"tau_s": 0.12}}],
+     "params": {"a1": ..., "time_delay.tau_s": 0.12}}
+
+``effects`` are innermost first (the order they were added); ``params`` repeats
+every value under the extended model's parameter names, for readers that only
+want numbers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import replace
+
+from i2ris_calib.diagnosis.effects import base_of, build_model, effects_of
+from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.model import Model
+
+SCHEMA = "i2ris-calib.model/1"
+
+
+def base_kind(model: Model) -> str:
+    """``"gpi"`` or ``"egpi"`` for the base models this format can rebuild."""
+    name = base_of(model).name
+    if name in ("gpi", "egpi"):
+        return name
+    raise CalibError(f"cannot save base model '{name}': only gpi and egpi are supported")
+
+
+def model_to_dict(model: Model) -> dict:
+    """JSON-ready dict of an (extended) model with its parameter values."""
+    base = base_of(model)
+    rec = {
+        "kind": base_kind(model),
+        "n": int(getattr(base, "n", 30)),
+        "params": {p.name: float(p.value) for p in base.parameters},
+        "fixed": [p.name for p in base.parameters if p.fixed],
+    }
+    if hasattr(base, "deadband_counts"):
+        rec["deadband_counts"] = float(base.deadband_counts)
+    return {
+        "schema": SCHEMA,
+        "base": rec,
+        "effects": [{"name": n, "label": lbl, "params": v} for n, lbl, v in effects_of(model)],
+        "params": {p.name: float(p.value) for p in model.parameters},
+    }
+
+
+def base_from_dict(rec: Mapping) -> Model:
+    """The GPI/EGPI base model described by ``rec`` (the ``base`` entry)."""
+    from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+
+    try:
+        kind, params = rec["kind"], dict(rec["params"])
+        n = int(rec.get("n", 30))
+        if kind == "gpi":
+            model = gpi_model(n=n, **params)
+        elif kind == "egpi":
+            model = i2ris_egpi_model(
+                n=n, deadband_counts=float(rec.get("deadband_counts", 0.0)), **params
+            )
+        else:
+            raise CalibError(f"model file: unknown base kind '{kind}' (use gpi or egpi)")
+        fixed = set(rec.get("fixed", []))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CalibError(f"model file: bad 'base' record ({exc}); see docs/diagnosis.md") from None
+    return replace(
+        model, parameters=tuple(replace(p, fixed=p.name in fixed) for p in model.parameters)
+    )
+
+
+def model_from_dict(obj: Mapping) -> Model:
+    """Rebuild the extended model saved by :func:`model_to_dict`."""
+    if obj.get("schema") != SCHEMA:
+        raise CalibError(
+            f"model file: schema is {obj.get('schema')!r}, expected '{SCHEMA}' (docs/diagnosis.md)"
+        )
+    base = base_from_dict(obj.get("base", {}))
+    effects = obj.get("effects", [])
+    if not isinstance(effects, list):
+        raise CalibError("model file: 'effects' must be a list (docs/diagnosis.md)")
+    model = base
+    for e in effects:
+        try:
+            model = build_model(model, {e["name"]: e.get("params", {})})
+        except (KeyError, TypeError) as exc:
+            raise CalibError(f"model file: bad effect record {e!r} ({exc})") from None
+    return model

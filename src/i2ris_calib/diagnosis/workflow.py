@@ -1,0 +1,512 @@
+"""Locate, name, add, repeat: the model-discrepancy workflow.
+
+1. *Locate*: the current model's residual is analysed per branch, input range,
+   time window, input rate, other axis, autocorrelation and lagged
+   cross-correlation with the input (:mod:`i2ris_calib.diagnosis.locate`).
+2. *Name*: every catalogue effect not yet in the model is fitted as an extension
+   of the current fitted model (warm start from its values, a small grid over the
+   effect's parameters, then a joint refit). A candidate is *significant* only if
+   all three hold (defaults in :class:`~i2ris_calib.diagnosis.config.DiagnosisConfig`):
+
+   - it lowers the RMSE on held-out loading cycles by at least
+     ``min_rel_improvement`` (relative);
+   - a one-sided paired t-test over held-out units (strokes of the held-out
+     cycles) on ``d_j = ln(MSE_before_j / MSE_after_j)`` rejects "no improvement"
+     at level ``alpha``: each unit is fitted by neither model, so noise alone
+     makes ``d_j`` scatter around zero (slightly below, as extra parameters fit
+     noise);
+   - BIC on the fitted samples falls by at least ``min_delta_bic`` (10 is "very
+     strong" evidence on the Kass-Raftery scale).
+
+   It must also beat, by the same rule, the current model refitted from the
+   candidate's base values (so an effect is never credited with what was only a
+   better optimum of the base model). Among significant candidates the lowest
+   held-out RMSE wins.
+3. *Add and repeat* until no candidate is significant or ``max_steps`` is reached.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from i2ris_calib.diagnosis.config import DiagnosisConfig
+from i2ris_calib.diagnosis.cycles import Segmentation, holdout_mask, holdout_units, segment
+from i2ris_calib.diagnosis.effects import (
+    CATALOGUE,
+    EffectModel,
+    effects_of,
+    model_values,
+)
+from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
+from i2ris_calib.diagnosis.refit import refit, sse
+from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.model import Model, Signals
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Fit quality of one model on one data set.
+
+    Attributes
+    ----------
+    fit_rmse_deg, holdout_rmse_deg : float
+        RMSE (deg, Eq25) on the fitted and on the held-out samples.
+    bic : float
+        ``n ln(SSE/n) + k ln n`` on the fitted samples of the search signal.
+    n_free : int
+        Free parameters k.
+    """
+
+    fit_rmse_deg: float
+    holdout_rmse_deg: float
+    bic: float
+    n_free: int
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return {
+            "fit_rmse_deg": self.fit_rmse_deg,
+            "holdout_rmse_deg": self.holdout_rmse_deg,
+            "bic": self.bic,
+            "n_free": self.n_free,
+        }
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Evidence that ``after`` is better than ``before`` on held-out data.
+
+    Attributes
+    ----------
+    rel_improvement : float
+        ``1 - RMSE_after / RMSE_before`` on the held-out samples.
+    z : float
+        Held-out SSE reduction over its standard deviation under "the before
+        model is adequate" (see :func:`sse_reduction_z`).
+    p_value : float
+        One-sided normal p-value of ``z``.
+    units_improved, n_units : int
+        Held-out strokes whose mean squared error fell, out of all.
+    delta_bic : float
+        BIC(after) - BIC(before) on the fitted samples (negative = better).
+    significant : bool
+        All three criteria met.
+    """
+
+    rel_improvement: float
+    z: float
+    p_value: float
+    units_improved: int
+    n_units: int
+    delta_bic: float
+    significant: bool
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One fitted candidate effect at one step."""
+
+    effect: str
+    model: Model | None
+    metrics: Metrics | None
+    comparison: Comparison | None
+    skipped: str | None = None
+    nfev: int = 0
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict (parameters of the effect only)."""
+        if self.skipped:
+            return {"effect": self.effect, "skipped": self.skipped}
+        return {
+            "effect": self.effect,
+            "params": effects_of(self.model)[-1][2],
+            "metrics": self.metrics.as_dict(),
+            "evidence": self.comparison.as_dict(),
+            "nfev": self.nfev,
+        }
+
+
+@dataclass(frozen=True)
+class Step:
+    """One added effect, with the evidence and the residual analyses."""
+
+    effect: str
+    model_before: Model
+    model_after: Model
+    before: Metrics
+    after: Metrics
+    comparison: Comparison
+    candidates: tuple[Candidate, ...]
+    analysis_before: dict
+    sentences_before: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`.
+
+    Attributes
+    ----------
+    start_model, final_model : Model
+        Polished starting model and the final extended model (fitted values).
+    baseline, final : Metrics
+    steps : tuple of Step
+        Effects added, in order.
+    last_candidates : tuple of Candidate
+        Candidates of the final (unsuccessful) round: why the search stopped.
+    analysis_final : dict
+        Residual analysis of the final model; ``sentences_final`` its summary.
+    holdout : ndarray of bool, shape (n,)
+        Held-out samples of the full signal.
+    decimation : int
+        Step between the samples used in the search.
+    """
+
+    start_model: Model
+    final_model: Model
+    baseline: Metrics
+    final: Metrics
+    steps: tuple[Step, ...]
+    last_candidates: tuple[Candidate, ...]
+    analysis_final: dict
+    sentences_final: tuple[str, ...]
+    holdout: np.ndarray
+    decimation: int
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def named_effects(self) -> list[str]:
+        """Effect names in the order they were added (empty if nothing is missing)."""
+        return [s.effect for s in self.steps]
+
+
+@dataclass(frozen=True)
+class _Data:
+    """Search data: decimated signals, angle, masks and held-out units."""
+
+    signals: Signals
+    theta: np.ndarray
+    fit: np.ndarray
+    hold: np.ndarray
+    units: np.ndarray
+    seg: Segmentation
+
+
+def metrics_of(model: Model, values: np.ndarray, d: _Data, n_free: int) -> Metrics:
+    """Fitted/held-out RMSE (deg) and BIC of ``model`` at ``values`` on ``d``."""
+    y = model.evaluate(d.signals, values)
+    r = y - d.theta
+    rf, rh = r[d.fit], r[d.hold]
+    n = max(rf.size, 1)
+    sse_f = float(np.dot(rf, rf))
+    bic = n * np.log(max(sse_f, 1e-300) / n) + n_free * np.log(n)
+    return Metrics(
+        fit_rmse_deg=float(np.sqrt(sse_f / n)),
+        holdout_rmse_deg=float(np.sqrt(np.mean(rh**2))) if rh.size else float("nan"),
+        bic=float(bic),
+        n_free=int(n_free),
+    )
+
+
+def autocovariance(e: np.ndarray, max_lag: int) -> np.ndarray:
+    """Sample autocovariance of ``e`` (shape (n,)) at lags 0..L, Bartlett-tapered.
+
+    ``L`` is the first lag where the autocorrelation drops below 0.1 (at most
+    ``max_lag``); the taper ``1 - l/(L+1)`` keeps the implied variance positive
+    (Newey-West).
+    """
+    e = np.asarray(e, float) - np.mean(e)
+    n = e.size
+    g0 = float(np.dot(e, e) / n) if n else 0.0
+    gam = [g0]
+    for lag in range(1, min(max_lag, n - 1) + 1):
+        g = float(np.dot(e[lag:], e[:-lag]) / n)
+        if g0 <= 0 or g / g0 < 0.1:
+            break
+        gam.append(g)
+    L = len(gam) - 1
+    return np.array([g * (1 - lag / (L + 1)) for lag, g in enumerate(gam)])
+
+
+def sse_reduction_z(
+    r_before: np.ndarray, delta: np.ndarray, gamma: np.ndarray
+) -> tuple[float, float]:
+    """z-score and one-sided p-value of the held-out SSE reduction.
+
+    With ``r_b`` the held-out residual of the model before and ``delta`` the
+    change of its prediction, ``SSE_b - SSE_a = sum(2 r_b delta - delta^2)``.
+    If the model before is adequate, ``r_b`` is noise ``e`` (autocovariance
+    ``gamma``) and ``2 sum(e delta)`` has variance ``4 delta' C delta``, so
+    ``z = (SSE_b - SSE_a) / (2 sqrt(delta' C delta))`` exceeds the normal
+    quantile with at most the nominal probability (its mean is ``-sum delta^2``
+    <= 0: the test is conservative).
+
+    Parameters
+    ----------
+    r_before, delta : ndarray, shape (m,)
+        Held-out residual before (deg) and prediction change after - before (deg),
+        in time order.
+    gamma : ndarray, shape (L+1,)
+        Noise autocovariance at lags 0..L (deg^2), from :func:`autocovariance`.
+    """
+    gain = float(np.sum(2 * r_before * delta - delta**2))
+    var = gamma[0] * float(np.dot(delta, delta))
+    for lag in range(1, gamma.size):
+        var += 2 * gamma[lag] * float(np.dot(delta[lag:], delta[:-lag]))
+    if var <= 0:
+        return (np.inf if gain > 0 else 0.0), (0.0 if gain > 0 else 1.0)
+    z = gain / (2 * np.sqrt(var))
+    return float(z), float(stats.norm.sf(z))
+
+
+def compare(
+    before: tuple[Model, Metrics],
+    after: tuple[Model, Metrics],
+    d: _Data,
+    cfg: DiagnosisConfig,
+) -> Comparison:
+    """Held-out evidence that ``after`` improves on ``before`` (see module doc).
+
+    The noise autocovariance is estimated from the fitted-sample residual of
+    ``after`` (the better model's residual is the closer one to pure noise).
+    """
+    mb, mtb = before
+    ma, mta = after
+    yb = mb.evaluate(d.signals, model_values(mb))
+    ya = ma.evaluate(d.signals, model_values(ma))
+    rb, ra = d.theta - yb, d.theta - ya
+    gamma = autocovariance(ra[d.fit], max_lag=50)
+    z, p = sse_reduction_z(rb[d.hold], (ya - yb)[d.hold], gamma)
+    labels = np.unique(d.units[d.units >= 0])
+    improved = sum(
+        float(np.mean(ra[d.units == lab] ** 2)) < float(np.mean(rb[d.units == lab] ** 2))
+        for lab in labels
+    )
+    rel = 1.0 - mta.holdout_rmse_deg / mtb.holdout_rmse_deg if mtb.holdout_rmse_deg > 0 else 0.0
+    dbic = mta.bic - mtb.bic
+    sig = bool(rel >= cfg.min_rel_improvement and p < cfg.alpha and dbic <= -cfg.min_delta_bic)
+    return Comparison(
+        rel_improvement=float(rel),
+        z=z,
+        p_value=p,
+        units_improved=int(improved),
+        n_units=int(labels.size),
+        delta_bic=float(dbic),
+        significant=sig,
+    )
+
+
+def _n_free(model: Model) -> int:
+    return int(sum(not p.fixed for p in model.parameters))
+
+
+def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> Candidate:
+    """Fit effect ``name`` as an extension of the fitted ``current`` model.
+
+    Every start on the effect's grid is profiled (effect held, base parameters
+    refitted for a few iterations, because the fitted base has already absorbed
+    part of the effect); the two best profiles are refitted jointly.
+    """
+    effect = CATALOGUE[name]
+    why = effect.available(d.signals)
+    if why:
+        return Candidate(name, None, None, None, skipped=why)
+    x_cur = model_values(current)
+    used = {lbl for _, lbl, _ in effects_of(current)}
+    label = name if name not in used else f"{name}_2"
+    proto = EffectModel(current, effect, tuple(effect.neutral()), label)
+    y_cur = current.evaluate(d.signals, x_cur)
+    m = x_cur.size
+    base_only = np.ones(m + len(effect.params), dtype=bool)
+    base_only[m:] = False
+    profiles, nfev = (
+        [
+            refit(
+                proto,
+                d.signals,
+                d.theta,
+                d.fit,
+                np.concatenate([x_cur, effect.neutral()]),
+                free=np.zeros(base_only.size, dtype=bool),
+            )
+        ],
+        0,
+    )
+    for s0 in effect.start_grid(d.signals, y_cur):
+        r = refit(
+            proto,
+            d.signals,
+            d.theta,
+            d.fit,
+            np.concatenate([x_cur, s0]),
+            free=base_only,
+            max_nfev=cfg.profile_nfev,
+        )
+        nfev += r.nfev
+        profiles.append(r)
+    profiles.sort(key=lambda r: r.sse_deg2)
+    best = None
+    for start in profiles[:2]:
+        r = refit(proto, d.signals, d.theta, d.fit, start.values, max_nfev=cfg.max_nfev)
+        nfev += r.nfev
+        if best is None or r.sse_deg2 < best.sse_deg2:
+            best = r
+    model = proto.with_values(best.values)
+    return Candidate(
+        name, model, metrics_of(model, best.values, d, _n_free(model)), None, nfev=nfev
+    )
+
+
+def _search_data(
+    signals: Signals, theta: np.ndarray, cfg: DiagnosisConfig
+) -> tuple[_Data, np.ndarray, int]:
+    """Decimated search data, the full held-out mask and the decimation step."""
+    n = theta.size
+    seg_full = segment(np.asarray(signals.v, float))
+    hold_full = holdout_mask(seg_full, cfg.holdout_every)
+    step = max(1, int(np.ceil(n / cfg.max_samples)))
+    idx = np.arange(0, n, step)
+    sig = signals.take(idx)
+    th = np.asarray(theta, float)[idx]
+    ok = np.isfinite(th)
+    hold = hold_full[idx] & ok
+    fit = ~hold_full[idx] & ok
+    seg = Segmentation(seg_full.stroke[idx], seg_full.cycle[idx], seg_full.rising[idx])
+    units = np.where(ok, holdout_units(seg, hold), -1)
+    if fit.sum() < 50 or hold.sum() < 20:
+        raise CalibError(
+            f"too few usable samples for diagnosis ({int(fit.sum())} fitted, {int(hold.sum())} "
+            "held out): record at least 6 loading cycles with the angle measured"
+        )
+    return _Data(sig, np.where(ok, th, 0.0), fit, hold, units, seg), hold_full, step
+
+
+def _analysis(model: Model, d: _Data) -> tuple[dict, tuple[str, ...]]:
+    res = d.theta - model.evaluate(d.signals, model_values(model))
+    res = np.where(d.fit | d.hold, res, np.nan)
+    a = residual_analysis(res, d.signals, d.seg)
+    return a, tuple(concentration_sentences(a))
+
+
+def diagnose(
+    start: Model,
+    signals: Signals,
+    theta_deg: np.ndarray,
+    config: DiagnosisConfig | None = None,
+    progress=None,
+) -> Diagnosis:
+    """Run locate -> name -> add until no candidate effect helps.
+
+    Parameters
+    ----------
+    start : Model
+        Starting model with fitted (or at least sensible) values, e.g. a GPI or
+        EGPI fitted by :mod:`i2ris_calib.fitting`; it is polished on the fitted
+        cycles first.
+    signals : Signals
+        Inputs, shape (n,) each, in time order (``t_s`` needed by the
+        time-dependent effects; ``v_other``/``theta_other_deg`` by coupling).
+    theta_deg : ndarray, shape (n,)
+        Measured angle (deg); NaN where not measured.
+    config : DiagnosisConfig, optional
+    progress : callable, optional
+        ``progress(text)`` called before each candidate fit (for a progress bar).
+
+    Returns
+    -------
+    Diagnosis
+    """
+    cfg = config or DiagnosisConfig()
+    theta_deg = np.asarray(theta_deg, float)
+    if theta_deg.shape != np.asarray(signals.v).shape:
+        raise CalibError("diagnose: angle and input have different lengths")
+    d, hold_full, step = _search_data(signals, theta_deg, cfg)
+    names = list(cfg.candidates or CATALOGUE)
+    pol = refit(start, d.signals, d.theta, d.fit, model_values(start), max_nfev=cfg.start_max_nfev)
+    current = start.with_values(pol.values)
+    cur_m = metrics_of(current, pol.values, d, _n_free(current))
+    baseline = cur_m
+    steps: list[Step] = []
+    last: tuple[Candidate, ...] = ()
+    notes: list[str] = []
+    for _ in range(cfg.max_steps):
+        analysis, sentences = _analysis(current, d)
+        done = {e for e, _, _ in effects_of(current)}
+        cands = []
+        for name in names:
+            if name in done:
+                continue
+            if progress:
+                progress(name)
+            c = fit_candidate(current, name, d, cfg)
+            if c.model is not None:
+                c = Candidate(
+                    c.effect,
+                    c.model,
+                    c.metrics,
+                    compare((current, cur_m), (c.model, c.metrics), d, cfg),
+                    nfev=c.nfev,
+                )
+            cands.append(c)
+        last = tuple(cands)
+        passing = [c for c in cands if c.comparison is not None and c.comparison.significant]
+        if not passing:
+            break
+        best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
+        # the base model refitted from the winner's base values: an effect is
+        # named only if it beats the better of (current, this refit)
+        inner_x = model_values(best.model)[: best.model.n_inner]
+        nul = refit(current, d.signals, d.theta, d.fit, inner_x, max_nfev=cfg.max_nfev)
+        null_model = current.with_values(nul.values)
+        null_m = metrics_of(null_model, nul.values, d, _n_free(null_model))
+        if compare((current, cur_m), (null_model, null_m), d, cfg).significant:
+            notes.append(
+                f"step {len(steps) + 1}: the base model refitted from {best.effect}'s values "
+                f"fits better (held-out RMSE {null_m.holdout_rmse_deg:.3g} vs "
+                f"{cur_m.holdout_rmse_deg:.3g} deg); candidates were judged against it"
+            )
+            ref = (null_model, null_m)
+            passing = [c for c in passing if compare(ref, (c.model, c.metrics), d, cfg).significant]
+            if not passing:
+                current, cur_m = ref
+                continue
+            best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
+            comp = compare(ref, (best.model, best.metrics), d, cfg)
+        else:
+            comp = best.comparison
+        steps.append(
+            Step(
+                effect=best.effect,
+                model_before=current,
+                model_after=best.model,
+                before=cur_m,
+                after=best.metrics,
+                comparison=comp,
+                candidates=tuple(cands),
+                analysis_before=analysis,
+                sentences_before=sentences,
+            )
+        )
+        current, cur_m = best.model, best.metrics
+        last = ()
+    analysis, sentences = _analysis(current, d)
+    return Diagnosis(
+        start_model=steps[0].model_before if steps else current,
+        final_model=current,
+        baseline=baseline,
+        final=cur_m,
+        steps=tuple(steps),
+        last_candidates=last,
+        analysis_final=analysis,
+        sentences_final=sentences,
+        holdout=hold_full,
+        decimation=step,
+        notes=tuple(notes),
+    )

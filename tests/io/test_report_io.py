@@ -163,6 +163,7 @@ def test_rerun_replaces_the_previous_report(tmp_path):
     write_report(run_dir, None, CFG)
     stale = run_dir / "report" / "figures" / "stale.png"
     stale.write_bytes(b"old")
+    (run_dir / "report" / ".stamp.json").write_text("{}")  # as left by 'run'
     (run_dir / "sync" / "synced.csv").unlink()
     write_report(run_dir, None, CFG)
     assert not stale.exists() and not (run_dir / "report" / "figures" / "synced_loops.png").exists()

@@ -143,8 +143,8 @@ def write_sync(root: Path) -> dict:
     return sync
 
 
-GPI_PARAMS = ("a1", "a2", "a3", "a4", "lambda", "sigma", "r_1", "r_n")
-EGPI_PARAMS = ("a1", "a2", "a3", "a4", "a5", "a6", "lambda", "sigma", "r_1", "r_n", "kappa")
+GPI_PARAMS = ("a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn")
+EGPI_PARAMS = ("a1", "a2", "a3", "a4", "a5", "a6", "lam", "sigma", "r1", "rn", "kappa", "v_f")
 
 
 def _dataset(axis: str, direction: str, t: np.ndarray, scale: float):

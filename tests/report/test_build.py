@@ -66,6 +66,10 @@ def test_complete_run_has_every_section_and_figure(run_data):
     ]
     assert {"tracking_quality", "synced_loops"} <= set(names) and len(names) == 8
     assert not _blocks(doc, "overview", Note)
+    params = next(s for s in doc.sections if s.anchor == "parameters")
+    assert [s.title for s in params.subsections] == ["yaw+", "yaw-", "pitch+", "pitch-"]
+    units = {r[0]: r[1] for r in params.subsections[0].blocks[0].rows}
+    assert units["a1"] == "deg/count" and units["kappa"] == "1"  # from the model declarations
     acc = _blocks(doc, "accuracy", Table)
     assert [t.caption.split(":")[0] for t in acc] == ["yaw", "pitch"]
 

@@ -80,22 +80,27 @@ def test_gpi_egpi_ratio(yaw_fit):
 
 def test_params_table_values_stderr_and_relative_error(yaw_fit):
     d = tables.fit_datasets(yaw_fit)[0]
-    t = tables.params_table(d)
+    t = tables.params_table(d, {"a1": ("deg/count", "loading slope")})
     assert t.header == (
         "parameter",
+        "unit",
         "EGPI value",
         "EGPI stderr",
         "EGPI rel. stderr (%)",
         "GPI value",
         "GPI stderr",
         "GPI rel. stderr (%)",
+        "meaning",
     )
     rows = {r[0]: r for r in t.rows}
     assert set(rows) == set(d["models"]["egpi"]["params"]) | set(d["models"]["gpi"]["params"])
-    # stderr was written as 1 % of the value, except the last parameter (null).
-    assert rows["a1"][3] == "1.0" and rows["a1"][6] == "1.0"
-    assert rows["kappa"][2] == tables.DASH and rows["kappa"][4] == tables.DASH  # GPI has no kappa
-    assert rows["a1"][1] == f"{d['models']['egpi']['params']['a1']:.6g}"
+    assert rows["a1"][1] == "deg/count" and rows["a1"][-1] == "loading slope"
+    assert rows["a2"][1] == "" and rows["a2"][-1] == ""
+    # stderr was written as 1 % of the value, except each model's last parameter (null).
+    assert rows["a1"][4] == "1.0" and rows["a1"][7] == "1.0"
+    assert rows["v_f"][3] == tables.DASH and rows["rn"][6] == tables.DASH
+    assert rows["kappa"][5] == tables.DASH  # GPI has no kappa
+    assert rows["a1"][2] == f"{d['models']['egpi']['params']['a1']:.6g}"
 
 
 def test_fit_info_table(yaw_fit):

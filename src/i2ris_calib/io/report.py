@@ -20,7 +20,7 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.report.data import DiagnosisData, FitData, RunData
 
 AXES = ("yaw", "pitch")
-REPORT_FILES = {"report.html", "report.md", "figures"}
+REPORT_FILES = {"report.html", "report.md", "figures", ".stamp.json"}  # stamp: see io/run.py
 FIGURE_DIR = "figures"
 
 ANGLES_COLUMNS = {"time_s": True, "yaw_deg": True, "pitch_deg": True, "status": False}

@@ -213,17 +213,34 @@ def _fig6_caption(name: str, rows: pd.DataFrame) -> str:
     )
 
 
-def parameters_section(run: RunData) -> Section:
-    """Fitted parameters with standard errors and fit diagnostics per dataset."""
+def parameter_info() -> dict[str, tuple[str, str]]:
+    """Parameter name -> (unit, meaning) from the GPI and I2RIS-EGPI model declarations.
+
+    Empty when the hysteresis package cannot be imported (the table then has no units).
+    """
+    try:
+        from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+    except ImportError:
+        return {}
+    info: dict[str, tuple[str, str]] = {}
+    for model in (i2ris_egpi_model(), gpi_model()):
+        for p in model.parameters:
+            info.setdefault(p.name, (p.unit, p.doc))
+    return info
+
+
+def parameters_section(run: RunData, info: Mapping[str, tuple[str, str]] | None = None) -> Section:
+    """Fitted parameters with standard errors and fit diagnostics, one subsection per dataset."""
     title = "Fitted parameters"
     if not run.fits:
         return Section("parameters", title, (_no_fit_note(run),))
+    info = parameter_info() if info is None else info
     subs = []
     for fd in run.fits:
-        blocks: list = []
         for d in tables.fit_datasets(fd.fit):
-            blocks += [tables.params_table(d), tables.fit_info_table(d)]
-        subs.append(Section(f"parameters-{_slug(fd.axis)}", fd.axis, tuple(blocks)))
+            name = str(d.get("name", fd.axis))
+            blocks = (tables.params_table(d, info), tables.fit_info_table(d))
+            subs.append(Section(f"parameters-{_slug(fd.axis)}-{_slug(name)}", name, blocks))
     return Section("parameters", title, (), tuple(subs))
 
 

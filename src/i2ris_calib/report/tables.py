@@ -106,35 +106,47 @@ def gpi_egpi_ratio(dataset: Mapping[str, Any], split_key: str = "holdout_metrics
     return g / e if e > 0 and math.isfinite(g) and math.isfinite(e) else None
 
 
-def params_table(dataset: Mapping[str, Any]) -> Table:
-    """Fitted parameters with standard errors, one column pair per model.
+def params_table(
+    dataset: Mapping[str, Any], info: Mapping[str, tuple[str, str]] | None = None
+) -> Table:
+    """Fitted parameters with standard errors, one column group per model.
+
+    Parameters
+    ----------
+    dataset : mapping
+        One fit.json dataset record.
+    info : mapping, optional
+        Parameter name -> (unit, one-line meaning), shown when given.
 
     The relative standard error (stderr / |value|, %) flags poorly determined
     parameters.
     """
+    info = info or {}
     models = [(k, lab) for k, lab in MODELS if isinstance(dataset.get("models", {}).get(k), dict)]
     names: list[str] = []
     for k, _ in models:
         for n in dataset["models"][k].get("params", {}) or {}:
             if n not in names:
                 names.append(n)
-    header = ["parameter"]
+    header = ["parameter", "unit"]
     for _, lab in models:
         header += [f"{lab} value", f"{lab} stderr", f"{lab} rel. stderr (%)"]
+    header.append("meaning")
     rows = []
     for n in names:
-        row = [n]
+        unit, doc = info.get(n, ("", ""))
+        row = [n, unit]
         for k, _ in models:
             rec = dataset["models"][k]
             val = (rec.get("params") or {}).get(n)
             se = (rec.get("stderr") or {}).get(n)
             row += [fmt(val), fmt(se), fmt(_relative_pct(val, se), 1)]
-        rows.append(tuple(row))
+        rows.append((*row, doc))
     return Table(
         header=tuple(header),
         rows=tuple(rows),
         caption=f"{_dataset_label(dataset)}: fitted parameters (stderr from the LM Jacobian; "
-        "— = not a parameter of that model or not estimable).",
+        "— = not a parameter of that model, held fixed, or not estimable).",
     )
 
 

@@ -113,3 +113,11 @@ def test_fragment_markdown_leaves_code_blocks_alone():
 
 def test_png_size():
     assert png_size(tiny_png(13, 7)) == (13, 7)
+
+
+def test_explicit_alignment_overrides_the_numeric_guess():
+    t = Table(("parameter", "unit"), (("kappa", "1"),), align=("l", "l"))
+    text, _ = render_markdown(Document("t", "s", (Section("a", "A", (t,)),)))
+    assert "|---|---|" in text
+    page = render_html(Document("t", "s", (Section("a", "A", (t,)),)), TEMPLATE, "", "1")
+    assert '<td class="text">1</td>' in page

@@ -363,6 +363,7 @@ def _steps_table(steps: list) -> Table:
     flat = []
     for s in steps:
         row = dict(tables.flatten(s)) if isinstance(s, Mapping) else {"step": s}
+        row = {k: v for k, v in row.items() if not _is_png_list(v)}  # plots are shown below
         flat.append(row)
         keys += [k for k in row if k not in keys]
     keys.sort(key=lambda k: (k != "effect", k.startswith("evidence"), k))
@@ -370,6 +371,11 @@ def _steps_table(steps: list) -> Table:
     return Table(
         ("step", *keys), tuple((str(i + 1), *r) for i, r in enumerate(rows)), "Diagnosis steps."
     )
+
+
+def _is_png_list(value: Any) -> bool:
+    items = value if isinstance(value, list) else [value]
+    return bool(items) and all(isinstance(x, str) and x.lower().endswith(".png") for x in items)
 
 
 def _clip(text: str, n: int = 160) -> str:

@@ -35,13 +35,15 @@ class Table:
 
     ``group_header`` optionally spans columns above the header: a tuple of
     ``(label, n_columns)`` pairs whose widths add up to k (HTML only; in Markdown
-    the group label is prefixed to the header cells).
+    the group label is prefixed to the header cells). ``align`` optionally gives
+    ``"l"`` or ``"r"`` per column; by default numeric-looking columns align right.
     """
 
     header: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
     caption: str = ""
     group_header: tuple[tuple[str, int], ...] = ()
+    align: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -125,8 +125,14 @@ def _html_table(t: Table) -> str:
         )
         head.append(f'<tr class="group">{cells}</tr>')
     head.append("<tr>" + "".join(f"<th>{e(c)}</th>" for c in t.header) + "</tr>")
+    right = column_alignment(t)
     body = "\n".join(
-        "<tr>" + "".join(f"<td{_cell_class(c)}>{e(c)}</td>" for c in row) + "</tr>"
+        "<tr>"
+        + "".join(
+            f"<td>{e(c)}</td>" if r else f'<td class="text">{e(c)}</td>'
+            for c, r in zip(row, right, strict=True)
+        )
+        + "</tr>"
         for row in t.rows
     )
     caption = f"<caption>{e(t.caption)}</caption>" if t.caption else ""
@@ -139,9 +145,11 @@ def _html_table(t: Table) -> str:
 _NUMBER = re.compile(r"^[-+]?(\d[\d.,eE+-]*|—)( \(.*\))?$")
 
 
-def _cell_class(text: str) -> str:
-    """Left-align text cells, right-align numbers (CSS class ``text``)."""
-    return "" if _NUMBER.match(text) else ' class="text"'
+def column_alignment(t: Table) -> list[bool]:
+    """True per column to align right: ``t.align`` when given, else all cells numeric-looking."""
+    if t.align:
+        return [a == "r" for a in t.align]
+    return [bool(t.rows) and all(_NUMBER.match(r[j]) for r in t.rows) for j in range(len(t.header))]
 
 
 def fragment_html(frag: MarkdownFragment) -> str:
@@ -258,9 +266,7 @@ def _md_table(t: Table) -> list[str]:
         labels = [label for label, n in t.group_header for _ in range(n)]
         header = [f"{g} {h}".strip() for g, h in zip(labels, header, strict=True)]
     cell = lambda s: _md_text(s).replace("|", "\\|")  # noqa: E731
-    numeric = [
-        bool(t.rows) and all(_NUMBER.match(r[j]) for r in t.rows) for j in range(len(header))
-    ]
+    numeric = column_alignment(t)
     out = ["| " + " | ".join(cell(h) for h in header) + " |"]
     out.append("|" + "|".join("---:" if num else "---" for num in numeric) + "|")
     out += ["| " + " | ".join(cell(c) for c in row) + " |" for row in t.rows]

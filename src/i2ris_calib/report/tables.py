@@ -145,6 +145,7 @@ def params_table(
     return Table(
         header=tuple(header),
         rows=tuple(rows),
+        align=("l", "l", *("r" * (3 * len(models))), "l"),
         caption=f"{_dataset_label(dataset)}: fitted parameters (stderr from the LM Jacobian; "
         "— = not a parameter of that model, held fixed, or not estimable).",
     )

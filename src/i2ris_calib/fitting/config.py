@@ -26,7 +26,9 @@ class FitConfig:
     n_operators : int
         n, the number of non-zero thresholds (n + 1 play operators, Eq14).
     deadband_counts : float
-        Dead band of ``v'`` (counts); negative = automatic (1 % of the input range).
+        Dead band of ``v'`` (counts) for the EGPI output switch; negative = automatic
+        (1 % of the input range). Small by default: encoder counts are exact, and a
+        wide band delays the switch back to loading at the turning points.
     fixed_gpi, fixed_egpi : tuple of str
         Parameters held at their start value. ``lam`` by default: lam and the
         envelope scale are exactly redundant (docs/models.md).
@@ -47,7 +49,7 @@ class FitConfig:
     seed: int = 0
     max_nfev: int = 3000
     n_operators: int = 30
-    deadband_counts: float = -1.0
+    deadband_counts: float = 2.0
     fixed_gpi: tuple[str, ...] = ("lam",)
     fixed_egpi: tuple[str, ...] = ("lam",)
     fit_flag_point: bool = True

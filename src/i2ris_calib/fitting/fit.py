@@ -117,7 +117,7 @@ def _validate(signals: Signals, theta: np.ndarray, n_free: int, used: np.ndarray
         )
 
 
-def _lsq(counter, x0_full, free, lower, upper, method, max_nfev):
+def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
     def fun(x):
         full = x0_full.copy()
         full[free] = x
@@ -131,7 +131,7 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev):
             fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev
         )
     elif method == "lm":
-        res = least_squares(fun, x0, method="lm", x_scale="jac", max_nfev=max_nfev)
+        res = least_squares(fun, x0, method="lm", x_scale="jac", max_nfev=max_nfev, ftol=ftol)
     else:
         raise CalibError(f"fit: unknown method '{method}'; use 'lm' or 'trf'")
     full = x0_full.copy()
@@ -151,13 +151,17 @@ def _profile(counter, full, idx, grid):
     return best
 
 
-def _refine_profiled(counter, full, pidx, v, lower, upper):
-    """Coarse-to-fine grid over each profiled parameter (v_f) around its value."""
+def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
+    """Grid search over each profiled parameter (v_f): the whole input range (when
+    ``wide``) then +-1 % of it around the best, the other parameters held."""
     span = float(np.ptp(v))
     for idx in pidx:
         lo, hi = max(lower[idx], v.min()), min(upper[idx], v.max())
         centre = full[idx]
-        for width, n in ((0.15 * span, 31), (0.01 * span, 21)):
+        levels = ((0.5 * span, 41), (0.02 * span, 21)) if wide else ((0.01 * span, 21),)
+        if wide:
+            centre = 0.5 * (lo + hi)
+        for width, n in levels:
             grid = np.clip(np.linspace(centre - width, centre + width, n), lo, hi)
             centre, _ = _profile(counter, full, idx, grid)
             full = full.copy()
@@ -175,7 +179,8 @@ def fit_model(
     starts: list[np.ndarray] | None = None,
     method: str = "lm",
     max_nfev: int | None = 3000,
-    profile_rounds: int = 2,
+    screen_nfev: int = 200,
+    ftol: float = 1e-7,
 ) -> FitResult:
     """Fit ``model`` to measured angles by least squares (Eq24).
 
@@ -196,9 +201,12 @@ def fit_model(
     method : {"lm", "trf"}
         Unbounded Levenberg-Marquardt or bounded trust-region reflective.
     max_nfev : int, optional
-        Evaluation limit per start (the result is flagged not converged when hit).
-    profile_rounds : int
-        Grid-then-LM rounds when a profiled parameter (``v_f``) is free.
+        Evaluation limit of the final run (the result is flagged not converged when hit).
+    screen_nfev : int
+        With several starts, each first gets an LM run limited to this many
+        evaluations; only the best is run to convergence.
+    ftol : float
+        Relative cost-reduction tolerance of ``least_squares``.
 
     Returns
     -------
@@ -228,20 +236,23 @@ def fit_model(
     counter = _Counter(model, s, theta, used)
     starts = [np.array([p.value for p in params], dtype=float)] if not starts else starts
 
-    best = None
-    for x0 in starts:
-        full = np.asarray(x0, dtype=float).copy()
-        res = None
-        for rnd in range(max(1, profile_rounds) if pidx else 1):
-            if pidx:
-                full = _refine_profiled(counter, full, pidx, v, lower, upper)
-            if lsq_free.size:
-                full, res = _lsq(counter, full, lsq_free, lower, upper, method, max_nfev)
-            if rnd == 0 and not pidx:
-                break
-        cost = float(np.sum(counter.residuals(full) ** 2))
-        if best is None or cost < best[0]:
-            best = (cost, full, res)
+    def run(x0, nfev_limit, steps):
+        full, res = np.asarray(x0, dtype=float).copy(), None
+        for step in steps if pidx else ("lm",):
+            if step == "lm" and lsq_free.size:
+                full, res = _lsq(counter, full, lsq_free, lower, upper, method, nfev_limit, ftol)
+            elif step in ("wide", "fine"):
+                full = _refine_profiled(counter, full, pidx, v, lower, upper, wide=step == "wide")
+        return float(np.sum(counter.residuals(full) ** 2)), full, res
+
+    # every start: LM, wide v_f grid, LM (short when several starts); then the best
+    # one: LM to convergence, fine v_f grid, LM.
+    first = ("lm", "wide", "lm")
+    if len(starts) > 1:
+        screened = [run(x0, screen_nfev, first) for x0 in starts]
+        best = run(min(screened, key=lambda c: c[0])[1], max_nfev, ("lm", "fine", "lm"))
+    else:
+        best = run(starts[0], max_nfev, first + ("fine", "lm"))
     cost, full, res = best
     return _result(
         model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts)

@@ -61,6 +61,87 @@ def family_outputs(v, gl, gr, rl, rr, p):  # pragma: no cover - compiled
     return out
 
 
+@njit(cache=True, fastmath=True)
+def linear_family_outputs(v, al, bl, ar, br, rl, rr, p):  # pragma: no cover - compiled
+    """:func:`family_outputs` for linear envelopes ``gl = al v + bl``, ``gr = ar v + br``
+    (al, bl, ar, br: shape (S,)), computed inline: no envelope arrays are built."""
+    n = v.size
+    n_fam = al.size
+    out = np.empty((n_fam, n))
+    m = p.size
+    w = np.empty(m)
+    for s in range(n_fam):
+        acc = 0.0
+        g_l = al[s] * v[0] + bl[s]
+        g_r = ar[s] * v[0] + br[s]
+        for i in range(m):
+            wi = min(max(0.0, g_l - rl[s, i]), g_r + rr[s, i])
+            w[i] = wi
+            acc += p[i] * wi
+        out[s, 0] = acc
+        for k in range(1, n):
+            if v[k] > v[k - 1]:
+                g = al[s] * v[k] + bl[s]
+                acc = 0.0
+                for i in range(m):
+                    wi = max(g - rl[s, i], w[i])
+                    w[i] = wi
+                    acc += p[i] * wi
+                out[s, k] = acc
+            elif v[k] < v[k - 1]:
+                g = ar[s] * v[k] + br[s]
+                acc = 0.0
+                for i in range(m):
+                    wi = min(g + rr[s, i], w[i])
+                    w[i] = wi
+                    acc += p[i] * wi
+                out[s, k] = acc
+            else:
+                out[s, k] = out[s, k - 1]
+    return out
+
+
+@njit(cache=True)
+def thresholds_and_weights(r1, rn, n, lam, sigma):  # pragma: no cover - compiled
+    """Thresholds [0, r1..rn] (Eq14) and weights lam exp(-sigma r) (Eq15), shape (n+1,)."""
+    r = np.empty(n + 1)
+    r[0] = 0.0
+    for i in range(1, n + 1):
+        r[i] = r1 + (i - 1) * (rn - r1) / (n - 1) if n > 1 else r1
+    return r, lam * np.exp(-sigma * r)
+
+
+@njit(cache=True)
+def i2ris_egpi_output(v, x, n, deadband):  # pragma: no cover - compiled
+    """I2RIS EGPI output (Eq16-23), shape (n_samples,); x = (a1..a6, lam, sigma, r1, rn, kappa, v_f)."""
+    r, p = thresholds_and_weights(x[8], x[9], n, x[6], x[7])
+    rl = np.empty((2, n + 1))
+    rr = np.empty((2, n + 1))
+    rl[0] = r
+    rl[1] = r
+    rr[0] = r
+    rr[1] = x[10] * r
+    al = np.array([x[0], x[0]])
+    bl = np.array([x[1], x[1]])
+    ar = np.array([x[2], x[4]])
+    br = np.array([x[3], x[5]])
+    z = linear_family_outputs(v, al, bl, ar, br, rl, rr, p)
+    d = motion_direction(v, deadband)
+    return select_stage(z, v, d, np.empty(0), np.array([x[11]]))
+
+
+@njit(cache=True)
+def gpi_output(v, x, n):  # pragma: no cover - compiled
+    """GPI output (Eq3), shape (n_samples,); x = (a1, a2, a3, a4, lam, sigma, r1, rn)."""
+    r, p = thresholds_and_weights(x[6], x[7], n, x[4], x[5])
+    rr = np.empty((1, n + 1))
+    rr[0] = r
+    z = linear_family_outputs(
+        v, np.array([x[0]]), np.array([x[1]]), np.array([x[2]]), np.array([x[3]]), rr, rr, p
+    )
+    return z[0]
+
+
 @njit(cache=True)
 def motion_direction(v, deadband):  # pragma: no cover - compiled
     """What ``v'`` means on a sampled signal: +1 loading, -1 unloading, int8 (n,).

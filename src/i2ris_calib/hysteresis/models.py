@@ -29,7 +29,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from i2ris_calib.hysteresis.kernel import family_outputs, motion_direction, select_stage
+from i2ris_calib.hysteresis.kernel import (
+    family_outputs,
+    gpi_output,
+    i2ris_egpi_output,
+    motion_direction,
+    select_stage,
+)
 from i2ris_calib.hysteresis.model import Parameter, Signals
 
 INF = np.inf
@@ -183,13 +189,10 @@ class GPIModel(ParametricModel):
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,), for values (a1..a4, lam, sigma, r1, rn)."""
-        a1, a2, a3, a4, lam, sigma, r1, rn = np.asarray(values, dtype=float)
-        v = _input(signals)
-        r = thresholds(r1, rn, self.n)
-        p = density(r, lam, sigma)
-        gl = (a1 * v + a2)[None, :]
-        gr = (a3 * v + a4)[None, :]
-        return family_outputs(v, gl, gr, r[None, :], r[None, :], p)[0]
+        x = np.ascontiguousarray(values, dtype=float)
+        if x.size != 8:
+            raise ValueError(f"gpi: expected 8 values, got {x.size}")
+        return gpi_output(_input(signals), x, int(self.n))
 
 
 def gpi_model(n: int = 30, **values: float) -> GPIModel:
@@ -231,11 +234,10 @@ class I2RISEGPIModel(ParametricModel):
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,) (Eq21)."""
-        v = _input(signals)
-        values = np.asarray(values, dtype=float)
-        z = self.families(v, values)
-        d = motion_direction(v, float(self.deadband_counts))
-        return select_stage(z, v, d, np.empty(0), np.array([values[11]]))
+        x = np.ascontiguousarray(values, dtype=float)
+        if x.size != 12:
+            raise ValueError(f"egpi: expected 12 values, got {x.size}")
+        return i2ris_egpi_output(_input(signals), x, int(self.n), float(self.deadband_counts))
 
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 0.0, **values: float) -> I2RISEGPIModel:

@@ -75,14 +75,7 @@ def test_empty_run_folder_gives_a_report_that_says_what_is_missing(tmp_path, cap
     root.mkdir()
     assert main(["report", str(root)]) == 0
     md = (root / "report" / "report.md").read_text()
-    for label in (
-        "track/angles.csv",
-        "track/track.json",
-        "sync/sync.json",
-        "sync/synced.csv",
-        "fit/yaw/fit.json",
-        "fit/pitch/fit.json",
-    ):
+    for label in runfolder.STAGE_FILES:
         assert f"{label}: not found" in md
     assert "report.html" in capsys.readouterr().out
 

@@ -14,6 +14,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+# The stage outputs a run folder normally holds (diagnosis is optional).
+STAGE_FILES = (
+    "track/angles.csv",
+    "track/track.json",
+    "sync/sync.json",
+    "sync/synced.csv",
+    "fit/yaw/fit.json",
+    "fit/pitch/fit.json",
+)
 FPS = 30.0
 N_FRAMES = 600
 FLAGGED = {"not_found": range(100, 130), "ambiguous": range(300, 310), "rejected": range(450, 455)}

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import pytest
+from runfolder import STAGE_FILES
 
 from i2ris_calib.report.build import build_document
 from i2ris_calib.report.config import ReportConfig
@@ -85,17 +86,7 @@ def test_headline_ratio_from_fit_json(run_data):
 
 
 def test_empty_run_states_every_missing_output():
-    absent = {
-        k: "not found"
-        for k in (
-            "track/angles.csv",
-            "track/track.json",
-            "sync/sync.json",
-            "sync/synced.csv",
-            "fit/yaw/fit.json",
-            "fit/pitch/fit.json",
-        )
-    }
+    absent = dict.fromkeys(STAGE_FILES, "not found")
     doc = build_document(RunData("empty", absent=absent), CFG)
     assert doc.figures() == []
     notes = " ".join(b.text for s in _walk(doc.sections) for b in s.blocks if isinstance(b, Note))

@@ -18,6 +18,7 @@ import pandas as pd
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json, write_text
+from i2ris_calib.io.calibrate import write_camera_yaml
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.simulation import trajectory as tj
 from i2ris_calib.simulation.config import SimulationConfig
@@ -286,21 +287,6 @@ def _write_truth(folder: Path, cfg, cams, truth: Truth, t0_ctrl: float, tables: 
     }  # fmt: skip
     write_json(folder / "truth" / "truth.json", summary)
     return summary
-
-
-def write_camera_yaml(path: Path, K: np.ndarray, dist: np.ndarray, width: int, height: int) -> None:
-    """Intrinsics as OpenCV FileStorage YAML (camera_matrix, distortion_coefficients)."""
-    import cv2
-
-    from i2ris_calib.io.atomic import atomic_path
-
-    with atomic_path(path) as tmp:
-        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
-        fs.write("image_width", int(width))
-        fs.write("image_height", int(height))
-        fs.write("camera_matrix", np.asarray(K, dtype=float))
-        fs.write("distortion_coefficients", np.asarray(dist, dtype=float).reshape(1, -1))
-        fs.release()
 
 
 def session_toml(cfg: SimulationConfig, cams: list[CameraModel], name: str) -> str:

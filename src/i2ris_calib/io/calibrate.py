@@ -1,0 +1,83 @@
+"""Camera intrinsics files: OpenCV FileStorage YAML and ROS ``camera_info`` YAML.
+
+OpenCV: ``camera_matrix`` and ``distortion_coefficients`` as ``!!opencv-matrix``
+nodes, plus ``image_width``/``image_height``. ROS (``camera_calibration`` output):
+``camera_matrix: {rows, cols, data}``, ``distortion_coefficients: {rows, cols,
+data}``, ``image_width``, ``image_height``, ``distortion_model: plumb_bob``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from i2ris_calib.errors import CalibError
+
+
+def _node_matrix(node, rows: int, cols: int | None = None) -> np.ndarray:
+    """Matrix from an OpenCV matrix node or a ROS ``{rows, cols, data}`` map."""
+    if node.empty():
+        return np.zeros((0,))
+    m = node.mat()
+    if m is not None and m.size:
+        return np.asarray(m, dtype=float)
+    data = node.getNode("data") if node.isMap() else node
+    if not data.isSeq():
+        return np.zeros((0,))
+    vals = np.array([data.at(i).real() for i in range(data.size())], dtype=float)
+    return vals.reshape(rows, -1) if cols is None else vals.reshape(rows, cols)
+
+
+def read_camera_yaml(path: str | Path) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Read intrinsics: ``(K (3, 3), dist (k,), width_px, height_px)``.
+
+    Accepts OpenCV FileStorage YAML/XML and ROS camera_info YAML; CalibError with
+    the file name when unreadable or incomplete.
+    """
+    import cv2
+
+    p = Path(path)
+    if not p.is_file():
+        raise CalibError(f"camera calibration file not found: {p}")
+    try:
+        fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
+    except cv2.error as exc:
+        raise CalibError(
+            f"{p}: not a readable OpenCV/ROS YAML file ({str(exc).splitlines()[-1]})"
+        ) from None
+    if not fs.isOpened():
+        raise CalibError(f"{p}: not a readable OpenCV/ROS YAML file")
+    try:
+        K = _node_matrix(fs.getNode("camera_matrix"), 3, 3)
+        dist = _node_matrix(fs.getNode("distortion_coefficients"), 1).ravel()
+        w = int(fs.getNode("image_width").real()) if not fs.getNode("image_width").empty() else 0
+        h = int(fs.getNode("image_height").real()) if not fs.getNode("image_height").empty() else 0
+    except (cv2.error, ValueError) as exc:
+        raise CalibError(f"{p}: malformed camera_matrix/distortion_coefficients ({exc})") from None
+    finally:
+        fs.release()
+    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+        raise CalibError(
+            f"{p}: no valid 3x3 camera_matrix (OpenCV or ROS camera_info format expected)"
+        )
+    return K, dist, w, h
+
+
+def write_camera_yaml(
+    path: Path, K: np.ndarray, dist: np.ndarray, width: int, height: int, extra: dict | None = None
+) -> None:
+    """Intrinsics as OpenCV FileStorage YAML (camera_matrix, distortion_coefficients)."""
+    import cv2
+
+    from i2ris_calib.io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
+        fs.write("image_width", int(width))
+        fs.write("image_height", int(height))
+        fs.write("camera_matrix", np.asarray(K, dtype=float))
+        fs.write("distortion_coefficients", np.asarray(dist, dtype=float).reshape(1, -1))
+        for k, v in (extra or {}).items():
+            fs.write(k, v)
+        fs.release()

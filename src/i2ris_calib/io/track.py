@@ -1,0 +1,380 @@
+"""``i2ris-calib track``: both videos -> per-frame pitch/yaw with status (docs/tracking.md).
+
+Each camera stream is decoded and detected in its own process (OpenCV releases the
+GIL too, but processes also parallelise the Python glue); the fusion then runs on
+the corner arrays. Outputs: ``angles.csv`` and ``track.json`` in ``--out`` (default
+``SESSION/track``), written atomically.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json
+from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.session import load_session, session_file
+from i2ris_calib.session import CameraSpec, SessionSpec
+from i2ris_calib.tracking import fuse as fz
+from i2ris_calib.tracking.config import TrackingConfig
+from i2ris_calib.tracking.pose import CameraIntrinsics, weak_perspective_intrinsics
+
+#: Above this fraction of out-of-order timestamps the file is refused (not flagged).
+MAX_NON_MONOTONIC = 0.05
+
+
+@dataclass
+class StreamResult:
+    """Raw per-frame detections of one camera (arrays over decoded frames)."""
+
+    corners: np.ndarray  # (n, 4, 2) px as detected (distorted), NaN if not found
+    mean_gray: np.ndarray  # (n,)
+    border: np.ndarray  # (n,) bool: marker touches the image border
+    other_ids: dict  # id -> count of frames where it was seen instead
+    shape: tuple[int, int]
+    roi_hits: int
+    edge_refined: int
+    seconds: float
+
+
+def track_session(session: Path, out: Path | None, config) -> Path:
+    """Track a session folder and write angles.csv + track.json; returns the out folder."""
+    session = Path(session)
+    spec = load_session(session)
+    cfg: TrackingConfig = config.track
+    out = Path(out) if out is not None else session / "track"
+    result = track(session, spec, cfg, progress=True)
+    inputs = [session / "session.toml"] + [
+        session_file(session, c.video, "video") for c in spec.cameras.values()
+    ]
+    inputs += [session_file(session, c.timestamps, "timestamps") for c in spec.cameras.values()]
+    summary = {**result["summary"], "provenance": provenance(inputs, cfg)}
+    with atomic_dir(out) as tmp:
+        write_csv(tmp / "angles.csv", result["angles"], "%.6f")
+        write_json(tmp / "track.json", summary)
+    return out
+
+
+def track(session: Path, spec: SessionSpec, cfg: TrackingConfig, progress: bool = False) -> dict:
+    """Run detection and fusion; returns ``{"angles": DataFrame, "summary": dict}``."""
+    names = list(spec.cameras)
+    if len(names) != 2:
+        raise CalibError(
+            f"{session / 'session.toml'}: tracking needs exactly two cameras, found {len(names)} "
+            "([cameras.<name>] tables, see docs/session.md)"
+        )
+    cams: dict[str, CameraSpec] = spec.cameras
+    views = [cams[n].view for n in names]
+    if sorted(views) != ["side", "top"]:
+        raise CalibError(
+            f'{session / "session.toml"}: the cameras need view = "top" and "side" (got {views})'
+        )
+    times = {
+        n: read_timestamps(session_file(session, cams[n].timestamps, f"timestamps of camera '{n}'"))
+        for n in names
+    }
+    videos = {n: session_file(session, cams[n].video, f"video of camera '{n}'") for n in names}
+    streams = run_streams(videos, spec, cfg, progress)
+    for n in names:
+        check_stream(n, videos[n], times[n], streams[n], cams[n], spec)
+    intr = {n: intrinsics(session, cams[n], streams[n].shape, cfg) for n in names}
+    return fuse_session(names, cams, times, streams, intr, spec, cfg)
+
+
+# ----------------------------------------------------------------------------- inputs
+def read_timestamps(path: Path) -> pd.DataFrame:
+    """Timestamp CSV (``frame``, ``time_s``) with a ``valid`` column for monotonic rows."""
+    try:
+        df = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CalibError(f"{path}: unreadable CSV ({str(exc).splitlines()[0]})") from None
+    missing = {"frame", "time_s"} - set(df.columns)
+    if missing:
+        raise CalibError(
+            f"{path}: missing column(s) {', '.join(sorted(missing))} (need frame, time_s)"
+        )
+    t = pd.to_numeric(df["time_s"], errors="coerce").to_numpy(float)
+    fr = pd.to_numeric(df["frame"], errors="coerce").to_numpy(float)
+    if not np.all(np.isfinite(t)) or not np.all(np.isfinite(fr)):
+        bad = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(fr)))[0]) + 2
+        raise CalibError(f"{path}: non-numeric frame/time_s at line {bad}")
+    if not np.array_equal(fr, np.arange(len(fr))):
+        raise CalibError(
+            f"{path}: column 'frame' must count 0, 1, 2, ... (one row per video frame, in order)"
+        )
+    running = np.maximum.accumulate(np.concatenate([[-np.inf], t[:-1]]))
+    valid = t > running
+    if (~valid).mean() > MAX_NON_MONOTONIC:
+        first = int(np.flatnonzero(~valid)[0]) + 2
+        raise CalibError(
+            f"{path}: {int((~valid).sum())} timestamps are not increasing (first at line {first}); "
+            "fix the camera clock export"
+        )
+    return pd.DataFrame({"frame": fr.astype(int), "time_s": t, "valid": valid})
+
+
+def intrinsics(
+    session: Path, cam: CameraSpec, shape: tuple[int, int], cfg: TrackingConfig
+) -> CameraIntrinsics:
+    """Camera model of one camera: pinhole from its calibration file, or weak perspective."""
+    from i2ris_calib.io.calibrate import read_camera_yaml
+
+    h, w = shape
+    if cam.model == "weak_perspective":
+        return weak_perspective_intrinsics(w, h, cfg.weak_perspective_focal_px)
+    if not cam.calibration:
+        raise CalibError(
+            f"{session / 'session.toml'}: camera with video '{cam.video}' has model = \"pinhole\" but no "
+            'calibration file (set calibration = "<camera>.yaml" or use model = "weak_perspective")'
+        )
+    K, dist, cw, ch = read_camera_yaml(session_file(session, cam.calibration, "calibration"))
+    if cw and ch and (cw, ch) != (w, h):
+        raise CalibError(
+            f"{cam.calibration}: calibrated for {cw}x{ch} but the video '{cam.video}' is {w}x{h} "
+            "(recalibrate at the recording resolution)"
+        )
+    return CameraIntrinsics(K, dist, w, h, "pinhole")
+
+
+# ----------------------------------------------------------------------------- streams
+_COUNTER = None
+
+
+def _init_worker(counter) -> None:
+    global _COUNTER
+    _COUNTER = counter
+
+
+def detect_stream(
+    video: Path, dictionary: str, marker_id: int, cfg: TrackingConfig
+) -> StreamResult:
+    """Decode one video and detect its marker in every frame (runs in a worker)."""
+    import cv2
+
+    from i2ris_calib.io.video import iter_frames
+    from i2ris_calib.tracking.detect import MarkerDetector, touches_border
+
+    cv2.setNumThreads(1)
+    det = MarkerDetector(dictionary, marker_id, cfg)
+    corners, gray, border, others = [], [], [], {}
+    shape, roi_hits, edge_refined, t0 = (0, 0), 0, 0, time.perf_counter()
+    for k, img in enumerate(iter_frames(video)):
+        shape = img.shape[:2]
+        d = det.detect(img)
+        gray.append(cv2.mean(img)[0])
+        for i in d.other_ids:
+            others[i] = others.get(i, 0) + 1
+        if d.corners is None:
+            corners.append(np.full((4, 2), np.nan))
+            border.append(False)
+        else:
+            corners.append(d.corners)
+            border.append(touches_border(d.corners, shape))
+            roi_hits += d.used_roi
+            edge_refined += d.edge_refined
+        if _COUNTER is not None and k % 20 == 19:
+            with _COUNTER.get_lock():
+                _COUNTER.value += 20
+    return StreamResult(np.array(corners).reshape(-1, 4, 2), np.array(gray), np.array(border, bool), others,
+                        shape, roi_hits, edge_refined, time.perf_counter() - t0)  # fmt: skip
+
+
+def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: bool) -> dict:
+    """Detect in every camera stream, in parallel processes when ``cfg.workers > 1``."""
+    from rich.progress import Progress
+
+    from i2ris_calib.io.video import header_frame_count
+    from i2ris_calib.tracking.detect import aruco_dictionary
+
+    aruco_dictionary(spec.marker.dictionary)  # fail early on a bad name
+    total = sum(max(header_frame_count(v), 1) for v in videos.values())
+    jobs = {
+        n: (v, spec.marker.dictionary, spec.cameras[n].marker_id, cfg) for n, v in videos.items()
+    }
+    if cfg.workers <= 1:
+        return {n: detect_stream(*a) for n, a in jobs.items()}
+    ctx = mp.get_context("fork")
+    counter = ctx.Value("l", 0)
+    with ProcessPoolExecutor(min(cfg.workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
+                             initargs=(counter,)) as ex:  # fmt: skip
+        futs = {n: ex.submit(detect_stream, *a) for n, a in jobs.items()}
+        with Progress(disable=not progress, transient=True) as bar:
+            task = bar.add_task("tracking markers", total=total)
+            while not all(f.done() for f in futs.values()):
+                bar.update(task, completed=counter.value)
+                time.sleep(0.2)
+        return {n: f.result() for n, f in futs.items()}
+
+
+def check_stream(
+    name: str, video: Path, ts: pd.DataFrame, s: StreamResult, cam: CameraSpec, spec: SessionSpec
+) -> None:
+    """One-line errors for a truncated video, a wrong id or dictionary."""
+    n = len(s.corners)
+    if n != len(ts):
+        raise CalibError(
+            f"{video.name}: {n} decodable frames but {len(ts)} rows in {cam.timestamps} "
+            "(truncated/corrupt video or wrong timestamp file; they must match one row per frame)"
+        )
+    if not np.isfinite(s.corners).any():
+        if s.other_ids:
+            seen = ", ".join(str(i) for i in sorted(s.other_ids))
+            raise CalibError(
+                f"{video.name}: marker id {cam.marker_id} never found, but ids {seen} of "
+                f"{spec.marker.dictionary} were (set marker_id of camera '{name}' in session.toml)"
+            )
+        raise CalibError(
+            f"{video.name}: no {spec.marker.dictionary} marker found in any frame "
+            "(wrong dictionary in session.toml [marker], or the marker is not in view)"
+        )
+
+
+# ----------------------------------------------------------------------------- fusion
+def _view(
+    corners_raw: np.ndarray, intr: CameraIntrinsics, view: str, spec: SessionSpec
+) -> fz.ViewData:
+    """Undistorted corners and IPPE candidates of one camera at the fused frames."""
+    from i2ris_calib.tracking.geometry import face_corner_points_tip
+    from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
+
+    c = intr.undistort(corners_raw)
+    n = len(c)
+    R = np.full((n, 2, 3, 3), np.nan)
+    t = np.full((n, 2, 3), np.nan)
+    for k in np.flatnonzero(np.isfinite(c).all(axis=(1, 2))):
+        Rm, tm, _ = ippe_candidates(c[k], intr.K, spec.marker.marker_size_mm)
+        for j in range(2):
+            R[k, j], t[k, j] = tip_pose_from_marker(view, Rm[j], tm[j], spec.marker.cube_size_mm)
+    X = face_corner_points_tip(view, spec.marker.marker_size_mm, spec.marker.cube_size_mm)
+    return fz.ViewData(c, intr.K, X, R, t)
+
+
+def resample_corners(
+    t_src: np.ndarray, c_src: np.ndarray, t_dst: np.ndarray, cfg: TrackingConfig
+) -> np.ndarray:
+    """Corners (n_dst, 4, 2) at times ``t_dst``: same frame, or linear between neighbours.
+
+    NaN when no frame is within ``same_frame_tol_s`` and the bracketing frames are
+    missing or more than ``max_interp_gap_s`` apart.
+    """
+    out = np.full((len(t_dst), 4, 2), np.nan)
+    j = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
+    t0, t1 = t_src[j - 1], t_src[j]
+    near = np.where(np.abs(t_dst - t0) <= np.abs(t1 - t_dst), j - 1, j)
+    same = np.abs(t_src[near] - t_dst) <= cfg.same_frame_tol_s
+    out[same] = c_src[near[same]]
+    w = np.clip((t_dst - t0) / np.maximum(t1 - t0, 1e-12), 0, 1)
+    interp = ~same & (t1 - t0 <= cfg.max_interp_gap_s) & (t_dst >= t0) & (t_dst <= t1)
+    ci = (1 - w)[:, None, None] * c_src[j - 1] + w[:, None, None] * c_src[j]
+    out[interp] = ci[interp]
+    return out
+
+
+def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: TrackingConfig) -> dict:
+    """Fused angles table and summary from the per-camera detections."""
+    a_name, b_name = names if cams[names[0]].view == "top" else names[::-1]
+    ta = times[a_name]
+    tb = times[b_name]
+    t = ta["time_s"].to_numpy()
+    ca = _usable(streams[a_name], ta)
+    cb_src = _usable(streams[b_name], tb)
+    keep_b = tb["valid"].to_numpy()
+    cb = resample_corners(tb["time_s"].to_numpy()[keep_b], cb_src[keep_b], t, cfg)
+    va = _view(ca, intr[a_name], cams[a_name].view, spec)
+    vb = _view(cb, intr[b_name], cams[b_name].view, spec)
+    if not (va.ok & vb.ok).any():
+        raise CalibError("no frame time where both markers are measured: cannot fuse the two views")
+    res = fz.fuse_views(va, vb, t, cfg)
+    status = res.status.copy()
+    status[~ta["valid"].to_numpy()] = fz.REJECTED
+    ref = reference_mask(t, cfg)
+    try:
+        M = fz.reference_rotation(res.Q, ref & (status == fz.MEASURED))
+    except ValueError:
+        raise CalibError(
+            f"no measured frame in the reference window ({cfg.reference_start_s}-"
+            f"{cfg.reference_start_s + cfg.reference_duration_s} s after the first frame); move "
+            "[track] reference_start_s to a time where the tip is straight and both markers are visible"
+        ) from None
+    ang = fz.relative_angles(res.Q, M)
+    ang[status != fz.MEASURED] = np.nan
+    df = pd.DataFrame({"frame": ta["frame"].to_numpy(), "time_s": t, "yaw_deg": ang[:, 0],
+                       "pitch_deg": ang[:, 1], "status": status, "reproj_err_px": res.rms_px,
+                       "roll_deg": ang[:, 2]})  # fmt: skip
+    df[f"mean_gray_{a_name}"] = streams[a_name].mean_gray
+    gb = streams[b_name].mean_gray
+    df[f"mean_gray_{b_name}"] = np.interp(t, tb["time_s"].to_numpy(), gb)
+    df[f"found_{a_name}"] = va.ok.astype(int)
+    df[f"found_{b_name}"] = vb.ok.astype(int)
+    if cfg.plain:
+        for name, v in ((a_name, va), (b_name, vb)):
+            pa = plain_angles(v, ref)
+            df[f"yaw_plain_{name}_deg"] = pa[:, 0]
+            df[f"pitch_plain_{name}_deg"] = pa[:, 1]
+    summary = _summary(df, res, streams, names, M, ref, cfg)
+    return {"angles": df, "summary": summary}
+
+
+def _usable(s: StreamResult, ts: pd.DataFrame) -> np.ndarray:
+    """Detected corners with border-touching markers and out-of-order frames removed."""
+    c = s.corners.copy()
+    c[s.border] = np.nan
+    c[~ts["valid"].to_numpy()] = np.nan
+    return c
+
+
+def reference_mask(t: np.ndarray, cfg: TrackingConfig) -> np.ndarray:
+    """Frames inside the reference window (relative to the first frame), shape (n,)."""
+    rel = t - t[0]
+    return (rel >= cfg.reference_start_s) & (
+        rel <= cfg.reference_start_s + cfg.reference_duration_s
+    )
+
+
+def plain_angles(v: fz.ViewData, ref: np.ndarray) -> np.ndarray:
+    """Single-camera angles from the top-ranked IPPE solution, no fusion (comparison)."""
+    Q = v.R_ct[:, 0]
+    ok = np.isfinite(Q).all(axis=(1, 2))
+    out = np.full((len(Q), 3), np.nan)
+    if not (ok & ref).any():
+        return out
+    M = fz.reference_rotation(Q, ref & ok)
+    out[ok] = fz.relative_angles(Q[ok], M)
+    return out
+
+
+def _summary(df: pd.DataFrame, res: fz.FusionResult, streams: dict, names, M, ref, cfg) -> dict:
+    counts = df["status"].value_counts().to_dict()
+    n = len(df)
+    rms = df.loc[df["status"] == fz.MEASURED, "reproj_err_px"]
+    per_cam = {
+        n_: {"frames": len(s.corners), "found": int(np.isfinite(s.corners).all(axis=(1, 2)).sum()),
+             "touching_border": int(s.border.sum()), "roi_hits": int(s.roi_hits),
+             "edge_refined": int(s.edge_refined),
+             "other_ids_seen": {str(k): v for k, v in s.other_ids.items()},
+             "seconds": round(s.seconds, 3),
+             "frames_per_s": round(len(s.corners) / max(s.seconds, 1e-9), 1)}
+        for n_, s in streams.items()
+    }  # fmt: skip
+    return {
+        "schema": "i2ris-calib.track/1",
+        "frames": n,
+        "status_counts": {k: int(counts.get(k, 0)) for k in (fz.MEASURED, fz.NOT_FOUND, fz.AMBIGUOUS, fz.REJECTED)},
+        "detection_rate": float((df["status"] == fz.MEASURED).mean()) if n else 0.0,
+        "reproj_err_px": {"median": float(rms.median()) if len(rms) else None,
+                          "p95": float(rms.quantile(0.95)) if len(rms) else None,
+                          "max": float(rms.max()) if len(rms) else None},
+        "competing_minima_frames": res.n_competing,
+        "resolved_by_continuity": res.n_by_continuity,
+        "camera_rotation_b_from_a": res.R_ba,
+        "reference": {"frames": int(ref.sum()), "tip_to_top_camera": M},
+        "cameras": per_cam,
+        "conventions": "docs/tracking.md: R_BT = Rz(yaw) Ry(pitch) Rx(roll) relative to the reference pose",
+    }  # fmt: skip

@@ -43,7 +43,9 @@ class SyncConfig:
 
     # --- joint offset + hysteresis model profile
     model: Literal["egpi", "gpi"] = "egpi"
-    profile_halfwidth_s: float = 0.08  # coarse profile +- around the xcorr offset
+    profile_halfwidth_s: float = (
+        0.12  # coarse profile +- around the xcorr offset (extended if needed)
+    )
     profile_step_s: float = 0.01  # coarse grid step
     profile_tol_s: float = 0.0002  # golden-section refinement tolerance
     min_axis_range_counts: float = 50.0  # an axis whose encoder spans less is not used

@@ -1,10 +1,8 @@
 """Synthetic sync truth without video: encoder log, angles and flashes with known clocks.
 
-Used by the sync tests and ``benchmarks/bench_sync.py``. The angle is produced by an
-independent, deliberately plain implementation of the I2RIS EGPI model (MODEL.md
-Eq16-24: one ascending and two descending linear envelopes, exponential density,
-regulator ``kappa`` on the second descending stage below the flag point ``v_f``), so
-the sync estimators are tested against a model they do not share code with.
+Used by the sync tests and ``benchmarks/bench_sync.py``. The input is the
+hysteresis presets' Fig-5-like loading trajectory and the angle the I2RIS EGPI model
+(MODEL.md Eq16-24) with the presets' parameter recipe, rescaled to a chosen backlash.
 """
 
 from __future__ import annotations
@@ -33,7 +31,7 @@ class SyntheticSync:
     offset_s, drift_ppm : float
         True clock parameters.
     backlash_deg : float
-        Stage-1 loop width ``2 * sum_i p(r_i) r_i``, deg.
+        Stage-1 reversal dead band of the truth, deg.
     """
 
     angles: pd.DataFrame
@@ -45,78 +43,29 @@ class SyntheticSync:
     meta: dict = field(default_factory=dict)
 
 
-def sweep_trajectory(
-    t_s: np.ndarray, amplitudes: tuple[float, ...], period_s: float, rest_s: float
-) -> np.ndarray:
-    """Fig-5-like input: up-and-down sweeps from 0 of growing amplitude, with rests.
+def egpi_truth_params(rng: np.random.Generator, backlash_deg: float) -> dict[str, float]:
+    """I2RIS-EGPI truth (hysteresis presets recipe) rescaled to a given backlash.
 
-    Each sweep is ``A * (1 - cos(2 pi u)) / 2`` for ``u`` in [0, 1] over ``period_s``
-    (the speed varies along the sweep, which is what separates a clock offset from
-    backlash), followed by ``rest_s`` at 0.
+    ``backlash_deg`` is the stage-1 reversal dead band ``2 * sum p(r_i) r_i / sum p(r_i)``
+    (deg): the angle the input must "take up" after a reversal. Thresholds scale by
+    ``c``, ``sigma`` by ``1/c`` (same density over the operators), and the envelope
+    offsets follow the recipe (loading from rest starts at ~0 deg, both families meet
+    at v = 0). 0 gives a hysteresis-free (linear) truth.
     """
-    v = np.zeros_like(t_s, dtype=float)
-    t0 = 0.0
-    for a in amplitudes:
-        u = (t_s - t0) / period_s
-        inside = (u >= 0) & (u <= 1)
-        v[inside] = a * 0.5 * (1 - np.cos(2 * np.pi * u[inside]))
-        t0 += period_s + rest_s
-    return v
+    from i2ris_calib.hysteresis.models import density, thresholds
+    from i2ris_calib.hysteresis.presets import random_i2ris_egpi_params
 
-
-def egpi_truth(
-    v: np.ndarray,
-    slope_deg: float,
-    backlash_deg: float,
-    kappa: float = 2.0,
-    v_f: float | None = None,
-    n: int = 30,
-) -> np.ndarray:
-    """Plain-numpy EGPI (MODEL.md Eq16-24) with linear envelopes, for synthetic truth.
-
-    Parameters
-    ----------
-    v : ndarray, shape (k,)
-        Input (counts).
-    slope_deg : float
-        Envelope slope, deg per count (all three envelopes).
-    backlash_deg : float
-        Stage-1 loop width ``2 * sum p(r_i) r_i``, deg; thresholds are scaled to it.
-    kappa : float
-        Regulator of the second descending stage (``v <= v_f``).
-    v_f : float, optional
-        Flag point, counts; default 40% of max(v).
-    n : int
-        Number of nonzero thresholds (n + 1 operators).
-
-    Returns
-    -------
-    ndarray, shape (k,)
-        Angle, deg.
-    """
-    v = np.asarray(v, dtype=float)
-    v_f = 0.4 * float(v.max()) if v_f is None else v_f
-    r = np.concatenate([[0.0], np.linspace(0.05, 1.0, n)])
-    p = np.exp(-1.0 * r)
-    p /= p.sum()
-    r = r * backlash_deg / (2 * float(p @ r))  # loop width = backlash_deg
-    gl = gr1 = gr2 = slope_deg * v  # the stages differ by the threshold scale kappa
-    w1 = np.clip(np.zeros_like(r), gl[0] - r, gr1[0] + r)
-    w2 = np.clip(np.zeros_like(r), gl[0] - r, gr2[0] + kappa * r)
-    y = np.empty_like(v)
-    rising = True
-    for k in range(v.size):
-        if k and v[k] > v[k - 1]:
-            w1 = np.maximum(gl[k] - r, w1)
-            w2 = np.maximum(gl[k] - r, w2)
-            rising = True
-        elif k and v[k] < v[k - 1]:
-            w1 = np.minimum(gr1[k] + r, w1)
-            w2 = np.minimum(gr2[k] + kappa * r, w2)
-            rising = False
-        use2 = (not rising) and v[k] <= v_f
-        y[k] = p @ (w2 if use2 else w1)
-    return y
+    p = random_i2ris_egpi_params(rng)
+    r = thresholds(p["r1"], p["rn"], 30)
+    w = density(r, p["lam"], p["sigma"])
+    b0 = 2 * float(w @ r) / float(w.sum())
+    c = max(backlash_deg, 1e-9) / b0
+    gap = p["a2"] - p["a4"]
+    p.update(r1=p["r1"] * c, rn=p["rn"] * c, sigma=p["sigma"] / c)
+    pr_over_p = 0.5 * backlash_deg
+    p.update(a2=pr_over_p, a4=pr_over_p - gap * c)
+    p["a6"] = p["a4"] + (1.0 - p["kappa"]) * pr_over_p
+    return p
 
 
 def make_sync_case(
@@ -132,9 +81,9 @@ def make_sync_case(
     exposure_frac: float = 1.0,
     gray_noise: float = 0.5,
     cameras: tuple[str, ...] = ("top", "side"),
-    max_counts: float = 6000.0,
-    slope_deg: float = 40.0 / 6000.0,
-    kappa: float = 2.0,
+    n_cycles: int = 4,
+    speed_counts_s: float = 1500.0,
+    pause_s: float = 1.0,
     log_edge: str = "sampled",
 ) -> SyntheticSync:
     """A seeded synthetic sync case with known offset and drift.
@@ -146,7 +95,7 @@ def make_sync_case(
     offset_s, drift_ppm : float
         True clock: ``t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam``.
     backlash_deg : float
-        Stage-1 hysteresis loop width, deg (0 = no hysteresis).
+        Stage-1 reversal dead band of the EGPI truth, deg (see :func:`egpi_truth_params`).
     duration_s, fps : float
         Camera recording length (camera clock, s) and frame rate.
     log_rate_hz : float
@@ -163,8 +112,10 @@ def make_sync_case(
     cameras : tuple of str
         Camera names (one mean_gray column each; their frames are offset by a
         random fraction of the frame interval).
-    max_counts, slope_deg, kappa
-        Trajectory amplitude (counts), envelope slope (deg/count), stage-2 regulator.
+    n_cycles, speed_counts_s, pause_s
+        Fig-5-like input (hysteresis presets ``loading_trajectory``): ramps out to
+        0..6000 counts and back at constant speed with pauses; it starts 1 s after
+        the first frame and stays at 0 once done (keep ``duration_s`` long enough).
     log_edge : {"sampled", "tick"}
         "sampled": the LED switches at arbitrary times and the log samples its state
         (``sync.log_edge_at = "midpoint"``, like ``i2ris-calib simulate``); "tick": the
@@ -177,15 +128,17 @@ def make_sync_case(
     t_ctrl = t_ctrl0 + np.arange(int((duration_s * drift + 2.0) * log_rate_hz)) / log_rate_hz
     t_ctrl += rng.uniform(0, 0.2 / log_rate_hz, t_ctrl.size)  # small logging jitter
     t_ctrl = np.sort(t_ctrl)
-    amps = tuple(max_counts * a for a in (0.35, 0.6, 0.8, 1.0, 0.5, 0.9, 0.7))
-    period = (duration_s - 2.0) / len(amps) * 0.8
-    rest = (duration_s - 2.0) / len(amps) * 0.2
+    from i2ris_calib.hysteresis.models import i2ris_egpi_model
+    from i2ris_calib.hysteresis.presets import loading_trajectory
+
+    t_traj, v_traj = loading_trajectory(
+        rng, n_cycles=n_cycles, rate_hz=1000.0, speed_counts_s=speed_counts_s, pause_s=pause_s
+    )
+    truth = egpi_truth_params(rng, backlash_deg)
     u = t_ctrl - (offset_s + 1.0)  # trajectory starts 1 s after the first frame
-    yaw_true = sweep_trajectory(u, amps, period, rest)
-    pitch_true = np.zeros_like(yaw_true)
-    yaw_deg = egpi_truth(yaw_true, slope_deg, backlash_deg, kappa=kappa)
-    enc_yaw = np.round(yaw_true)
-    enc_pitch = np.round(pitch_true)
+    enc_yaw = np.interp(u, t_traj, v_traj, left=0.0, right=0.0).round()
+    enc_pitch = np.zeros_like(enc_yaw)
+    yaw_deg = i2ris_egpi_model().evaluate_dict(enc_yaw, truth)
 
     # camera frames (shared camera clock, each camera with its own phase)
     interval = 1.0 / fps
@@ -238,7 +191,7 @@ def make_sync_case(
         offset_s=offset_s,
         drift_ppm=drift_ppm,
         backlash_deg=backlash_deg,
-        meta={"seed": seed, "fps": fps, "exposure_s": exposure, "yaw_deg_ctrl": yaw_deg},
+        meta={"seed": seed, "fps": fps, "exposure_s": exposure, "truth_params": truth},
     )
 
 

@@ -15,8 +15,9 @@ class DiagnosisConfig:
         Effects to try (catalogue names); empty = the whole catalogue.
     max_steps : int
         Most effects added.
-    holdout_every : int
-        Every ``holdout_every``-th loading cycle is held out (from the third on).
+    holdout_fraction : float
+        Fraction of the loading cycles held out (whole cycles, evenly spread,
+        never the first; the fitting stage's rule).
     alpha : float
         Significance level of the one-sided paired test over held-out strokes.
     min_rel_improvement : float
@@ -31,11 +32,18 @@ class DiagnosisConfig:
         Cap on least-squares iterations of the base refit at each grid start.
     start_max_nfev : int
         Cap on least-squares iterations when the starting model is polished.
+    n_global_starts : int
+        Data-driven base starts of the global refit after an effect is named
+        (0 = only the candidate's own values).
+    global_max_nfev : int
+        Evaluation cap of that global refit (its screening runs get a quarter).
+    seed : int
+        Seed of the random start variations of the global refit.
     """
 
     candidates: tuple[str, ...] = ()
     max_steps: int = 3
-    holdout_every: int = 3
+    holdout_fraction: float = 0.3
     alpha: float = 0.01
     min_rel_improvement: float = 0.05
     min_delta_bic: float = 10.0
@@ -43,6 +51,9 @@ class DiagnosisConfig:
     max_nfev: int = 30
     profile_nfev: int = 4
     start_max_nfev: int = 60
+    n_global_starts: int = 3
+    global_max_nfev: int = 400
+    seed: int = 0
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
@@ -53,8 +64,8 @@ class DiagnosisConfig:
             raise ValueError(f"candidates: unknown effect(s) {bad}; valid: {', '.join(CATALOGUE)}")
         if self.max_steps < 0:
             raise ValueError("max_steps must be >= 0")
-        if self.holdout_every < 2:
-            raise ValueError("holdout_every must be >= 2")
+        if not 0 < self.holdout_fraction < 1:
+            raise ValueError("holdout_fraction must be in (0, 1)")
         if not 0 < self.alpha < 1:
             raise ValueError("alpha must be in (0, 1)")
         if not 0 <= self.min_rel_improvement < 1:
@@ -63,5 +74,7 @@ class DiagnosisConfig:
             raise ValueError("min_delta_bic must be >= 0")
         if self.max_samples < 100:
             raise ValueError("max_samples must be >= 100")
-        if min(self.max_nfev, self.start_max_nfev, self.profile_nfev) < 1:
+        if self.n_global_starts < 0:
+            raise ValueError("n_global_starts must be >= 0")
+        if min(self.max_nfev, self.start_max_nfev, self.profile_nfev, self.global_max_nfev) < 1:
             raise ValueError("max_nfev, profile_nfev and start_max_nfev must be >= 1")

@@ -1,4 +1,4 @@
-"""Strokes, loading cycles and the held-out split used to judge candidate effects.
+"""Strokes and loading cycles, and the held-out units of the paired evidence.
 
 A *stroke* is a monotone run of the input between two reversals; a *loading
 cycle* is a rising stroke followed by the falling stroke after it (minimum to
@@ -96,28 +96,6 @@ def segment(v: np.ndarray, min_travel_frac: float = 0.05) -> Segmentation:
     starts[1:] = rising[1:] & ~rising[:-1]
     cycle = np.cumsum(starts)
     return Segmentation(stroke=stroke, cycle=cycle, rising=rising)
-
-
-def holdout_mask(seg: Segmentation, every: int = 3) -> np.ndarray:
-    """Held-out samples: every ``every``-th loading cycle, starting with the third.
-
-    Cycles 0 and 1 are always fitted (the model's initial state is settled there).
-    With fewer than ``every`` cycles the strokes are used instead; with fewer
-    than ``every`` strokes the last quarter of the samples is held out.
-
-    Returns
-    -------
-    ndarray of bool, shape (n,)
-    """
-    n_cycles = int(seg.cycle.max()) + 1 if seg.cycle.size else 0
-    if n_cycles >= every:
-        return seg.cycle % every == every - 1
-    n_strokes = int(seg.stroke.max()) + 1 if seg.stroke.size else 0
-    if n_strokes >= every:
-        return seg.stroke % every == every - 1
-    mask = np.zeros(seg.cycle.size, dtype=bool)
-    mask[int(0.75 * mask.size) :] = True
-    return mask
 
 
 def holdout_units(seg: Segmentation, holdout: np.ndarray, min_units: int = 6) -> np.ndarray:

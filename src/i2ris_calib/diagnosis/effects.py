@@ -209,9 +209,7 @@ class TimeDelay(Effect):
         return replace(signals, v=np.interp(t - float(p[0]), t, v))
 
     def start_grid(self, signals, y_deg):
-        t = np.asarray(signals.t_s, float)
-        dt = float(np.median(np.diff(t))) if t.size > 1 else 0.01
-        return [np.array([k * dt]) for k in (1, 3, 8, 20)]
+        return [np.array([tau]) for tau in (0.02, 0.05, 0.1, 0.15, 0.2, 0.3, 0.45, 0.7, 1.0, 1.5)]
 
 
 @dataclass(frozen=True)
@@ -252,7 +250,7 @@ class RateDependence(Effect):
     def start_grid(self, signals, y_deg):
         s95 = float(np.quantile(np.abs(_rate(signals)), 0.95)) or 1.0
         span = _span(signals.v)
-        return [np.array([f * span / s95]) for f in (0.005, 0.015, 0.04)]
+        return [np.array([f * span / s95]) for f in (0.003, 0.007, 0.015, 0.03, 0.06)]
 
 
 def _stroke_speed(signals: Signals) -> tuple[np.ndarray, float]:
@@ -291,7 +289,7 @@ class Creep(Effect):
         return (1.0 - p[0]) * y + p[0] * first_order_lag(y, t, float(p[1]))
 
     def start_grid(self, signals, y_deg):
-        return [np.array([g, tau]) for g in (0.05, 0.15) for tau in (0.3, 1.0, 3.0)]
+        return [np.array([g, tau]) for g in (0.05, 0.15, 0.3) for tau in (0.2, 0.5, 1.0, 2.0, 5.0)]
 
 
 @dataclass(frozen=True)
@@ -320,7 +318,7 @@ class DeadZone(Effect):
 
     def start_grid(self, signals, y_deg):
         span = _span(signals.v)
-        return [np.array([f * span]) for f in (0.01, 0.03, 0.08)]
+        return [np.array([f * span]) for f in (0.005, 0.01, 0.02, 0.04, 0.08)]
 
 
 @dataclass(frozen=True)

@@ -33,10 +33,11 @@ import numpy as np
 from scipy import stats
 
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.cycles import Segmentation, holdout_mask, holdout_units, segment
+from i2ris_calib.diagnosis.cycles import Segmentation, holdout_units, segment
 from i2ris_calib.diagnosis.effects import (
     CATALOGUE,
     EffectModel,
+    base_of,
     effects_of,
     model_values,
 )
@@ -44,6 +45,7 @@ from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analy
 from i2ris_calib.diagnosis.refit import refit, sse
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.models import ParametricModel
 
 
 @dataclass(frozen=True)
@@ -364,13 +366,70 @@ def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> 
     )
 
 
+def _polished(c: Candidate, d: _Data, cfg: DiagnosisConfig) -> Candidate:
+    """The named candidate refitted globally: the fitting stage's multi-start fit
+    (:func:`i2ris_calib.fitting.fit.fit_model`, bounded) from the candidate's
+    values and from data-driven base starts computed on the input as the effect
+    transforms it. The base fitted without the effect has often absorbed part
+    of it and sits in a poor basin; the best of all runs is kept."""
+    model = c.model
+    x = model_values(model)
+    starts = [x]
+    base = base_of(model)
+    if cfg.n_global_starts > 0 and isinstance(base, ParametricModel):
+        from i2ris_calib.fitting.initial import start_values
+
+        sig_eff = model.effect.transform_input(d.signals, x[model.n_inner :])
+        theta_fit = np.where(d.fit, d.theta, np.nan)
+        rng = np.random.default_rng(cfg.seed)
+        try:
+            base_starts = start_values(base, sig_eff.v, theta_fit, cfg.n_global_starts, rng)
+        except (ValueError, CalibError, np.linalg.LinAlgError):
+            base_starts = []
+        if model.n_inner == len(base.parameters):
+            starts += [np.concatenate([b, x[model.n_inner :]]) for b in base_starts]
+    from i2ris_calib.fitting.fit import fit_model
+
+    try:
+        res = fit_model(
+            model,
+            d.signals,
+            d.theta,
+            fit_mask=d.fit,
+            holdout_mask=d.hold,
+            starts=starts,
+            method="trf",
+            max_nfev=cfg.global_max_nfev,
+            screen_nfev=cfg.global_max_nfev // 4,
+        )
+        x_new = model_values(res.model)
+    except CalibError:
+        x_new = x
+    r = refit(model, d.signals, d.theta, d.fit, x_new, max_nfev=cfg.start_max_nfev)
+    best = r.values if r.sse_deg2 <= sse(model, d.signals, d.theta, d.fit, x) else x
+    model = model.with_values(best)
+    return Candidate(
+        c.effect, model, metrics_of(model, best, d, _n_free(model)), c.comparison, nfev=c.nfev
+    )
+
+
+def holdout_for(v: np.ndarray, cfg: DiagnosisConfig | None = None) -> np.ndarray:
+    """Held-out samples, shape (n,): whole loading cycles, as the fitting stage
+    chooses them (:func:`i2ris_calib.fitting.cycles.holdout_mask`, fraction
+    ``holdout_fraction``, never the first cycle)."""
+    from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
+
+    cfg = cfg or DiagnosisConfig()
+    return holdout_mask(cycle_index(np.asarray(v, float)), cfg.holdout_fraction)
+
+
 def _search_data(
     signals: Signals, theta: np.ndarray, cfg: DiagnosisConfig
 ) -> tuple[_Data, np.ndarray, int]:
     """Decimated search data, the full held-out mask and the decimation step."""
     n = theta.size
     seg_full = segment(np.asarray(signals.v, float))
-    hold_full = holdout_mask(seg_full, cfg.holdout_every)
+    hold_full = holdout_for(signals.v, cfg)
     step = max(1, int(np.ceil(n / cfg.max_samples)))
     idx = np.arange(0, n, step)
     sig = signals.take(idx)
@@ -393,6 +452,61 @@ def _analysis(model: Model, d: _Data) -> tuple[dict, tuple[str, ...]]:
     res = np.where(d.fit | d.hold, res, np.nan)
     a = residual_analysis(res, d.signals, d.seg)
     return a, tuple(concentration_sentences(a))
+
+
+def _round(current, cur_m, names, d, cfg, progress) -> tuple[Candidate, ...]:
+    """Every catalogue effect not yet in ``current``, fitted and compared."""
+    done = {e for e, _, _ in effects_of(current)}
+    cands = []
+    for name in names:
+        if name in done:
+            continue
+        if progress:
+            progress(name)
+        c = fit_candidate(current, name, d, cfg)
+        if c.model is not None:
+            comp = compare((current, cur_m), (c.model, c.metrics), d, cfg)
+            c = Candidate(c.effect, c.model, c.metrics, comp, nfev=c.nfev)
+        cands.append(c)
+    return tuple(cands)
+
+
+def _null_reference(current, cur_m, best: Candidate, d, cfg):
+    """(reference model and metrics, note or None) for judging the winner.
+
+    The current model is refitted from the winner's base values; if that alone is
+    a significant improvement, the winner was partly a better optimum of the base
+    model, and candidates are judged against the refit instead.
+    """
+    inner_x = model_values(best.model)[: best.model.n_inner]
+    nul = refit(current, d.signals, d.theta, d.fit, inner_x, max_nfev=cfg.max_nfev)
+    null_model = current.with_values(nul.values)
+    null_m = metrics_of(null_model, nul.values, d, _n_free(null_model))
+    if not compare((current, cur_m), (null_model, null_m), d, cfg).significant:
+        return (current, cur_m), None
+    note = (
+        f"the base model refitted from {best.effect}'s values fits better (held-out RMSE "
+        f"{null_m.holdout_rmse_deg:.3g} vs {cur_m.holdout_rmse_deg:.3g} deg); candidates "
+        "were judged against it"
+    )
+    return (null_model, null_m), note
+
+
+def single_threaded_blas():
+    """Context limiting BLAS to one thread (threadpoolctl), a no-op without it.
+
+    The diagnosis runs thousands of small least-squares steps (Jacobians of
+    ~10^3 x 13); multi-threaded BLAS only adds synchronisation to their SVDs and,
+    on a loaded machine, made them ~10x slower (measured: 27 s vs 2.5 s per
+    diagnosis on 2 shared cores).
+    """
+    import contextlib
+
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional dependency
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def diagnose(
@@ -423,7 +537,11 @@ def diagnose(
     -------
     Diagnosis
     """
-    cfg = config or DiagnosisConfig()
+    with single_threaded_blas():
+        return _diagnose(start, signals, theta_deg, config or DiagnosisConfig(), progress)
+
+
+def _diagnose(start, signals, theta_deg, cfg, progress) -> Diagnosis:
     theta_deg = np.asarray(theta_deg, float)
     if theta_deg.shape != np.asarray(signals.v).shape:
         raise CalibError("diagnose: angle and input have different lengths")
@@ -433,63 +551,36 @@ def diagnose(
     current = start.with_values(pol.values)
     cur_m = metrics_of(current, pol.values, d, _n_free(current))
     baseline = cur_m
+    start_polished = current
     steps: list[Step] = []
     last: tuple[Candidate, ...] = ()
     notes: list[str] = []
     for _ in range(cfg.max_steps):
         analysis, sentences = _analysis(current, d)
-        done = {e for e, _, _ in effects_of(current)}
-        cands = []
-        for name in names:
-            if name in done:
-                continue
-            if progress:
-                progress(name)
-            c = fit_candidate(current, name, d, cfg)
-            if c.model is not None:
-                c = Candidate(
-                    c.effect,
-                    c.model,
-                    c.metrics,
-                    compare((current, cur_m), (c.model, c.metrics), d, cfg),
-                    nfev=c.nfev,
-                )
-            cands.append(c)
-        last = tuple(cands)
+        cands = _round(current, cur_m, names, d, cfg, progress)
+        last = cands
         passing = [c for c in cands if c.comparison is not None and c.comparison.significant]
         if not passing:
             break
         best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
-        # the base model refitted from the winner's base values: an effect is
-        # named only if it beats the better of (current, this refit)
-        inner_x = model_values(best.model)[: best.model.n_inner]
-        nul = refit(current, d.signals, d.theta, d.fit, inner_x, max_nfev=cfg.max_nfev)
-        null_model = current.with_values(nul.values)
-        null_m = metrics_of(null_model, nul.values, d, _n_free(null_model))
-        if compare((current, cur_m), (null_model, null_m), d, cfg).significant:
-            notes.append(
-                f"step {len(steps) + 1}: the base model refitted from {best.effect}'s values "
-                f"fits better (held-out RMSE {null_m.holdout_rmse_deg:.3g} vs "
-                f"{cur_m.holdout_rmse_deg:.3g} deg); candidates were judged against it"
-            )
-            ref = (null_model, null_m)
+        ref, note = _null_reference(current, cur_m, best, d, cfg)
+        if note:
+            notes.append(f"step {len(steps) + 1}: {note}")
             passing = [c for c in passing if compare(ref, (c.model, c.metrics), d, cfg).significant]
             if not passing:
                 current, cur_m = ref
                 continue
             best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
-            comp = compare(ref, (best.model, best.metrics), d, cfg)
-        else:
-            comp = best.comparison
+        best = _polished(best, d, cfg)
         steps.append(
             Step(
                 effect=best.effect,
-                model_before=current,
+                model_before=ref[0],
                 model_after=best.model,
-                before=cur_m,
+                before=ref[1],
                 after=best.metrics,
-                comparison=comp,
-                candidates=tuple(cands),
+                comparison=compare(ref, (best.model, best.metrics), d, cfg),
+                candidates=cands,
                 analysis_before=analysis,
                 sentences_before=sentences,
             )
@@ -498,7 +589,7 @@ def diagnose(
         last = ()
     analysis, sentences = _analysis(current, d)
     return Diagnosis(
-        start_model=steps[0].model_before if steps else current,
+        start_model=start_polished,
         final_model=current,
         baseline=baseline,
         final=cur_m,

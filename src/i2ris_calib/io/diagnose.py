@@ -93,31 +93,18 @@ def read_synced(path: Path, axis: str) -> tuple[Signals, np.ndarray, bool]:
     return sig, theta, abs_input
 
 
-def start_model(kind: str, signals: Signals, theta_deg: np.ndarray) -> Model:
-    """Starting model ``kind`` (gpi/egpi) fitted to all measured samples.
-
-    Uses the fitting stage's fitter when it is available and falls back to a
-    least-squares fit from a data-scaled start otherwise.
-    """
+def start_model(
+    kind: str, signals: Signals, theta_deg: np.ndarray, holdout: np.ndarray, fit_config=None
+) -> Model:
+    """Starting model ``kind`` (gpi/egpi) fitted by the fitting stage on the samples
+    that are not held out (:func:`i2ris_calib.fitting.pipeline.fit_kind`)."""
     if kind not in STARTS:
         raise CalibError(f"--start must be gpi or egpi, got '{kind}'")
-    from i2ris_calib.diagnosis.refit import refit
-    from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+    from i2ris_calib.fitting.config import FitConfig
+    from i2ris_calib.fitting.pipeline import fit_kind
 
-    v = np.asarray(signals.v, float)
-    ok = np.isfinite(theta_deg)
-    slope, offset = np.polyfit(v[ok], theta_deg[ok], 1)
-    slope = float(np.clip(slope, 1e-6, 0.99))
-    init = {"a1": slope, "a2": float(offset) + 1.0, "a3": slope, "a4": float(offset) - 1.0}
-    if kind == "gpi":
-        model = gpi_model(**init)
-    else:
-        vf = float(np.quantile(v[ok], 0.65))
-        model = i2ris_egpi_model(**init, a5=slope, a6=float(offset) - 1.0, v_f=vf)
-    theta0 = np.where(ok, theta_deg, 0.0)
-    x = np.array([p.value for p in model.parameters])
-    best = refit(model, signals, theta0, ok, x, max_nfev=200)
-    return model.with_values(best.values)
+    res = fit_kind(kind, signals, theta_deg, fit_config or FitConfig(), holdout=holdout)
+    return res.model
 
 
 def _figure(model: Model, signals: Signals, theta: np.ndarray, holdout: np.ndarray, title: str):
@@ -182,7 +169,7 @@ def diagnose_file(
     from i2ris_calib.config import PipelineConfig
     from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record
     from i2ris_calib.diagnosis.serialize import model_to_dict
-    from i2ris_calib.diagnosis.workflow import diagnose
+    from i2ris_calib.diagnosis.workflow import diagnose, holdout_for, single_threaded_blas
     from i2ris_calib.io.atomic import atomic_dir, write_json, write_text
     from i2ris_calib.io.provenance import provenance
 
@@ -191,9 +178,10 @@ def diagnose_file(
     cfg = config or PipelineConfig()
     out = Path(out) if out is not None else Path("diagnose_out")
     signals, theta, abs_input = read_synced(Path(data), axis)
-    with Progress(transient=True) as bar:
+    with Progress(transient=True) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {axis}: fitting {start}", total=None)
-        base = start_model(start, signals, theta)
+        holdout = holdout_for(signals.v, cfg.diagnose)
+        base = start_model(start, signals, theta, holdout, cfg.fit)
         diag = diagnose(
             base,
             signals,

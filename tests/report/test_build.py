@@ -10,7 +10,7 @@ from runfolder import STAGE_FILES
 from i2ris_calib.report.build import build_document
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.report.data import RunData
-from i2ris_calib.report.document import Figure, MarkdownFragment, Note, Paragraph, Section, Table
+from i2ris_calib.report.document import Figure, MarkdownFragment, Note, Paragraph, Table
 
 CFG = ReportConfig(figure_dpi=40)
 REAL_FIGURE_TESTS = {"test_complete_run_has_every_section_and_figure"}
@@ -130,21 +130,39 @@ def test_predictions_without_a_dataset_row_is_a_warning(run_data):
     assert warns == ["predictions.csv has no rows for dataset 'yaw-'."]
 
 
-def test_diagnosis_section_shows_effects_steps_fragment_and_unreferenced_plots(run_data):
-    run, truth = run_data
+def test_diagnosis_fragment_is_embedded_with_unreferenced_plots_after_it(run_data):
+    run, _ = run_data
     doc = build_document(run, CFG)
+    sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
+    frag, fig = sec.blocks
+    assert isinstance(frag, MarkdownFragment) and frag.text == run.diagnoses[0].markdown
+    assert list(frag.images) == ["plots/step1_before.png"]  # the one the fragment references
+    assert isinstance(fig, Figure) and fig.name == "diagnose_yaw_plots_step1_after"
+
+
+def test_diagnosis_summary_without_fragment(run_data):
+    run, _ = run_data
+    dd = replace(run.diagnoses[0], markdown=None)
+    doc = build_document(replace(run, diagnoses=(dd,)), CFG)
     sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
     paras = [b.text for b in sec.blocks if isinstance(b, Paragraph)]
     assert paras == ["Named effects, in the order added: axis_coupling."]
-    tables_ = [b for b in sec.blocks if isinstance(b, Table)]
-    base_final = dict((r[0], r[1:]) for r in tables_[0].rows)
-    assert base_final["holdout_rmse_deg"] == ("0.91", "0.31")
-    steps = tables_[1]
-    assert steps.header[:2] == ("step", "effect") and steps.rows[0][:2] == ("1", "axis_coupling")
-    frag = next(b for b in sec.blocks if isinstance(b, MarkdownFragment))
-    assert list(frag.images) == ["plots/step1_before.png"]  # the one the fragment references
-    figs = [b for b in sec.blocks if isinstance(b, Figure)]
-    assert [f.name for f in figs] == ["diagnose_yaw_plots_step1_after"]
+    base_final, steps = [b for b in sec.blocks if isinstance(b, Table)]
+    assert dict((r[0], r[1:]) for r in base_final.rows)["holdout_rmse_deg"] == ("0.91", "0.31")
+    assert steps.header == (
+        "step",
+        "effect",
+        "params",
+        "delta_bic",
+        "evidence",
+        "holdout_rmse_after_deg",
+        "holdout_rmse_before_deg",
+    )
+    assert steps.rows[0][:3] == ("1", "axis_coupling", "c_deg_per_count=0.001")
+    assert [f.name for f in sec.blocks if isinstance(f, Figure)] == [
+        "diagnose_yaw_plots_step1_before",
+        "diagnose_yaw_plots_step1_after",
+    ]
 
 
 def test_no_named_effect_is_said(run_data):
@@ -159,7 +177,6 @@ def test_no_named_effect_is_said(run_data):
     sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
     assert sec.blocks[0].text.startswith("Named effects, in the order added: none")
     assert any(isinstance(b, Note) and "plots/gone.png" in b.text for b in sec.blocks)
-    assert isinstance(sec, Section)
 
 
 def test_provenance_lists_every_stage_json(run_data):

@@ -97,10 +97,16 @@ def test_fragment_html_demotes_headings_and_inlines_only_known_images():
         "## R\n\n![a](a.png) ![b](b.png)\n\n<script>x()</script>", {"a.png": ("n", RED)}
     )
     out = fragment_html(frag)
-    assert "<h5>R</h5>" in out
+    assert "<h4>R</h4>" in out  # top level of the fragment becomes h4
     assert "data:image/png;base64," + base64.b64encode(RED).decode() in out
     assert 'src="b.png"' in out  # unknown image left as is (the builder lists it as missing)
     assert "<script>" not in out
+
+
+def test_fragment_heading_levels_keep_their_relative_depth():
+    frag = MarkdownFragment("## A\n\n### B\n", {})
+    assert fragment_markdown(frag, "figures", {}).splitlines() == ["#### A", "", "##### B"]
+    assert "<h4>A</h4>" in fragment_html(frag) and "<h5>B</h5>" in fragment_html(frag)
 
 
 def test_fragment_markdown_leaves_code_blocks_alone():

@@ -309,9 +309,31 @@ def diagnosis_section(diagnoses: tuple[DiagnosisData, ...]) -> Section:
 
 
 def _diagnosis_subsection(dd: DiagnosisData) -> Section:
-    diag = dd.diagnosis
-    named = diag.get("named_effects")
+    """The stage's own diagnosis.md when present (it is the complete account), else a summary."""
+    fig_names = {
+        rel: f"diagnose_{_slug(dd.axis)}_{_slug(rel.removesuffix('.png'))}" for rel in dd.images
+    }
+    referenced: set[str] = set()
+    if dd.markdown:
+        referenced = {rel for rel in dd.images if f"]({rel})" in dd.markdown}
+        frag_images = {rel: (fig_names[rel], dd.images[rel]) for rel in referenced}
+        blocks: list = [MarkdownFragment(dd.markdown, frag_images)]
+    else:
+        blocks = _diagnosis_summary(dd.diagnosis)
+    for rel, png in dd.images.items():
+        if rel not in referenced:
+            blocks.append(Figure(fig_names[rel], png, f"{dd.axis}: {rel}"))
+    for rel in dd.missing_images:
+        blocks.append(
+            Note(f"diagnose/{dd.axis}/{rel} is listed in diagnosis.json but not found.", "warn")
+        )
+    return Section(f"diagnosis-{_slug(dd.axis)}", dd.axis, tuple(blocks))
+
+
+def _diagnosis_summary(diag: Mapping[str, Any]) -> list:
+    """Named effects, baseline vs final metrics and a compact steps table from diagnosis.json."""
     blocks: list = []
+    named = diag.get("named_effects")
     if isinstance(named, list):
         text = (
             ", ".join(map(str, named))
@@ -327,25 +349,7 @@ def _diagnosis_subsection(dd: DiagnosisData) -> Section:
     steps = diag.get("steps")
     if isinstance(steps, list) and steps:
         blocks.append(_steps_table(steps))
-    referenced: set[str] = set()
-    fig_names = {
-        rel: f"diagnose_{_slug(dd.axis)}_{_slug(rel.removesuffix('.png'))}" for rel in dd.images
-    }
-    if dd.markdown:
-        referenced = {rel for rel in dd.images if rel in dd.markdown}
-        blocks.append(
-            MarkdownFragment(
-                dd.markdown, {rel: (fig_names[rel], dd.images[rel]) for rel in referenced}
-            )
-        )
-    for rel, png in dd.images.items():
-        if rel not in referenced:
-            blocks.append(Figure(fig_names[rel], png, f"{dd.axis}: {rel}"))
-    for rel in dd.missing_images:
-        blocks.append(
-            Note(f"diagnose/{dd.axis}/{rel} is listed in diagnosis.json but not found.", "warn")
-        )
-    return Section(f"diagnosis-{_slug(dd.axis)}", dd.axis, tuple(blocks))
+    return blocks
 
 
 def _baseline_final_rows(diag: Mapping[str, Any]) -> list[tuple[str, str, str]]:
@@ -358,19 +362,28 @@ def _baseline_final_rows(diag: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     return [(k, tables.fmt(b.get(k)), tables.fmt(f.get(k))) for k in keys]
 
 
+def _step_row(step: Any) -> dict[str, str]:
+    """A step's scalar fields and its ``params`` as ``name=value``; nested detail left out."""
+    if not isinstance(step, Mapping):
+        return {"effect": str(step)}
+    row = {
+        k: tables.fmt(v)
+        for k, v in step.items()
+        if not isinstance(v, (Mapping, list)) and not _is_png_list(v)
+    }
+    if isinstance(step.get("params"), Mapping):
+        row["params"] = tables.fmt(step["params"])
+    return row
+
+
 def _steps_table(steps: list) -> Table:
+    rows = [_step_row(s) for s in steps]
     keys: list[str] = []
-    flat = []
-    for s in steps:
-        row = dict(tables.flatten(s)) if isinstance(s, Mapping) else {"step": s}
-        row = {k: v for k, v in row.items() if not _is_png_list(v)}  # plots are shown below
-        flat.append(row)
-        keys += [k for k in row if k not in keys]
-    keys.sort(key=lambda k: (k != "effect", k.startswith("evidence"), k))
-    rows = tuple(tuple(_clip(tables.fmt(r.get(k))) for k in keys) for r in flat)
-    return Table(
-        ("step", *keys), tuple((str(i + 1), *r) for i, r in enumerate(rows)), "Diagnosis steps."
-    )
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    keys.sort(key=lambda k: (k != "effect", k != "params", k))
+    body = tuple((str(i + 1), *(_clip(r.get(k, "")) for k in keys)) for i, r in enumerate(rows))
+    return Table(("step", *keys), body, "Diagnosis steps (details in diagnosis.json).")
 
 
 def _is_png_list(value: Any) -> bool:

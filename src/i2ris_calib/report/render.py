@@ -152,8 +152,11 @@ def column_alignment(t: Table) -> list[bool]:
     return [bool(t.rows) and all(_NUMBER.match(r[j]) for r in t.rows) for j in range(len(t.header))]
 
 
+FRAGMENT_TOP_LEVEL = 4  # a fragment sits under an h3 (axis) subsection
+
+
 def fragment_html(frag: MarkdownFragment) -> str:
-    """HTML of a Markdown fragment, headings demoted under h3, images inlined.
+    """HTML of a Markdown fragment, its top heading level made h4, images inlined.
 
     Raw HTML in the fragment is escaped, not passed through.
     """
@@ -161,9 +164,11 @@ def fragment_html(frag: MarkdownFragment) -> str:
 
     md = MarkdownIt("commonmark", {"html": False}).enable("table")
     tokens = md.parse(frag.text)
+    levels = [int(t.tag[1]) for t in tokens if t.type == "heading_open"]
+    shift = FRAGMENT_TOP_LEVEL - min(levels) if levels else 0
     for tok in tokens:
         if tok.type in ("heading_open", "heading_close"):
-            tok.tag = f"h{min(6, int(tok.tag[1]) + 3)}"
+            tok.tag = f"h{max(1, min(6, int(tok.tag[1]) + shift))}"
         for child in tok.children or ():
             if child.type == "image":
                 src = str(child.attrGet("src") or "")
@@ -276,16 +281,37 @@ def _md_table(t: Table) -> list[str]:
 
 
 def fragment_markdown(frag: MarkdownFragment, fdir: str, files: dict[str, bytes]) -> str:
-    """The fragment with headings demoted by three levels and image links re-pointed."""
+    """The fragment with its top heading level made ``####`` and image links re-pointed."""
     text = frag.text
     for rel, (name, png) in frag.images.items():
         text = text.replace(f"]({rel})", f"]({_figure_file(name, png, fdir, files)})")
-    out, fenced = [], False
-    for line in text.splitlines():
-        if line.lstrip().startswith(("```", "~~~")):
-            fenced = not fenced
-        if not fenced and re.match(r"^#{1,6} ", line):
-            line = "###" + line
-            line = re.sub(r"^#{7,}", "######", line)
+    lines = text.splitlines()
+    fenced = _fenced_lines(lines)
+    heading = re.compile(r"^(#{1,6}) ")
+    levels = [
+        len(m.group(1))
+        for ln, f in zip(lines, fenced, strict=True)
+        if not f
+        for m in [heading.match(ln)]
+        if m
+    ]
+    shift = FRAGMENT_TOP_LEVEL - min(levels) if levels else 0
+    out = []
+    for line, in_fence in zip(lines, fenced, strict=True):
+        m = None if in_fence else heading.match(line)
+        if m:
+            level = max(1, min(6, len(m.group(1)) + shift))
+            line = "#" * level + line[len(m.group(1)) :]
         out.append(line)
     return "\n".join(out).strip()
+
+
+def _fenced_lines(lines: list[str]) -> list[bool]:
+    """True for each line inside (or delimiting) a fenced code block."""
+    flags, fenced = [], False
+    for line in lines:
+        fence = line.lstrip().startswith(("```", "~~~"))
+        if fence:
+            fenced = not fenced
+        flags.append(fenced or fence)
+    return flags

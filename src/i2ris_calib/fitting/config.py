@@ -22,7 +22,8 @@ class FitConfig:
     seed : int
         Seed of the start variations.
     max_nfev : int
-        Model evaluations allowed per start (then flagged not converged).
+        LM iterations allowed per LM call of the final run (then flagged not
+        converged); finite-difference Jacobian evaluations are not counted.
     n_operators : int
         n, the number of non-zero thresholds (n + 1 play operators, Eq14).
     deadband_counts : float
@@ -47,7 +48,7 @@ class FitConfig:
     n_starts: int = 3
     n_starts_gpi: int = 2
     seed: int = 0
-    max_nfev: int = 3000
+    max_nfev: int = 300
     n_operators: int = 30
     deadband_counts: float = 2.0
     fixed_gpi: tuple[str, ...] = ("lam",)

@@ -152,20 +152,37 @@ def _profile(counter, full, idx, grid):
 
 
 def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
-    """Grid search over each profiled parameter (v_f): the whole input range (when
-    ``wide``) then +-1 % of it around the best, the other parameters held."""
+    """Profile search over each profiled parameter (v_f), the others held.
+
+    ``wide``: a grid over +-20 % of the input range in 1 % steps around the current
+    value. Always then: the exact step - the cost only changes where v_f crosses an
+    input value of a fitted sample, so every midpoint between consecutive distinct
+    fitted input values within +-1 % of the range is tried, and among equal best
+    costs the middle candidate is kept (the centre of the interval the data allow).
+    """
     span = float(np.ptp(v))
+    vals = np.unique(v[counter.used])
     for idx in pidx:
         lo, hi = max(lower[idx], v.min()), min(upper[idx], v.max())
-        centre = full[idx]
-        levels = ((0.5 * span, 41), (0.02 * span, 21)) if wide else ((0.01 * span, 21),)
         if wide:
-            centre = 0.5 * (lo + hi)
-        for width, n in levels:
-            grid = np.clip(np.linspace(centre - width, centre + width, n), lo, hi)
-            centre, _ = _profile(counter, full, idx, grid)
+            grid = np.clip(np.linspace(full[idx] - 0.2 * span, full[idx] + 0.2 * span, 41), lo, hi)
+            best, _ = _profile(counter, full, idx, grid)
             full = full.copy()
-            full[idx] = centre
+            full[idx] = best
+        near = vals[np.abs(vals - full[idx]) <= 0.01 * span]
+        if near.size < 2:
+            continue
+        cands = 0.5 * (near[1:] + near[:-1])
+        costs = np.empty(cands.size)
+        trial = full.copy()
+        for j, c in enumerate(cands):
+            trial[idx] = c
+            costs[j] = np.sum(counter.residuals(trial) ** 2)
+        tied = np.flatnonzero(costs <= costs.min() * (1 + 1e-12))
+        run = tied[np.concatenate(([0], np.flatnonzero(np.diff(tied) > 1) + 1))[0] :]
+        run = run[: np.argmax(np.diff(np.append(run, run[-1] + 2)) > 1) + 1]
+        full = full.copy()
+        full[idx] = 0.5 * (cands[run[0]] + cands[run[-1]])
     return full
 
 
@@ -178,8 +195,8 @@ def fit_model(
     holdout_mask: np.ndarray | None = None,
     starts: list[np.ndarray] | None = None,
     method: str = "lm",
-    max_nfev: int | None = 3000,
-    screen_nfev: int = 200,
+    max_nfev: int | None = 300,
+    screen_nfev: int = 20,
     ftol: float = 1e-7,
 ) -> FitResult:
     """Fit ``model`` to measured angles by least squares (Eq24).
@@ -201,10 +218,12 @@ def fit_model(
     method : {"lm", "trf"}
         Unbounded Levenberg-Marquardt or bounded trust-region reflective.
     max_nfev : int, optional
-        Evaluation limit of the final run (the result is flagged not converged when hit).
+        Limit on LM iterations (function evaluations not counting the finite-difference
+        Jacobian, scipy >= 1.16) of each LM call of the final run; the result is flagged
+        not converged when hit.
     screen_nfev : int
-        With several starts, each first gets an LM run limited to this many
-        evaluations; only the best is run to convergence.
+        With several starts, each first gets LM runs limited to this many
+        iterations; only the best is run to convergence.
     ftol : float
         Relative cost-reduction tolerance of ``least_squares``.
 
@@ -245,9 +264,9 @@ def fit_model(
                 full = _refine_profiled(counter, full, pidx, v, lower, upper, wide=step == "wide")
         return float(np.sum(counter.residuals(full) ** 2)), full, res
 
-    # every start: LM, wide v_f grid, LM (short when several starts); then the best
+    # every start: fine v_f grid, LM, wide v_f grid, LM (short when several starts); then the best
     # one: LM to convergence, fine v_f grid, LM.
-    first = ("lm", "wide", "lm")
+    first = ("fine", "lm", "wide", "lm")
     if len(starts) > 1:
         screened = [run(x0, screen_nfev, first) for x0 in starts]
         best = run(min(screened, key=lambda c: c[0])[1], max_nfev, ("lm", "fine", "lm"))

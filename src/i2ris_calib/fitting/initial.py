@@ -9,8 +9,10 @@ Recipe (docs/fit.md):
 2. Envelope lines from the branches: with weights summing to P and
    ``pr = sum p_i r_i``, a long loading stretch follows ``P (a1 v + a2) - pr``, a long
    unloading stretch above the flag point ``P (a3 v + a4) + pr`` and below it
-   ``P (a5 v + a6) + kappa pr``; straight-line fits to samples far (>= 20 % of the
-   input range) from the last reversal give a1..a6.
+   ``P (a5 v + a6) + kappa pr``; straight-line fits give a1..a6: loading and upper
+   unloading samples far (>= 20 % of the input range) from the last reversal, lower
+   unloading samples in the lower half of their angles (below the S3 dead zone);
+   samples within 5 % of the range of the estimated flag point are left out.
 3. Flag point (:func:`flag_point`): on each unloading stretch, the first input value
    where the angle stops following the input (|d theta / d v| below 20 % of the
    loading slope) after it has followed it - the paper's "first point where the
@@ -128,15 +130,18 @@ def envelope_values(
         _line(v, theta, up & far) or _line(v, theta, up) or (np.nanmax(theta) / max(span, 1), 0.0)
     )
     out = {"lam": lam, "a1": load[0] / P, "a2": (load[1] + pr) / P}
-    upper = down & (v > v_f) if v_f is not None else down
+    margin = 0.05 * span  # keep clear of the (uncertain) flag point
+    upper = down & (v > v_f + margin) if v_f is not None else down
     unl1 = _line(v, theta, upper & far) or _line(v, theta, upper) or (load[0], load[1] + 2 * pr)
     out.update(a3=unl1[0] / P, a4=(unl1[1] - pr) / P)
     if isinstance(model, I2RISEGPIModel):
         kappa = shape["kappa"]
-        lower = down & (v <= v_f) if v_f is not None else down & (v <= np.median(v))
         vlow = v_f if v_f is not None else float(np.median(v))
-        deep = lower & (v < vlow - 0.3 * (vlow - v.min()))
-        unl2 = _line(v, theta, deep) or _line(v, theta, lower) or unl1
+        lower = down & (v <= vlow - margin)
+        # the steep part below the stage-2 dead zone: the lower half of those angles
+        ok = lower & np.isfinite(theta)
+        low_half = ok & (theta <= np.median(theta[ok])) if ok.any() else ok
+        unl2 = _line(v, theta, low_half) or _line(v, theta, lower) or unl1
         out.update(a5=unl2[0] / P, a6=(unl2[1] - kappa * pr) / P)
     return out
 

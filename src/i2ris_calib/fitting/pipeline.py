@@ -37,6 +37,18 @@ def build_model(kind: str, v: np.ndarray, config: FitConfig = FitConfig()) -> Pa
     raise CalibError(f"unknown model '{kind}'; use gpi, egpi or all")
 
 
+def model_from_params(
+    kind: str, params: dict[str, float], n_operators: int = 30, deadband_counts: float = 2.0
+) -> ParametricModel:
+    """A fitted model rebuilt from a fit.json record's ``params`` (and its
+    ``n_operators`` / ``deadband_counts``)."""
+    if kind == "gpi":
+        return gpi_model(n=n_operators, **params)
+    if kind == "egpi":
+        return i2ris_egpi_model(n=n_operators, deadband_counts=deadband_counts, **params)
+    raise CalibError(f"unknown model '{kind}'; use gpi or egpi")
+
+
 def split_masks(v: np.ndarray, config: FitConfig = FitConfig()) -> tuple[np.ndarray, np.ndarray]:
     """(cycle index (n,), held-out mask (n,)) for ``v`` (see fitting.cycles)."""
     cyc = cycle_index(v, deadband_for(v, config))

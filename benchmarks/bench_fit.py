@@ -1,0 +1,106 @@
+"""Fitting benchmark: parameter recovery and fitting speed (issue 2).
+
+Run: ``python benchmarks/bench_fit.py`` (``--quick``: 2 parameter sets, no speed part).
+
+1. Recovery: for >= 5 random true I2RIS-EGPI parameter sets
+   (``presets.random_i2ris_egpi_params``), data from a Fig-5-like trajectory
+   (5 loading cycles, 5000 samples) + Gaussian noise sigma = 0.1 deg; GPI and EGPI
+   fitted with the default FitConfig on the fit cycles; held-out RMSE reported.
+   Targets: EGPI held-out RMSE <= 1.05 sigma; GPI held-out RMSE >= 4x EGPI's.
+2. Speed: GPI + EGPI fitted to the four paper-like datasets (yaw+/-, pitch+/-),
+   5000 samples each; target <= 5 s in total (one core, compiled kernels warm).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+from i2ris_calib.fitting.config import FitConfig  # noqa: E402
+from i2ris_calib.fitting.pipeline import fit_all  # noqa: E402
+from i2ris_calib.hysteresis.models import i2ris_egpi_model  # noqa: E402
+from i2ris_calib.hysteresis.presets import (  # noqa: E402
+    DATASETS,
+    loading_trajectory,
+    paper_like_params,
+    random_i2ris_egpi_params,
+)
+
+NOISE_DEG = 0.1
+N_SAMPLES = 5000
+
+
+def synthetic(rng: np.random.Generator, truth: dict, config: FitConfig):
+    """(v counts, theta deg) from the EGPI with ``truth`` + N(0, 0.1 deg)."""
+    _, v = loading_trajectory(rng, n_cycles=5, n_samples=N_SAMPLES)
+    model = i2ris_egpi_model(n=config.n_operators, deadband_counts=config.deadband_counts)
+    y = model.evaluate_dict(v, truth)
+    return v, y + rng.normal(0.0, NOISE_DEG, v.size)
+
+
+def recovery(n_sets: int, config: FitConfig) -> bool:
+    print(
+        f"== parameter recovery: {n_sets} random true EGPI sets, {N_SAMPLES} samples, noise {NOISE_DEG} deg"
+    )
+    print(
+        f"{'set':>3} {'range':>6} {'EGPI fit':>9} {'EGPI hold':>9} {'GPI hold':>9} {'ratio':>6} {'v_f true':>8} {'v_f fit':>8} {'s':>5}"
+    )
+    ok = True
+    for k in range(n_sets):
+        rng = np.random.default_rng(1000 + k)
+        truth = random_i2ris_egpi_params(rng)
+        v, theta = synthetic(rng, truth, config)
+        t0 = time.perf_counter()
+        res = fit_all(v, theta, config)
+        dt = time.perf_counter() - t0
+        eg, gp = res["egpi"], res["gpi"]
+        ratio = gp.holdout_metrics.rmse_deg / eg.holdout_metrics.rmse_deg
+        good = eg.holdout_metrics.rmse_deg <= 1.05 * NOISE_DEG and ratio >= 4.0
+        ok &= good
+        print(
+            f"{k:>3} {np.ptp(theta):6.1f} {eg.metrics.rmse_deg:9.4f} {eg.holdout_metrics.rmse_deg:9.4f} "
+            f"{gp.holdout_metrics.rmse_deg:9.4f} {ratio:6.1f} {truth['v_f']:8.0f} {eg.params['v_f']:8.0f} {dt:5.2f}"
+            + ("" if good else "  <-- target missed")
+        )
+    print(
+        f"targets (EGPI hold <= {1.05 * NOISE_DEG:.3f} deg, GPI/EGPI >= 4): {'PASS' if ok else 'FAIL'}"
+    )
+    return ok
+
+
+def speed(config: FitConfig) -> bool:
+    rng = np.random.default_rng(7)
+    data = [synthetic(rng, paper_like_params(d), config) for d in DATASETS]
+    fit_all(data[0][0][:500], data[0][1][:500], config)  # compile / load kernels
+    t0 = time.perf_counter()
+    results = [fit_all(v, theta, config) for v, theta in data]
+    dt = time.perf_counter() - t0
+    print(f"== speed: GPI + EGPI on 4 datasets x {N_SAMPLES} samples: {dt:.2f} s (target <= 5 s)")
+    for name, res in zip(DATASETS, results, strict=True):
+        print(
+            f"   {name:7} EGPI hold {res['egpi'].holdout_metrics.rmse_deg:.3f} nfev {res['egpi'].nfev:5d}   "
+            f"GPI hold {res['gpi'].holdout_metrics.rmse_deg:.3f} nfev {res['gpi'].nfev:5d}"
+        )
+    return dt <= 5.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="2 parameter sets, skip the speed part")
+    ap.add_argument("--sets", type=int, default=6, help="number of random true parameter sets")
+    args = ap.parse_args()
+    config = FitConfig()
+    ok = recovery(2 if args.quick else args.sets, config)
+    if not args.quick:
+        ok &= speed(config)
+    print("ALL TARGETS MET" if ok else "SOME TARGETS MISSED")
+
+
+if __name__ == "__main__":
+    main()

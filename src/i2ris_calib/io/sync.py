@@ -1,0 +1,143 @@
+"""``i2ris-calib sync``: read session + encoder log + angles, write synced.csv and sync.json.
+
+Formats are documented in ``docs/sync.md``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.io.atomic import write_csv, write_json
+from i2ris_calib.io.encoders import encoder_log_path, read_encoder_log
+from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.session import SESSION_FILE, load_session
+
+SCHEMA = "i2ris-calib.sync/1"
+CLOCK = "t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam"
+
+
+def read_angles(path: Path) -> pd.DataFrame:
+    """angles.csv from the tracking stage, validated (sync.estimate.check_angles)."""
+    from i2ris_calib.sync.estimate import check_angles
+
+    if not path.is_file():
+        raise CalibError(
+            f"tracked angles not found: {path} (run 'i2ris-calib track SESSION' first, or pass --angles)"
+        )
+    try:
+        df = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CalibError(f"{path}: not a readable CSV file ({exc})") from None
+    return check_angles(df, str(path))
+
+
+def input_files(session: Path, log_path: Path, angles_path: Path) -> list[Path]:
+    """Files whose hashes go into the provenance (a ROS2 bag folder: all its files)."""
+    logs = (
+        sorted(p for p in log_path.rglob("*") if p.is_file()) if log_path.is_dir() else [log_path]
+    )
+    return [session / SESSION_FILE, *logs, angles_path]
+
+
+def sync_summary(clock, table: pd.DataFrame, n_dropped: int, log, t_cam: np.ndarray, cfg) -> dict:
+    """The sync.json body (without provenance)."""
+    t_ref = float(clock.evidence.get("t_ref_cam_s", 0.5 * (np.min(t_cam) + np.max(t_cam))))
+    return {
+        "schema": SCHEMA,
+        "clock": CLOCK,
+        "method": clock.method,
+        "method_requested": cfg.sync.method,
+        "offset_s": clock.offset_s,
+        "drift_ppm": clock.drift_ppm,
+        "offset_stderr_s": clock.offset_stderr_s,
+        "drift_stderr_ppm": clock.drift_stderr_ppm,
+        "t_ref_cam_s": t_ref,
+        "offset_at_t_ref_s": clock.offset_at(t_ref),
+        "offset_at_t_ref_stderr_s": clock.offset_stderr_at(t_ref),
+        "n_rows": int(len(table)),
+        "n_dropped_outside_log": n_dropped,
+        "camera_time_range_s": [float(np.min(t_cam)), float(np.max(t_cam))],
+        "log_time_range_s": list(log.time_range()),
+        "evidence": clock.evidence,
+    }
+
+
+def xcorr_comparison(angles: pd.DataFrame, log, sync_cfg) -> dict | None:
+    """Plain cross-correlation result for comparison (None when it cannot run)."""
+    from i2ris_calib.sync.estimate import axis_series
+    from i2ris_calib.sync.xcorr import clock_from_xcorr
+
+    series = axis_series(angles)
+    if not series:
+        return None
+    try:
+        c = clock_from_xcorr(series, log, replace(sync_cfg, method="xcorr"))
+    except CalibError:
+        return None
+    return {"offset_s": c.offset_s, "drift_ppm": c.drift_ppm, "note": c.evidence["note"]}
+
+
+def sync_session(
+    session: str | Path, angles: str | Path | None, out: str | Path | None, cfg
+) -> Path:
+    """Synchronise one session; write ``OUT/synced.csv`` and ``OUT/sync.json``.
+
+    Parameters
+    ----------
+    session : path
+        Session folder (docs/session.md).
+    angles : path, optional
+        Tracked angles (default ``SESSION/track/angles.csv``).
+    out : path, optional
+        Output folder (default ``SESSION/sync``).
+    cfg : PipelineConfig
+        ``[sync]`` and ``[fit]`` sections are used.
+
+    Returns
+    -------
+    Path
+        The output folder.
+    """
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    from i2ris_calib.sync.estimate import check_overlap, estimate_clock, synced_table
+
+    root = Path(session)
+    spec = load_session(root)
+    angles_path = Path(angles) if angles is not None else root / "track" / "angles.csv"
+    out_dir = Path(out) if out is not None else root / "sync"
+    log_path = encoder_log_path(root, spec.encoder)
+    log = read_encoder_log(root, spec.encoder, cfg.sync.max_gap_s)
+    df = read_angles(angles_path)
+    with Progress(
+        SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), transient=True
+    ) as bar:
+        bar.add_task(
+            f"sync {root.name}: estimating the clock (method {cfg.sync.method})", total=None
+        )
+        clock = estimate_clock(df, log, cfg.sync, cfg.fit)
+        comparison = xcorr_comparison(df, log, cfg.sync) if clock.method != "xcorr" else None
+    table, n_dropped = synced_table(df, clock, log)
+    t_cam = df["time_s"].to_numpy(dtype=float)
+    check_overlap(len(table), n_dropped, clock, log, t_cam, cfg.sync)
+    summary = sync_summary(clock, table, n_dropped, log, t_cam, cfg)
+    summary["xcorr_comparison"] = comparison
+    summary["provenance"] = provenance(input_files(root, log_path, angles_path), cfg)
+    write_csv(out_dir / "synced.csv", table, float_format="%.6f")
+    write_json(out_dir / "sync.json", summary)
+    return out_dir
+
+
+def with_method(cfg, method: str | None):
+    """``cfg`` with ``[sync] method`` replaced (CLI ``--method``); CalibError if unknown."""
+    if method is None:
+        return cfg
+    allowed = ("auto", "event", "model", "xcorr")
+    if method not in allowed:
+        raise CalibError(f"--method '{method}' is not one of {', '.join(allowed)}")
+    return replace(cfg, sync=replace(cfg.sync, method=method))

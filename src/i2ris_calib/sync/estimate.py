@@ -1,0 +1,189 @@
+"""Choose and run a sync method; build the synced table (one row per angle sample).
+
+Entry points: :func:`estimate_clock` (angles table + encoder log -> ClockModel) and
+:func:`synced_table` (apply a clock: controller times, interpolated encoders).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.sync.clock import ClockModel
+from i2ris_calib.sync.config import SyncConfig
+from i2ris_calib.sync.events import Edge, camera_edges, clock_from_events, log_edges
+from i2ris_calib.sync.joint import clock_from_model
+from i2ris_calib.sync.log import ENCODER_CHANNELS, EncoderLog
+from i2ris_calib.sync.xcorr import AxisSeries, clock_from_xcorr
+
+ANGLE_COLUMNS = ("frame", "time_s", "yaw_deg", "pitch_deg", "status")
+SYNCED_COLUMNS = (
+    "time_s",
+    "enc_yaw",
+    "enc_pitch",
+    "yaw_deg",
+    "pitch_deg",
+    "status",
+    "frame",
+    "time_cam_s",
+)
+AXES = (("yaw", "yaw_deg", "enc_yaw"), ("pitch", "pitch_deg", "enc_pitch"))
+
+
+def check_angles(angles: pd.DataFrame, where: str) -> pd.DataFrame:
+    """The angles table sorted by time; CalibError on missing columns or a clock reset."""
+    missing = [c for c in ANGLE_COLUMNS if c not in angles.columns]
+    if missing:
+        raise CalibError(
+            f"{where}: missing column(s) {', '.join(missing)} (angles.csv is written by "
+            "'i2ris-calib track'; see docs/formats.md)"
+        )
+    t = pd.to_numeric(angles["time_s"], errors="coerce").to_numpy(dtype=float)
+    if not np.isfinite(t).all():
+        raise CalibError(
+            f"{where}: time_s has empty or non-numeric values (fix the tracking output)"
+        )
+    dt = np.diff(t)
+    if (dt < 0).any():
+        i = int(np.flatnonzero(dt < 0)[0])
+        raise CalibError(
+            f"{where}: camera time goes back from {t[i]:.6f} s to {t[i + 1]:.6f} s at row {i + 2} "
+            "(camera clock reset: split the recording)"
+        )
+    return angles.reset_index(drop=True)
+
+
+def axis_series(angles: pd.DataFrame) -> list[AxisSeries]:
+    """Measured frames (status ``measured``, finite angle) of each axis."""
+    out = []
+    measured = angles["status"].astype(str).to_numpy() == "measured"
+    t = angles["time_s"].to_numpy(dtype=float)
+    for axis, col, channel in AXES:
+        th = pd.to_numeric(angles[col], errors="coerce").to_numpy(dtype=float)
+        ok = measured & np.isfinite(th)
+        if ok.sum() >= 8:
+            out.append(AxisSeries(axis, channel, t[ok], th[ok]))
+    return out
+
+
+def flash_cameras(angles: pd.DataFrame, cfg: SyncConfig) -> list[str]:
+    """Cameras with a ``mean_gray_<camera>`` column (restricted to ``cfg.flash_cameras``)."""
+    cams = [c[len("mean_gray_") :] for c in angles.columns if c.startswith("mean_gray_")]
+    if cfg.flash_cameras:
+        unknown = [c for c in cfg.flash_cameras if c not in cams]
+        if unknown:
+            raise CalibError(
+                f"sync.flash_cameras names {', '.join(unknown)} but angles.csv has mean_gray_ "
+                f"columns for: {', '.join(cams) or 'none'} (fix sync.flash_cameras)"
+            )
+        cams = list(cfg.flash_cameras)
+    return cams
+
+
+def video_edges(angles: pd.DataFrame, cfg: SyncConfig) -> list[Edge]:
+    """LED edges seen in every flash camera; a camera's own frame times are taken from
+    ``time_s_<camera>`` when angles.csv has that column, else from ``time_s``."""
+    edges = []
+    for cam in flash_cameras(angles, cfg):
+        tcol = f"time_s_{cam}" if f"time_s_{cam}" in angles.columns else "time_s"
+        t = pd.to_numeric(angles[tcol], errors="coerce").to_numpy(dtype=float)
+        g = pd.to_numeric(angles[f"mean_gray_{cam}"], errors="coerce").to_numpy(dtype=float)
+        edges += camera_edges(t, g, cam, cfg)
+    return edges
+
+
+def estimate_clock(
+    angles: pd.DataFrame, log: EncoderLog, cfg: SyncConfig, fit_config=None
+) -> ClockModel:
+    """Camera -> controller clock by the configured method.
+
+    ``auto`` uses the sync event when the log has ``sync_flash`` edges and the video
+    shows the flash, else the joint hysteresis-model estimate (the reason is recorded
+    in ``evidence["auto"]``). ``event`` and ``model`` insist on their method;
+    ``xcorr`` is plain cross-correlation (comparison only: biased by hysteresis).
+
+    Parameters
+    ----------
+    angles : DataFrame
+        angles.csv (see :func:`check_angles`).
+    log : EncoderLog
+    cfg : SyncConfig
+    fit_config : FitConfig, optional
+        For the ``model`` method.
+    """
+    method = cfg.method
+    reason = ""
+    if method in ("auto", "event"):
+        lg = log_edges(log.flash, cfg.log_edge_at) if log.flash is not None else []
+        cam = video_edges(angles, cfg)
+        if lg and cam:
+            return clock_from_events(cam, lg, cfg)
+        reason = (
+            "the encoder log has no sync_flash column/topic"
+            if log.flash is None
+            else "no sync_flash edge in the encoder log"
+            if not lg
+            else "no flash visible in the video (mean_gray_<camera> columns)"
+        )
+        if method == "event":
+            raise CalibError(
+                f"sync.method = 'event' but {reason} (use sync.method = 'model' or 'auto')"
+            )
+    series = axis_series(angles)
+    if not series:
+        raise CalibError(
+            "sync: no measured angles to synchronise with (every frame flagged by tracking?)"
+        )
+    if method == "xcorr":
+        return clock_from_xcorr(series, log, cfg)
+    clock = clock_from_model(series, log, cfg, fit_config)
+    if reason:
+        clock.evidence["auto"] = f"model method used: {reason}"
+    return clock
+
+
+def synced_table(
+    angles: pd.DataFrame, clock: ClockModel, log: EncoderLog
+) -> tuple[pd.DataFrame, int]:
+    """One row per angle sample on the controller clock, encoders interpolated there.
+
+    Rows whose controller time falls outside the encoder log are dropped (returned
+    count) rather than extrapolated.
+
+    Returns
+    -------
+    table : DataFrame
+        Columns :data:`SYNCED_COLUMNS`: time_s (controller clock, s), enc_yaw and
+        enc_pitch (counts, linearly interpolated), yaw_deg, pitch_deg (deg, NaN when
+        not measured), status, frame, time_cam_s (camera clock, s).
+    n_dropped : int
+    """
+    t_cam = angles["time_s"].to_numpy(dtype=float)
+    t_ctrl = clock.to_ctrl(t_cam)
+    table = pd.DataFrame(
+        {
+            "time_s": t_ctrl,
+            **{ch: log.interpolate(ch, t_ctrl) for ch in ENCODER_CHANNELS},
+            "yaw_deg": pd.to_numeric(angles["yaw_deg"], errors="coerce"),
+            "pitch_deg": pd.to_numeric(angles["pitch_deg"], errors="coerce"),
+            "status": angles["status"].astype(str),
+            "frame": angles["frame"],
+            "time_cam_s": t_cam,
+        }
+    )
+    inside = np.isfinite(table["enc_yaw"]) & np.isfinite(table["enc_pitch"])
+    return table[inside].reset_index(drop=True), int((~inside).sum())
+
+
+def check_overlap(n_rows: int, n_dropped: int, clock: ClockModel, log: EncoderLog, t_cam, cfg):
+    """CalibError when fewer than ``cfg.min_overlap_frames`` frames fall inside the log."""
+    if n_rows >= cfg.min_overlap_frames:
+        return
+    lo, hi = log.time_range()
+    a, b = clock.to_ctrl(np.array([np.min(t_cam), np.max(t_cam)]))
+    raise CalibError(
+        f"sync: video and encoder log do not overlap: frames map to [{a:.3f}, {b:.3f}] s on the "
+        f"controller clock, the log covers [{lo:.3f}, {hi:.3f}] s ({n_rows} frame(s) inside, "
+        f"{n_dropped} outside; check that the log belongs to this recording)"
+    )

@@ -103,12 +103,15 @@ def sync(
         None, "--out", "-o", help="Output folder (default SESSION/sync)."
     ),
     config: Path | None = ConfigOpt,
+    method: str | None = typer.Option(
+        None, "--method", help="auto, event, model or xcorr (overrides [sync] method)."
+    ),
 ) -> None:
     """Estimate camera/encoder clock offset and drift; write the synced CSV."""
     cfg = _config(config)
-    from i2ris_calib.io.sync import sync_session
+    from i2ris_calib.io.sync import sync_session, with_method
 
-    sync_session(session, angles, out, cfg)
+    sync_session(session, angles, out, with_method(cfg, method))
 
 
 @app.command()

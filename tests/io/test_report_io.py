@@ -49,7 +49,16 @@ def test_write_report_outputs_and_markdown_links(run_dir):
     assert not list(run_dir.glob(".report.tmp-*"))
 
 
-def test_report_provenance_hashes_inputs_relative_to_run(run_dir):
+@pytest.fixture
+def stub_figures(monkeypatch):
+    """Replace the matplotlib figures by a tiny PNG (figures are tested in tests/report)."""
+    from i2ris_calib.report import figures
+
+    for name in ("fit_figure_png", "tracking_figure_png", "synced_figure_png"):
+        monkeypatch.setattr(figures, name, lambda *a, **k: runfolder.tiny_png())
+
+
+def test_report_provenance_hashes_inputs_relative_to_run(run_dir, stub_figures):
     run, inputs = load_run(run_dir)
     write_report(run_dir, None, CFG)
     md = (run_dir / "report" / "report.md").read_text()
@@ -63,7 +72,9 @@ def test_report_provenance_hashes_inputs_relative_to_run(run_dir):
         assert f"| input {rel} | sha256 {digest} |" in md
 
 
-def test_report_is_deterministic(run_dir, tmp_path):
+def test_report_is_deterministic(tmp_path):
+    run_dir = tmp_path / "s"
+    runfolder.make_run_folder(run_dir, fit_axes=("yaw",), diagnosis=True)
     write_report(run_dir, tmp_path / "r1", CFG)
     write_report(run_dir, tmp_path / "r2", CFG)
     for name in ("report.html", "report.md", "figures/fig6_yaw_yaw_pos.png"):
@@ -150,7 +161,7 @@ def test_missing_run_dir_and_unsafe_out(tmp_path, run_dir, capsys):
     assert (other / "notes.txt").read_text() == "keep me"
 
 
-def test_rerun_replaces_the_previous_report(tmp_path):
+def test_rerun_replaces_the_previous_report(tmp_path, stub_figures):
     run_dir = tmp_path / "s"
     runfolder.make_run_folder(run_dir, fit_axes=())
     write_report(run_dir, None, CFG)

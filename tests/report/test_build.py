@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 from runfolder import STAGE_FILES
 
-from i2ris_calib.report.build import build_document
+from i2ris_calib.report.build import build_document, section_count
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.report.data import RunData
 from i2ris_calib.report.document import Figure, MarkdownFragment, Note, Paragraph, Table
@@ -73,6 +73,17 @@ def test_complete_run_has_every_section_and_figure(run_data):
     assert units["a1"] == "deg/count" and units["kappa"] == "1"  # from the model declarations
     acc = _blocks(doc, "accuracy", Table)
     assert [t.caption.split(":")[0] for t in acc] == ["yaw", "pitch"]
+
+
+def test_progress_is_called_once_per_section(run_data):
+    run, _ = run_data
+    calls: list[str] = []
+    doc = build_document(run, CFG, progress=calls.append)
+    assert len(calls) == len(doc.sections) == section_count(run) == 8
+    empty = RunData("e")
+    calls.clear()
+    assert len(build_document(empty, CFG, progress=calls.append).sections) == len(calls)
+    assert len(calls) == section_count(empty)
 
 
 def test_headline_ratio_from_fit_json(run_data):

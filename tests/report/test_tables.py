@@ -28,7 +28,8 @@ def test_metrics_table_is_paper_shaped_and_shows_fit_json_numbers(yaw_fit):
         ("GPI", "held-out"),
     ]
     assert sum(n for _, n in t.group_header) == len(t.header) == 2 + 3 * len(ds)
-    assert [g for g, _ in t.group_header][1:] == ["yaw+", "yaw- (|input| -> |angle|)"]
+    assert [g for g, _ in t.group_header][1:] == ["yaw+", "yaw-"]
+    assert t.caption.endswith("yaw-: fitted as |input| -> |angle|.")
     for row, (model, split) in zip(
         t.rows,
         [

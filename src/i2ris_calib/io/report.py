@@ -280,6 +280,28 @@ def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, 
     return prov
 
 
+def _build_with_progress(run: RunData, report_config: Any, prov: dict[str, Any]):
+    """build_document with a transient rich progress bar on stderr (one step per section)."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from i2ris_calib.report.build import build_document, section_count
+
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("report", total=section_count(run))
+        started = []
+
+        def step(label: str) -> None:
+            if started:
+                bar.advance(task)
+            started.append(label)
+            bar.update(task, description=f"report: {label}")
+
+        doc = build_document(run, report_config, prov, progress=step)
+        bar.advance(task)
+    return doc
+
+
 def _template(name: str) -> str:
     return (
         resources.files("i2ris_calib.report")
@@ -326,7 +348,6 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     from i2ris_calib import __version__
     from i2ris_calib.io.atomic import atomic_dir
     from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.report.build import build_document
     from i2ris_calib.report.render import render_html, render_markdown
 
     root = Path(run_dir)
@@ -335,7 +356,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     _check_out(out_dir, root)
     run, inputs = load_run(root)
     prov = report_provenance(root, inputs, cfg)
-    doc = build_document(run, cfg.report, prov)
+    doc = _build_with_progress(run, cfg.report, prov)
     page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
     markdown, files = render_markdown(doc, FIGURE_DIR)
     with atomic_dir(out_dir) as tmp:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import pandas as pd
@@ -36,7 +36,10 @@ STAGE_INPUTS = (
 
 
 def build_document(
-    run: RunData, config: ReportConfig | None = None, provenance: Mapping[str, Any] | None = None
+    run: RunData,
+    config: ReportConfig | None = None,
+    provenance: Mapping[str, Any] | None = None,
+    progress: Callable[[str], None] | None = None,
 ) -> Document:
     """The whole report for one run.
 
@@ -48,26 +51,39 @@ def build_document(
         Figure settings; defaults when omitted.
     provenance : mapping, optional
         The report's own provenance block (version, config, input hashes).
+    progress : callable, optional
+        Called with a section title before each section is built (for a progress bar);
+        see :func:`section_count` for the number of calls.
     """
     cfg = config or ReportConfig()
-    sections = [
-        overview_section(run),
-        accuracy_section(run),
-        fit_figures_section(run, cfg),
-        parameters_section(run),
+    builders: list[tuple[str, Callable[[], Section]]] = [
+        ("overview", lambda: overview_section(run)),
+        ("accuracy tables", lambda: accuracy_section(run)),
+        ("Fig 6 figures", lambda: fit_figures_section(run, cfg)),
+        ("parameters", lambda: parameters_section(run)),
     ]
     if run.diagnoses:
-        sections.append(diagnosis_section(run.diagnoses))
-    sections += [
-        tracking_section(run, cfg),
-        sync_section(run, cfg),
-        provenance_section(run, provenance),
+        builders.append(("diagnosis", lambda: diagnosis_section(run.diagnoses)))
+    builders += [
+        ("tracking quality", lambda: tracking_section(run, cfg)),
+        ("clock sync", lambda: sync_section(run, cfg)),
+        ("provenance", lambda: provenance_section(run, provenance)),
     ]
+    sections = []
+    for label, build in builders:
+        if progress is not None:
+            progress(label)
+        sections.append(build())
     return Document(
         title=f"I2RIS calibration report: {run.name}",
         subtitle="GPI / EGPI hysteresis models (Yue et al.), tracking, clock sync and provenance",
         sections=tuple(sections),
     )
+
+
+def section_count(run: RunData) -> int:
+    """Number of top-level sections (= progress calls) :func:`build_document` makes."""
+    return 8 if run.diagnoses else 7
 
 
 def _missing(run: RunData, label: str) -> Note:

@@ -105,7 +105,7 @@ def _html_block(b: Block) -> str:
         w, h = png_size(b.png)
         return (
             f'<figure id="fig-{e(b.name)}"><img src="{data_uri(b.png)}" width="{w}" height="{h}" '
-            f'alt="{e(b.caption or b.name)}"><figcaption>{e(b.caption)}</figcaption></figure>'
+            f'alt="{e(_alt_text(b))}"><figcaption>{e(b.caption)}</figcaption></figure>'
         )
     if isinstance(b, Code):
         pre = f"<pre><code>{e(b.text)}</code></pre>"
@@ -242,7 +242,7 @@ def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
         return _md_table(b)
     if isinstance(b, Figure):
         path = _figure_file(b.name, b.png, fdir, files)
-        alt = _md_inline(b.caption or b.name).replace("[", "(").replace("]", ")")
+        alt = _md_inline(_alt_text(b)).replace("[", "(").replace("]", ")")
         return [f"![{alt}]({path})", "", f"_{_md_inline(b.caption)}_" if b.caption else ""]
     if isinstance(b, Code):
         fence = "```"
@@ -253,6 +253,12 @@ def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
     if isinstance(b, MarkdownFragment):
         return [fragment_markdown(b, fdir, files)]
     raise TypeError(f"unknown block {type(b).__name__}")
+
+
+def _alt_text(fig: Figure) -> str:
+    """Short alternative text: the caption up to its first colon (the figure's subject)."""
+    head = fig.caption.split(":", 1)[0].strip()
+    return head[:80] if head else fig.name
 
 
 def _md_text(text: str) -> str:

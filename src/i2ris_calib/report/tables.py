@@ -20,7 +20,7 @@ MODELS = (("egpi", "EGPI"), ("gpi", "GPI"))  # paper's row order
 METRIC_COLUMNS = (
     ("rmse_deg", "RMSE (deg)", 3),
     ("nrmse_pct", "NRMSE (%)", 2),
-    ("max_abs_err_deg", "MAE = max abs err (deg)", 3),
+    ("max_abs_err_deg", "MAE (deg)", 3),
 )
 TRACK_STATUSES = ("measured", "not_found", "ambiguous", "rejected")
 
@@ -68,7 +68,7 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
     groups: list[tuple[str, int]] = [("", 2)]
     for d in datasets:
         header += [label for _, label, _ in METRIC_COLUMNS]
-        groups.append((_dataset_label(d), len(METRIC_COLUMNS)))
+        groups.append((str(d.get("name", "dataset")), len(METRIC_COLUMNS)))
     rows = []
     for key, label in MODELS:
         if not any(key in d.get("models", {}) for d in datasets):
@@ -83,9 +83,15 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
         header=tuple(header),
         rows=tuple(rows),
         group_header=tuple(groups),
-        caption=f"{axis}: model accuracy per motion direction (MAE is the maximum absolute "
-        "error, as in the paper; held-out = samples not used for fitting).",
+        caption=f"{axis}: model accuracy per motion direction. MAE is the MAXIMUM absolute "
+        "error, as in the paper (Eq27); NRMSE is RMSE over the measured angle range; "
+        "held-out = samples not used for fitting." + _abs_note(datasets),
     )
+
+
+def _abs_note(datasets: list[dict[str, Any]]) -> str:
+    names = [str(d.get("name")) for d in datasets if d.get("abs_fitted")]
+    return f" {', '.join(names)}: fitted as |input| -> |angle|." if names else ""
 
 
 def _dataset_label(d: Mapping[str, Any]) -> str:

@@ -151,8 +151,8 @@ def as_signals(signals: Signals | np.ndarray) -> Signals:
     return signals if isinstance(signals, Signals) else Signals(v=np.asarray(signals, dtype=float))
 
 
-def _input(signals: Signals) -> np.ndarray:
-    v = np.ascontiguousarray(signals.v, dtype=float)
+def _input(signals: Signals | np.ndarray) -> np.ndarray:
+    v = np.ascontiguousarray(signals.v if isinstance(signals, Signals) else signals, dtype=float)
     if v.ndim != 1:
         raise ValueError("signals.v must be 1-D")
     return v

@@ -1,0 +1,89 @@
+"""Operator invariants (hypothesis): band, rate independence, wiping-out, monotonicity."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from i2ris_calib.hysteresis.kernel import family_outputs
+from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.presets import random_i2ris_egpi_params
+
+inputs = st.lists(st.integers(0, 6000), min_size=2, max_size=60).map(
+    lambda x: np.array(x, dtype=float)
+)
+seeds = st.integers(0, 2**31 - 1)
+SETTINGS = settings(max_examples=60, deadline=None)
+
+
+def _egpi(seed):
+    vals = random_i2ris_egpi_params(np.random.default_rng(seed))
+    return i2ris_egpi_model(deadband_counts=0.0, **vals)
+
+
+@SETTINGS
+@given(v=inputs, r=st.floats(0, 10), slope=st.floats(1e-3, 0.02), gap=st.floats(0, 5))
+def test_operator_stays_in_envelope_band(v, r, slope, gap):
+    """gamma_l(v) - r <= w <= gamma_r(v) + r at every sample when gamma_l <= gamma_r + 2r."""
+    gl, gr = slope * v, slope * v + gap
+    w = family_outputs(v, gl[None], gr[None], np.array([[r]]), np.array([[r]]), np.ones(1))[0]
+    assert np.all(w >= gl - r - 1e-9)
+    assert np.all(w <= gr + r + 1e-9)
+
+
+def _refine(v, rng, max_insert=3):
+    """Insert holds and intermediate points on each monotone step; return (v', kept index)."""
+    out, kept = [v[0]], [0]
+    for k in range(1, v.size):
+        for _ in range(rng.integers(0, max_insert + 1)):
+            out.append(out[-1])  # hold
+        lo, hi = v[k - 1], v[k]
+        for x in np.sort(rng.uniform(0, 1, rng.integers(0, max_insert + 1))):
+            out.append(lo + x * (hi - lo))  # monotone intermediate value
+        out.append(v[k])
+        kept.append(len(out) - 1)
+    return np.array(out), np.array(kept)
+
+
+@SETTINGS
+@given(v=inputs, seed=seeds)
+def test_rate_independence(v, seed):
+    """Holding the input or adding monotone intermediate samples does not change the
+    GPI/EGPI output at the original samples."""
+    rng = np.random.default_rng(seed)
+    fine, kept = _refine(v, rng)
+    for model in (gpi_model(), _egpi(seed)):
+        np.testing.assert_allclose(model(fine)[kept], model(v), atol=1e-9)
+
+
+@SETTINGS
+@given(h1=inputs, h2=inputs, tail=inputs, seed=seeds)
+def test_wiping_out(h1, h2, tail, seed):
+    """After a new maximum far above and then a new minimum far below every earlier
+    input, the output no longer depends on the earlier history (memory is wiped)."""
+    sweep = np.array([20000.0, -14000.0])
+    model = _egpi(seed)
+    y1 = model(np.concatenate((h1, sweep, tail)))[h1.size + 2 :]
+    y2 = model(np.concatenate((h2, sweep, tail)))[h2.size + 2 :]
+    np.testing.assert_allclose(y1, y2, atol=1e-9)
+
+
+@SETTINGS
+@given(v=inputs, seed=seeds)
+def test_monotone_on_a_monotone_branch(v, seed):
+    """With increasing envelopes and positive weights, a rising input never lowers
+    the GPI output and a falling one never raises it."""
+    model = gpi_model().with_values(
+        {
+            k: x
+            for k, x in random_i2ris_egpi_params(np.random.default_rng(seed)).items()
+            if k in gpi_model().names
+        }
+    )
+    up = np.concatenate((v, np.sort(np.random.default_rng(seed).uniform(v[-1], 6500, 30))))
+    y = model(up)[v.size - 1 :]
+    assert np.all(np.diff(y) >= -1e-9)
+    down = np.concatenate((v, -np.sort(-np.random.default_rng(seed).uniform(-500, v[-1], 30))))
+    y = model(down)[v.size - 1 :]
+    assert np.all(np.diff(y) <= 1e-9)

@@ -1,0 +1,142 @@
+"""Fitting against synthetic truth: recovery, masking, bad input, convergence flags."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import NOISE
+
+from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.config import FitConfig
+from i2ris_calib.fitting.fit import fit_model
+from i2ris_calib.fitting.initial import flag_point
+from i2ris_calib.fitting.pipeline import (
+    build_model,
+    direction_blocks,
+    fit_all,
+    fit_kind,
+    model_from_params,
+)
+from i2ris_calib.hysteresis.kernel import motion_direction
+from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
+
+
+def test_egpi_recovers_truth_to_noise_floor(egpi_data):
+    truth, v, theta = egpi_data
+    res = fit_kind("egpi", v, theta)
+    assert res.converged
+    assert res.holdout_metrics.n_samples > 300
+    assert res.holdout_metrics.rmse_deg <= 1.1 * NOISE  # tolerance: 10 % above the noise floor
+    assert res.metrics.rmse_deg <= 1.1 * NOISE
+    assert abs(res.params["v_f"] - truth["v_f"]) < 0.005 * 6000
+    # invariants of the lam scale gauge are recovered (kappa is scale free)
+    assert res.params["kappa"] == pytest.approx(truth["kappa"], rel=0.1)
+    assert res.params["a5"] / res.params["a1"] == pytest.approx(truth["a5"] / truth["a1"], rel=0.05)
+    # prediction on unseen input: the fitted model tracks the true model
+    _, v2 = loading_trajectory(np.random.default_rng(99), n_cycles=3, n_samples=2000)
+    err = res.predict(v2) - i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v2, truth)
+    assert np.sqrt(np.mean(err**2)) < 0.1
+
+
+def test_gpi_is_worse_on_two_stage_data(egpi_data):
+    _, v, theta = egpi_data
+    res = fit_all(v, theta)
+    assert res["gpi"].holdout_metrics.rmse_deg > 2 * res["egpi"].holdout_metrics.rmse_deg
+    assert res["gpi"].free == ("a1", "a2", "a3", "a4", "sigma", "r1", "rn")  # lam held (gauge)
+    assert res["gpi"].stderr["lam"] == 0.0
+    assert all(
+        math.isfinite(res["gpi"].stderr[k]) and res["gpi"].stderr[k] > 0 for k in res["gpi"].free
+    )
+    assert res["egpi"].aic < res["gpi"].aic and res["egpi"].bic < res["gpi"].bic
+
+
+def test_gpi_recovers_gpi_data(rng):
+    t = paper_like_params("pitch+")
+    _, v = loading_trajectory(rng, n_cycles=4, n_samples=1500)
+    theta = gpi_model().evaluate_dict(v, {k: t[k] for k in GPI_NAMES}) + rng.normal(0, 0.05, v.size)
+    res = fit_kind("gpi", v, theta)
+    assert res.converged and res.metrics.rmse_deg <= 1.1 * 0.05
+    cov = res.covariance
+    assert cov.shape == (8, 8) and np.allclose(cov, cov.T) and np.all(cov[4] == 0)
+
+
+def test_nan_angles_masked_not_dropped(egpi_data):
+    truth, v, theta = egpi_data
+    th = theta.copy()
+    th[200:260] = np.nan  # a tracking gap: the input sequence stays intact
+    model = i2ris_egpi_model(deadband_counts=2.0).with_fixed(fixed=("lam",))
+    res = fit_model(model, v, th, starts=[model.vector(truth)])
+    assert res.n_samples == v.size - 60
+    assert np.isnan(res.residuals[200:260]).all()
+    assert res.metrics.rmse_deg <= 1.1 * NOISE
+    assert model.value_dict() == i2ris_egpi_model(deadband_counts=2.0).value_dict()  # not mutated
+
+
+def test_bounded_trf_respects_bounds(egpi_data):
+    _, v, theta = egpi_data
+    model = gpi_model().with_fixed(fixed=("lam",)).with_bounds(r1=(0.0, 1.0), rn=(0.0, 6.0))
+    res = fit_model(model, v[:1500], theta[:1500], method="trf", max_nfev=50)
+    for p in res.model.parameters:
+        assert p.lower <= p.value <= p.upper
+
+
+def test_flag_point_from_data(egpi_data):
+    truth, v, theta = egpi_data
+    vf = flag_point(v, theta, motion_direction(v, 2.0))
+    assert vf is not None and abs(vf - truth["v_f"]) < 0.03 * 6000
+
+
+@pytest.mark.parametrize(
+    ("v", "theta", "match"),
+    [
+        (np.full(100, 5.0), np.linspace(0, 1, 100), "constant"),
+        (np.linspace(0, 100, 100), np.linspace(0, 1, 99), "angle has"),
+        (np.r_[np.linspace(0, 100, 99), np.nan], np.linspace(0, 1, 100), "NaN"),
+        (np.linspace(0, 100, 100), np.r_[np.full(95, np.nan), np.ones(5)], "usable samples"),
+    ],
+)
+def test_bad_input_one_line_errors(v, theta, match):
+    with pytest.raises(CalibError, match=match) as exc:
+        fit_model(gpi_model(), v, theta)
+    assert "\n" not in str(exc.value)
+
+
+def test_not_converged_is_flagged(egpi_data):
+    _, v, theta = egpi_data
+    res = fit_model(gpi_model().with_fixed(fixed=("lam",)), v, theta, max_nfev=2)
+    assert not res.converged and res.message
+
+
+def test_direction_blocks():
+    enc = np.r_[
+        np.zeros(10),
+        np.arange(1, 101),
+        np.zeros(30),
+        -np.arange(1, 81),
+        np.zeros(5),
+        np.arange(1, 61),
+    ]
+    blocks = {
+        b.direction: b
+        for b in direction_blocks(enc, FitConfig(zero_band_counts=0.0, min_block_samples=50))
+    }
+    assert set(blocks) == {"+", "-"}
+    assert blocks["+"].index.size == 160 and np.all(enc[blocks["+"].index] > 0)
+    assert blocks["-"].index.size == 80 and np.all(enc[blocks["-"].index] < 0)
+    assert direction_blocks(enc, FitConfig(min_block_samples=500)) == []
+
+
+def test_config_fixes_parameters(egpi_data):
+    _, v, theta = egpi_data
+    cfg = FitConfig(fixed_egpi=("lam", "kappa"), fit_flag_point=False, n_starts=1)
+    m = build_model("egpi", v, cfg)
+    assert {p.name for p in m.parameters if p.fixed} == {"lam", "kappa", "v_f"}
+    res = fit_kind("egpi", v, theta, cfg)
+    assert res.params["kappa"] == m.value_dict()["kappa"]
+    rebuilt = model_from_params("egpi", res.params, deadband_counts=cfg.deadband_counts)
+    np.testing.assert_allclose(rebuilt(v), res.predict(v))
+    with pytest.raises(ValueError, match="unknown"):
+        FitConfig(fixed_gpi=("kappa",)).validate()

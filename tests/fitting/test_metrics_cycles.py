@@ -1,0 +1,57 @@
+"""Eq25-27 and the held-out split by loading cycles."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
+from i2ris_calib.fitting.metrics import metrics
+from i2ris_calib.hysteresis.presets import loading_trajectory
+
+
+def test_metrics_by_hand():
+    theta = np.array([0.0, 10.0, 20.0, 40.0])
+    pred = np.array([1.0, 9.0, 23.0, 40.0])
+    m = metrics(theta, pred)
+    rmse = math.sqrt((1 + 1 + 9 + 0) / 4)
+    assert m.rmse_deg == pytest.approx(rmse)
+    assert m.nrmse_pct == pytest.approx(rmse / 40 * 100)
+    assert m.max_abs_err_deg == pytest.approx(3.0)  # MAXIMUM, not mean (Eq27)
+    assert m.n_samples == 4
+
+
+def test_metrics_nan_and_mask():
+    theta = np.array([0.0, np.nan, 2.0, 4.0])
+    pred = np.array([0.5, 100.0, 2.0, 3.0])
+    m = metrics(theta, pred, mask=np.array([True, True, True, False]))
+    assert m.n_samples == 2 and m.max_abs_err_deg == pytest.approx(0.5)
+    assert m.nrmse_pct == pytest.approx(math.sqrt(0.125) / 2 * 100)
+    empty = metrics(theta, pred, mask=np.zeros(4, bool))
+    assert empty.n_samples == 0 and math.isnan(empty.rmse_deg)
+    assert set(m.as_dict()) == {"rmse_deg", "nrmse_pct", "max_abs_err_deg"}
+
+
+@pytest.mark.parametrize("n_cycles", [1, 3, 6])
+def test_cycle_index_counts_cycles(rng, n_cycles):
+    _, v = loading_trajectory(rng, n_cycles=n_cycles, rate_hz=15.0)
+    cyc = cycle_index(v)
+    assert cyc.max() + 1 == n_cycles
+    assert np.all(np.diff(cyc) >= 0)
+    # each cycle starts at a minimum of the input
+    starts = np.flatnonzero(np.diff(cyc)) + 1
+    assert np.all(v[starts] == 0)
+
+
+def test_holdout_whole_cycles_never_first(rng):
+    _, v = loading_trajectory(rng, n_cycles=8, rate_hz=10.0)
+    cyc = cycle_index(v)
+    hold = holdout_mask(cyc, 0.25)
+    held = np.unique(cyc[hold])
+    assert held.size == 2 and 0 not in held
+    for c in held:  # whole cycles
+        assert hold[cyc == c].all()
+    assert not holdout_mask(np.zeros(50, int), 0.25).any()
+    assert not holdout_mask(cyc, 0.0).any()

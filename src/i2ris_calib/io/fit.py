@@ -267,7 +267,7 @@ def fit_files(
     fit_config = config.fit
     datasets = load_datasets(paths, axis, fit_config)
     console = Console(stderr=True)
-    with Progress(console=console, transient=True) as bar:
+    with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
         task = bar.add_task("fitting", total=len(datasets) * len(kinds))
 
         def step(label: str) -> None:

@@ -53,7 +53,8 @@ class FitResult:
     converged : bool
         Optimiser reported convergence (not the evaluation limit) with a finite cost.
     message : str
-        Optimiser message of the best start.
+        Optimiser message of the best start; names any free parameter that ended
+        outside its bounds (possible with the unbounded ``"lm"``).
     nfev : int
         Model evaluations in total (all starts, Jacobians, profile searches).
     n_samples : int
@@ -308,6 +309,13 @@ def _result(
         stderr[names[i]] = float("nan")
     converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)
     message = "profile search only" if res is None else str(res.message)
+    outside = [
+        p.name
+        for p, x in zip(model.parameters, full, strict=True)
+        if not p.fixed and not p.lower <= x <= p.upper
+    ]
+    if outside:
+        message += f" [outside bounds: {', '.join(outside)}; use method 'trf' for a bounded fit]"
     ln = n * np.log(rss / n) if rss > 0 else -np.inf
     return FitResult(
         model=fitted,
@@ -325,4 +333,5 @@ def _result(
         n_samples=n,
         free=tuple(names[i] for i in np.flatnonzero(is_free)),
         starts_tried=n_starts,
+        extra={"outside_bounds": outside},
     )

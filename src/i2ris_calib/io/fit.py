@@ -145,6 +145,7 @@ def model_record(res, kind: str, model) -> dict[str, Any]:
         "aic": res.aic,
         "bic": res.bic,
         "converged": res.converged,
+        "within_bounds": not res.extra.get("outside_bounds"),
         "message": res.message,
         "nfev": res.nfev,
         "n_samples": res.n_samples,

@@ -110,15 +110,28 @@ def first_order_lag(y, t, tau):
 
 @njit(cache=True)
 def held_speed(speed, threshold):
-    """Speed while moving, held at its last moving value while the input stops.
+    """Peak speed of the current movement, held while the input stops.
 
-    ``s[k] = speed[k]`` if ``speed[k] > threshold`` else ``s[k-1]`` (``s[-1] = 0``).
+    A movement is a run of samples with ``speed > threshold``; within it the
+    output is the running maximum of ``speed``; between movements it keeps the
+    last movement's peak (``0`` before the first).
+
+    Parameters
+    ----------
+    speed : ndarray, shape (n,)
+        Input speed (counts/s), >= 0.
+    threshold : float
+        Speed below which the input counts as stopped (counts/s).
     """
     n = speed.shape[0]
     out = np.empty(n)
-    prev = 0.0
+    cur = 0.0
+    moving = False
     for k in range(n):
         if speed[k] > threshold:
-            prev = speed[k]
-        out[k] = prev
+            cur = max(cur, speed[k]) if moving else speed[k]
+            moving = True
+        else:
+            moving = False
+        out[k] = cur
     return out

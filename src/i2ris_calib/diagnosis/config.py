@@ -37,6 +37,11 @@ class DiagnosisConfig:
         (0 = only the candidate's own values).
     global_max_nfev : int
         Evaluation cap of that global refit (its screening runs get a quarter).
+    n_finalists : int
+        Significant candidates refitted globally before the choice.
+    tie_rel : float
+        Finalists whose held-out RMSE is within this fraction of the best are
+        ranked by BIC instead.
     seed : int
         Seed of the random start variations of the global refit.
     """
@@ -53,6 +58,8 @@ class DiagnosisConfig:
     start_max_nfev: int = 60
     n_global_starts: int = 3
     global_max_nfev: int = 400
+    n_finalists: int = 2
+    tie_rel: float = 0.02
     seed: int = 0
 
     def validate(self) -> None:
@@ -74,6 +81,10 @@ class DiagnosisConfig:
             raise ValueError("min_delta_bic must be >= 0")
         if self.max_samples < 100:
             raise ValueError("max_samples must be >= 100")
+        if self.n_finalists < 1:
+            raise ValueError("n_finalists must be >= 1")
+        if not 0 <= self.tie_rel < 0.5:
+            raise ValueError("tie_rel must be in [0, 0.5)")
         if self.n_global_starts < 0:
             raise ValueError("n_global_starts must be >= 0")
         if min(self.max_nfev, self.start_max_nfev, self.profile_nfev, self.global_max_nfev) < 1:

@@ -233,9 +233,9 @@ class RateDependence(Effect):
     def half_width_counts(self, signals: Signals, p: np.ndarray) -> np.ndarray:
         """Backlash half-width ``h = gain_s * S`` (counts), shape (n,).
 
-        ``S`` is the input speed (5-sample moving average of |dv/dt|, counts/s)
-        while the input moves, held at its last moving value while the input
-        stops (below 5 % of the 95th-percentile speed).
+        ``S`` is the peak input speed of the current movement (running maximum
+        of the 5-sample moving average of |dv/dt|, counts/s), held while the
+        input stops (speed below 5 % of its 95th percentile).
         """
         from i2ris_calib.diagnosis._kernels import held_speed
 
@@ -272,11 +272,11 @@ class Creep(Effect):
             "gain",
             0.0,
             0.0,
-            0.9,
+            0.6,
             "1",
             "fraction of an output change that arrives slowly",
         ),
-        EffectParam("tau_s", 1.0, 0.01, 100.0, "s", "time constant of the slow part"),
+        EffectParam("tau_s", 1.0, 0.3, 100.0, "s", "time constant of the slow part (>= 0.3 s)"),
     )
     meaning: str = "visco-elastic creep of tendons and sheath while the input holds"
     needs: tuple[str, ...] = ("t_s",)
@@ -289,7 +289,7 @@ class Creep(Effect):
         return (1.0 - p[0]) * y + p[0] * first_order_lag(y, t, float(p[1]))
 
     def start_grid(self, signals, y_deg):
-        return [np.array([g, tau]) for g in (0.05, 0.15, 0.3) for tau in (0.2, 0.5, 1.0, 2.0, 5.0)]
+        return [np.array([g, tau]) for g in (0.05, 0.15, 0.3) for tau in (0.4, 0.8, 1.5, 3.0, 6.0)]
 
 
 @dataclass(frozen=True)

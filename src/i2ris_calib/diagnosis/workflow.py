@@ -366,6 +366,22 @@ def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> 
     )
 
 
+def _choose(passing: list[Candidate], d: _Data, cfg: DiagnosisConfig) -> Candidate:
+    """The winner among significant candidates, after a global refit of the best
+    ``n_finalists``: lowest held-out RMSE; within ``tie_rel`` of it, lowest BIC.
+
+    Candidates that mimic each other (a delay and a fast creep, say) reach
+    similar errors from a warm start; refitting the finalists globally before
+    choosing keeps the choice from depending on which local fit happened to
+    converge further.
+    """
+    ranked = sorted(passing, key=lambda c: c.metrics.holdout_rmse_deg)
+    finals = [_polished(c, d, cfg) for c in ranked[: cfg.n_finalists]]
+    top = min(c.metrics.holdout_rmse_deg for c in finals)
+    close = [c for c in finals if c.metrics.holdout_rmse_deg <= top * (1 + cfg.tie_rel)]
+    return min(close, key=lambda c: c.metrics.bic)
+
+
 def _polished(c: Candidate, d: _Data, cfg: DiagnosisConfig) -> Candidate:
     """The named candidate refitted globally: the fitting stage's multi-start fit
     (:func:`i2ris_calib.fitting.fit.fit_model`, bounded) from the candidate's
@@ -421,6 +437,26 @@ def holdout_for(v: np.ndarray, cfg: DiagnosisConfig | None = None) -> np.ndarray
 
     cfg = cfg or DiagnosisConfig()
     return holdout_mask(cycle_index(np.asarray(v, float)), cfg.holdout_fraction)
+
+
+def fit_start_model(
+    kind: str,
+    signals: Signals,
+    theta_deg: np.ndarray,
+    config: DiagnosisConfig | None = None,
+    fit_config=None,
+) -> Model:
+    """Starting model ``"gpi"`` or ``"egpi"`` fitted by the fitting stage
+    (:func:`i2ris_calib.fitting.pipeline.fit_kind`, multi-start LM) on the samples
+    that the diagnosis does not hold out."""
+    from i2ris_calib.fitting.config import FitConfig
+    from i2ris_calib.fitting.pipeline import fit_kind
+
+    if kind not in ("gpi", "egpi"):
+        raise CalibError(f"starting model must be gpi or egpi, got '{kind}'")
+    hold = holdout_for(signals.v, config)
+    with single_threaded_blas():
+        return fit_kind(kind, signals, theta_deg, fit_config or FitConfig(), holdout=hold).model
 
 
 def _search_data(
@@ -570,8 +606,7 @@ def _diagnose(start, signals, theta_deg, cfg, progress) -> Diagnosis:
             if not passing:
                 current, cur_m = ref
                 continue
-            best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
-        best = _polished(best, d, cfg)
+        best = _choose(passing, d, cfg)
         steps.append(
             Step(
                 effect=best.effect,

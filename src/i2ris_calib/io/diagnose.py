@@ -93,20 +93,6 @@ def read_synced(path: Path, axis: str) -> tuple[Signals, np.ndarray, bool]:
     return sig, theta, abs_input
 
 
-def start_model(
-    kind: str, signals: Signals, theta_deg: np.ndarray, holdout: np.ndarray, fit_config=None
-) -> Model:
-    """Starting model ``kind`` (gpi/egpi) fitted by the fitting stage on the samples
-    that are not held out (:func:`i2ris_calib.fitting.pipeline.fit_kind`)."""
-    if kind not in STARTS:
-        raise CalibError(f"--start must be gpi or egpi, got '{kind}'")
-    from i2ris_calib.fitting.config import FitConfig
-    from i2ris_calib.fitting.pipeline import fit_kind
-
-    res = fit_kind(kind, signals, theta_deg, fit_config or FitConfig(), holdout=holdout)
-    return res.model
-
-
 def _figure(model: Model, signals: Signals, theta: np.ndarray, holdout: np.ndarray, title: str):
     """Residual figure (2x2): vs time, vs input per branch, vs rate, loop."""
     import matplotlib
@@ -169,7 +155,7 @@ def diagnose_file(
     from i2ris_calib.config import PipelineConfig
     from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record
     from i2ris_calib.diagnosis.serialize import model_to_dict
-    from i2ris_calib.diagnosis.workflow import diagnose, holdout_for, single_threaded_blas
+    from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model, single_threaded_blas
     from i2ris_calib.io.atomic import atomic_dir, write_json, write_text
     from i2ris_calib.io.provenance import provenance
 
@@ -180,8 +166,7 @@ def diagnose_file(
     signals, theta, abs_input = read_synced(Path(data), axis)
     with Progress(transient=True) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {axis}: fitting {start}", total=None)
-        holdout = holdout_for(signals.v, cfg.diagnose)
-        base = start_model(start, signals, theta, holdout, cfg.fit)
+        base = fit_start_model(start, signals, theta, cfg.diagnose, cfg.fit)
         diag = diagnose(
             base,
             signals,

@@ -1,0 +1,138 @@
+"""Synthetic diagnosis cases with known truth: EGPI data with one hidden effect.
+
+Used by the tests (``tests/diagnosis``) and the benchmark
+(``benchmarks/bench_diagnosis.py``). The input is a loading trajectory like the
+I2RIS recordings (ramps out and back with pauses) but with strokes at several
+speeds, so rate effects are identifiable; the other axis moves slowly and
+independently so coupling is identifiable.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from i2ris_calib.diagnosis.effects import build_model, model_values
+from i2ris_calib.hysteresis.model import Model, Signals
+
+#: Hidden-effect parameter sets per effect, weakest first (input 0..6000 counts,
+#: angle ~0..37 deg, speeds 300-2000 counts/s).
+STRENGTHS: dict[str, tuple[dict[str, float], ...]] = {
+    "multi_stage_backlash": (
+        {"v_flag_counts": 2500.0, "width_counts": 300.0},
+        {"v_flag_counts": 3000.0, "width_counts": 450.0},
+        {"v_flag_counts": 2000.0, "width_counts": 600.0},
+    ),
+    "axis_coupling": ({"gain_angle": 0.05}, {"gain_angle": 0.1}, {"gain_angle": -0.15}),
+    "time_delay": ({"tau_s": 0.06}, {"tau_s": 0.12}, {"tau_s": 0.25}),
+    "rate_dependence": ({"gain_s": 0.06}, {"gain_s": 0.12}, {"gain_s": 0.25}),
+    "creep": (
+        {"gain": 0.1, "tau_s": 0.7},
+        {"gain": 0.2, "tau_s": 1.0},
+        {"gain": 0.3, "tau_s": 1.5},
+    ),
+    "dead_zone": ({"width_counts": 200.0}, {"width_counts": 350.0}, {"width_counts": 550.0}),
+    "saturation": (
+        {"knee_deg": 28.0, "limit_deg": 6.0},
+        {"knee_deg": 25.0, "limit_deg": 5.0},
+        {"knee_deg": 22.0, "limit_deg": 4.0},
+    ),
+}
+
+
+def excitation(
+    rng: np.random.Generator,
+    n_cycles: int = 8,
+    v_max_counts: float = 6000.0,
+    rate_hz: float = 30.0,
+    speeds_counts_s: tuple[float, ...] = (300.0, 800.0, 2000.0),
+    pause_s: float = 1.5,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ramps out and back with pauses; amplitude and speed vary per cycle.
+
+    The first and last cycles go to full scale; other amplitudes are
+    U(0.4, 1) of full scale; each cycle's speed is drawn from
+    ``speeds_counts_s``. Values are whole counts.
+
+    Returns
+    -------
+    t_s : ndarray, shape (n,)
+        Times (s) at ``rate_hz``.
+    v : ndarray, shape (n,)
+        Input (counts), >= 0.
+    """
+    kt, kv = [0.0], [0.0]
+    for i in range(n_cycles):
+        a = 1.0 if i in (0, n_cycles - 1) else rng.uniform(0.4, 1.0)
+        speed = float(speeds_counts_s[i % len(speeds_counts_s)] * rng.uniform(0.9, 1.1))
+        top = a * v_max_counts
+        for dt, val in ((pause_s, 0.0), (top / speed, top), (pause_s, top), (top / speed, 0.0)):
+            kt.append(kt[-1] + dt)
+            kv.append(val)
+    kt.append(kt[-1] + pause_s)
+    kv.append(0.0)
+    t = np.arange(0.0, kt[-1], 1.0 / rate_hz)
+    return t, np.round(np.interp(t, kt, kv))
+
+
+@dataclass(frozen=True)
+class Case:
+    """One synthetic data set.
+
+    Attributes
+    ----------
+    signals : Signals
+        ``v``, ``t_s``, and the other axis's ``v_other`` and measured
+        ``theta_other_deg``.
+    theta_deg : ndarray, shape (n,)
+        Measured angle of this axis (truth + white noise).
+    truth : Model
+        Truth model (EGPI, wrapped by the hidden effect if any).
+    effect : str or None
+        Hidden effect name (None for a clean case).
+    noise_deg : float
+        Noise standard deviation (deg).
+    """
+
+    signals: Signals
+    theta_deg: np.ndarray
+    truth: Model
+    effect: str | None
+    noise_deg: float
+
+
+def make_case(
+    seed: int,
+    effect: str | None = None,
+    params: dict[str, float] | None = None,
+    noise_deg: float = 0.2,
+    n_cycles: int = 8,
+) -> Case:
+    """A case: EGPI (``paper_like_params("yaw+")``) + optional hidden effect + noise.
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the trajectory and the noise.
+    effect : str, optional
+        Catalogue name of the hidden effect.
+    params : dict, optional
+        Its parameter values (default: the middle entry of :data:`STRENGTHS`).
+    noise_deg : float
+        White measurement noise (deg) on both axes.
+    """
+    from i2ris_calib.hysteresis.models import i2ris_egpi_model
+    from i2ris_calib.hysteresis.presets import paper_like_params
+
+    rng = np.random.default_rng(seed)
+    t, v = excitation(rng, n_cycles=n_cycles)
+    v_other = np.round(3000.0 + 2800.0 * np.sin(2 * np.pi * t / 37.0 + rng.uniform(0, 2 * np.pi)))
+    other = i2ris_egpi_model(**paper_like_params("pitch+"))
+    th_other = other(v_other) + rng.normal(0.0, noise_deg, t.size)
+    base = i2ris_egpi_model(**paper_like_params("yaw+"))
+    effects = {} if effect is None else {effect: params or STRENGTHS[effect][1]}
+    truth = build_model(base, effects)
+    sig = Signals(v=v, t_s=t, v_other=v_other, theta_other_deg=th_other)
+    theta = truth.evaluate(sig, model_values(truth)) + rng.normal(0.0, noise_deg, t.size)
+    return Case(sig, theta, truth, effect, noise_deg)

@@ -1,0 +1,173 @@
+"""Effect catalogue: neutral values, hand-checked transforms, build_model errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
+from i2ris_calib.diagnosis.effects import (
+    CATALOGUE,
+    add_effect,
+    base_of,
+    build_model,
+    effects_of,
+    model_values,
+)
+from i2ris_calib.diagnosis.synthetic import excitation
+from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.model import Model, Signals
+
+
+def _signals(seed: int = 0) -> Signals:
+    rng = np.random.default_rng(seed)
+    t, v = excitation(rng, n_cycles=3, rate_hz=20.0)
+    return Signals(
+        v=v, t_s=t, v_other=np.linspace(0, 3000, t.size), theta_other_deg=np.linspace(0, 20, t.size)
+    )
+
+
+@pytest.mark.parametrize("name", list(CATALOGUE))
+def test_neutral_effect_leaves_the_model_unchanged(name, egpi):
+    sig = _signals()
+    ext = add_effect(egpi, name)
+    assert isinstance(ext, Model)
+    y0 = egpi.evaluate(sig, model_values(egpi))
+    y1 = ext.evaluate(sig, model_values(ext))
+    np.testing.assert_allclose(y1, y0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(CATALOGUE))
+def test_parameters_are_declared_and_prefixed(name, egpi):
+    ext = add_effect(egpi, name)
+    own = ext.parameters[len(egpi.parameters) :]
+    assert [p.name for p in own] == [f"{name}.{p.name}" for p in CATALOGUE[name].params]
+    for p in own:
+        assert p.lower <= p.value <= p.upper and p.unit and p.doc
+    assert CATALOGUE[name].meaning
+
+
+def test_with_values_round_trip_and_stacking(egpi):
+    m = build_model(egpi, {"time_delay": {"tau_s": 0.1}, "creep": {"gain": 0.2, "tau_s": 1.0}})
+    assert [e[0] for e in effects_of(m)] == ["time_delay", "creep"]
+    assert base_of(m) is egpi
+    x = model_values(m)
+    x[-1] = 2.0
+    m2 = m.with_values(x)
+    assert effects_of(m2)[-1][2] == {"gain": 0.2, "tau_s": 2.0}
+    assert effects_of(m)[-1][2]["tau_s"] == 1.0  # original unchanged
+    twice = add_effect(add_effect(egpi, "dead_zone", {"width_counts": 10.0}), "dead_zone")
+    assert twice.parameters[-1].name == "dead_zone_2.width_counts"
+
+
+def test_build_model_rejects_bad_names_and_values(egpi):
+    with pytest.raises(CalibError, match="did you mean 'time_delay'"):
+        build_model(egpi, {"time_delya": {}})
+    with pytest.raises(CalibError, match="did you mean 'tau_s'"):
+        build_model(egpi, {"time_delay": {"tau": 0.1}})
+    with pytest.raises(CalibError, match="outside"):
+        build_model(egpi, {"time_delay": {"tau_s": -1.0}})
+    assert build_model(egpi, {}) is egpi
+
+
+def test_play_operator_by_hand():
+    v = np.array([0.0, 1, 2, 3, 2, 1, 0])
+    u = play_varying(v, np.ones(7))
+    np.testing.assert_array_equal(u, [0, 0, 1, 2, 2, 2, 1])
+
+
+def test_staged_backlash_by_hand():
+    # falls from 10 to 0 then rises back; stage flag at 6, slack 2
+    v = np.array([10.0, 8, 6, 5, 4, 3, 2, 0, 1, 2, 3, 5])
+    u = staged_backlash(v, 6.0, 2.0)
+    # above the flag u = v; the first 2 counts below it are slack (u holds at 6);
+    # then u = v + 2; the rise pays the slack back first (u holds at 2)
+    np.testing.assert_array_equal(u, [10, 8, 6, 6, 6, 5, 4, 2, 2, 2, 3, 5])
+
+
+def test_time_delay_shifts_the_input(linear):
+    t = np.arange(0, 5, 0.01)
+    v = 100.0 * t
+    m = build_model(linear, {"time_delay": {"tau_s": 0.25}})
+    y = m.evaluate(Signals(v=v, t_s=t), model_values(m))
+    late = t >= 0.25
+    np.testing.assert_allclose(y[late], 0.01 * 100.0 * (t[late] - 0.25), atol=1e-9)
+
+
+def test_creep_relaxes_exponentially_after_a_step(linear):
+    t = np.arange(0, 10, 0.05)
+    v = np.where(t >= 1.0, 1000.0, 0.0)
+    m = build_model(linear, {"creep": {"gain": 0.3, "tau_s": 2.0}})
+    y = m.evaluate(Signals(v=v, t_s=t), model_values(m))
+    k = t >= 1.0
+    # a sample's value is held over the interval before it (zero-order hold), so
+    # the step acts from the previous sample time, t = 0.95 s
+    expected = 10.0 * (1 - 0.3 * np.exp(-(t[k] - 0.95) / 2.0))
+    np.testing.assert_allclose(y[k], expected, rtol=1e-9)
+
+
+def test_first_order_lag_handles_uneven_sampling():
+    t = np.array([0.0, 0.5, 0.6, 2.0])
+    x = first_order_lag(np.array([0.0, 1.0, 1.0, 1.0]), t, 1.0)
+    # input 1 held from t = 0 on: x = 1 - exp(-t) exactly, whatever the spacing
+    np.testing.assert_allclose(x[1:], 1 - np.exp(-t[1:]), rtol=1e-12)
+
+
+def test_saturation_flattens_only_beyond_the_knee(linear):
+    v = np.linspace(-5000, 5000, 1001)
+    m = build_model(linear, {"saturation": {"knee_deg": 30.0, "limit_deg": 5.0}})
+    y = m.evaluate(Signals(v=v), model_values(m))
+    inside = np.abs(0.01 * v) <= 30.0
+    np.testing.assert_allclose(y[inside], 0.01 * v[inside])
+    assert np.all(np.abs(y) < 35.0) and np.all(np.diff(y) > 0)
+    np.testing.assert_allclose(y, -y[::-1])
+
+
+def test_dead_zone_holds_output_after_a_reversal(linear):
+    v = np.concatenate([np.arange(0, 1001, 10.0), np.arange(990, 0, -10.0)])
+    m = build_model(linear, {"dead_zone": {"width_counts": 200.0}})
+    y = m.evaluate(Signals(v=v), model_values(m))
+    top = int(np.argmax(v))
+    # after the reversal the input travels 200 counts before the output moves
+    held = (v[top:] >= 800.0) & (np.arange(v.size)[top:] >= top)
+    assert np.ptp(y[top:][held]) == 0.0
+    assert y[top:][v[top:] < 790.0].max() < y[top]
+
+
+def test_rate_dependence_width_follows_speed_and_holds_in_pauses(linear):
+    t = np.arange(0, 12, 0.01)
+    knots_t = [0, 1, 3, 5, 6, 12]
+    knots_v = [0, 0, 1000, 1000, 3000, 3000]  # 500 counts/s, pause, 2000 counts/s, pause
+    v = np.interp(t, knots_t, knots_v)
+    eff = CATALOGUE["rate_dependence"]
+    h = eff.half_width_counts(Signals(v=v, t_s=t), np.array([0.1]))
+    mid_slow = (t > 1.5) & (t < 2.5)
+    mid_fast = (t > 5.3) & (t < 5.7)
+    np.testing.assert_allclose(h[mid_slow], 50.0, rtol=1e-6)
+    np.testing.assert_allclose(h[mid_fast], 200.0, rtol=1e-6)
+    np.testing.assert_allclose(h[(t > 7) & (t < 12)], h[(t > 5.5) & (t < 5.7)].mean(), rtol=0.05)
+
+
+def test_axis_coupling_adds_the_other_angle(linear):
+    sig = _signals()
+    m = build_model(
+        linear, {"axis_coupling": {"gain_angle": 0.2, "gain_input_deg_per_count": 1e-3}}
+    )
+    y = m.evaluate(sig, model_values(m))
+    np.testing.assert_allclose(y, 0.01 * sig.v + 0.2 * sig.theta_other_deg + 1e-3 * sig.v_other)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.lists(st.floats(-1e3, 1e3), min_size=2, max_size=60),
+    st.floats(0.0, 200.0),
+)
+def test_play_output_stays_within_the_band(vals, h):
+    v = np.array(vals)
+    u = play_varying(v, np.full(v.size, h))
+    assert np.all(u >= v - h - 1e-9) and np.all(u <= v + h + 1e-9)
+    # the output only moves when the input pushes it to the band's edge
+    moved = np.flatnonzero(np.diff(u) != 0) + 1
+    assert np.allclose(np.abs(u[moved] - v[moved]), h)

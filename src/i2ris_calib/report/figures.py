@@ -284,5 +284,8 @@ def synced_figure_png(synced: pd.DataFrame, dpi: int = 100, max_points: int = 20
             ylabel=f"{axis} angle (deg)",
             title=f"{axis}: tracked angle vs encoder",
         )
+        enc = synced[f"enc_{axis}"].to_numpy(dtype=float)
+        if enc.size and np.nanmax(enc) - np.nanmin(enc) < 1:
+            ax.text(0.5, 0.8, f"{axis} encoder did not move", ha="center", transform=ax.transAxes)
         ax.grid(True, lw=0.4, alpha=0.5)
     return figure_png(fig, dpi)

@@ -226,21 +226,25 @@ def predictions_frame(fitted) -> pd.DataFrame:
 
 
 def results_table(fitted, kinds: Sequence[str], axis: str):
-    """A rich Table shaped like the paper's Tables 1-2 (fitted and held-out rows)."""
+    """A rich Table shaped like the paper's Tables 1-2: one row per model (fitted
+    cycles and held-out cycles), RMSE / NRMSE / MAE (= max |error|) per dataset."""
     from rich.table import Table
 
-    table = Table(title=f"Quantitative performance of EGPI and GPI, {axis} motor (deg, %)")
-    table.add_column("model")
+    absd = [d.name for d, _, _ in fitted if d.abs_fitted]
+    table = Table(
+        title=f"EGPI and GPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %",
+        caption=f"{', '.join(absd)}: fitted on |counts| -> |deg|" if absd else None,
+    )
+    table.add_column("model", no_wrap=True)
     for d, _, _ in fitted:
-        tag = f"{d.name}" + (" |abs|" if d.abs_fitted else "")
         for m in ("RMSE", "NRMSE", "MAE"):
-            table.add_column(f"{tag} {m}", justify="right")
+            table.add_column(f"{d.name}\n{m}", justify="right", no_wrap=True)
     for kind in [k for k in ("egpi", "gpi") if k in kinds]:
-        for label, attr in (("fit", "metrics"), ("held-out", "holdout_metrics")):
-            row = [f"{kind.upper()} ({label})"]
+        for label, attr in (("fit", "metrics"), ("hold", "holdout_metrics")):
+            row = [f"{kind.upper()} {label}"]
             for _, _, results in fitted:
                 mt = getattr(results[kind], attr)
-                row += [f"{mt.rmse_deg:.2f}", f"{mt.nrmse_pct:.2f}%", f"{mt.max_abs_err_deg:.2f}"]
+                row += [f"{mt.rmse_deg:.2f}", f"{mt.nrmse_pct:.2f}", f"{mt.max_abs_err_deg:.2f}"]
             if not results[kind].converged:
                 row[0] += " *"
             table.add_row(*[r.replace("nan", "-") for r in row])

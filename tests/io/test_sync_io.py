@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from i2ris_calib.cli import main
 from i2ris_calib.sync.synthetic import make_sync_case
@@ -95,6 +96,7 @@ def test_xcorr_method_and_custom_out(tmp_path, capsys):
     assert js["method"] == "xcorr" and "biased" in js["evidence"]["note"]
 
 
+@pytest.mark.slow  # ~10 s; the core test covers the accuracy by default
 def test_auto_without_flash_uses_model(tmp_path, capsys):
     case = _case(backlash_deg=6.0)
     s = write_session(tmp_path / "s", case)

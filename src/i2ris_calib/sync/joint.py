@@ -97,17 +97,21 @@ def model_blocks(
 class OffsetProfile:
     """Residual sum of squares of the hysteresis fits as a function of the offset.
 
-    Each evaluation refits every block, warm-started from the fits at the nearest
-    offsets evaluated so far (the first one uses the fitter's data-driven multi-start).
-    Results are cached by offset.
+    Each evaluation refits every block. Starts: the fits at the two nearest offsets
+    evaluated so far and the best fit found anywhere (warm starts), plus, while
+    ``cold`` is True (the coarse scan), the fitter's own data-driven multi-start; the
+    lowest residual wins. A warm-start chain alone can stay in a poor local minimum
+    found far from the true offset. Results are cached by offset.
     """
 
-    def __init__(self, blocks, log, t_c_s, drift_ppm, kind, fit_config):
+    def __init__(self, blocks, log, t_c_s, drift_ppm, kind, fit_config, seeds=None):
         self.blocks, self.log, self.t_c, self.drift = blocks, log, t_c_s, drift_ppm
         self.kind, self.fit_config = kind, fit_config
         self.cache: dict[float, tuple[float, list]] = {}
         self.n_samples = sum(int(np.isfinite(b.theta_deg).sum()) for b in blocks)
         self.n_params = 0
+        self.cold = seeds is None
+        self.seeds = seeds  # per-block parameter vectors to try as starts
 
     def inputs(self, block: Block, offset_c_s: float, drift_ppm: float | None = None) -> np.ndarray:
         """Encoder input (counts, sign applied) of ``block`` at a candidate clock."""
@@ -126,20 +130,39 @@ class OffsetProfile:
         self(offset_c_s)
         return self.cache[round(float(offset_c_s), 9)][1]
 
+    def best_params(self) -> list:
+        """Per-block parameter vectors of the lowest-RSS evaluation (or the seeds)."""
+        if not self.cache:
+            return self.seeds
+        k = min(self.cache, key=lambda x: self.cache[x][0])
+        return [r.model.values for r in self.cache[k][1]]
+
+    def _starts(self, i: int, offset_c_s: float) -> list:
+        near = sorted(self.cache, key=lambda k: abs(k - offset_c_s))[:2]
+        starts = [self.cache[k][1][i].model.values for k in near]
+        best = self.best_params()
+        if best is not None:
+            starts.append(best[i])
+        return starts
+
     def _fit(self, offset_c_s: float) -> tuple[float, list]:
         from i2ris_calib.fitting.fit import fit_model
         from i2ris_calib.fitting.pipeline import build_model, fit_kind
 
-        near = sorted(self.cache, key=lambda k: abs(k - offset_c_s))[:2]
         total, results = 0.0, []
         for i, b in enumerate(self.blocks):
             v = self.inputs(b, offset_c_s)
-            if not near:
-                res = fit_kind(self.kind, v, b.theta_deg, self.fit_config, np.zeros(v.size, bool))
-            else:
-                starts = [self.cache[k][1][i].model.values for k in near]
+            candidates = []
+            starts = self._starts(i, offset_c_s)
+            if starts:
                 model = build_model(self.kind, v, self.fit_config)
-                res = fit_model(model, v, b.theta_deg, starts=starts, method=self.fit_config.method)
+                candidates.append(
+                    fit_model(model, v, b.theta_deg, starts=starts, method=self.fit_config.method)
+                )
+            if self.cold or not starts:
+                hold = np.zeros(v.size, bool)
+                candidates.append(fit_kind(self.kind, v, b.theta_deg, self.fit_config, hold))
+            res = min(candidates, key=lambda r: float(np.nansum(r.residuals**2)))
             total += float(np.nansum(res.residuals**2))
             results.append(res)
         self.n_params = sum(len(r.free) for r in results)
@@ -152,18 +175,21 @@ class OffsetProfile:
 
 
 def scan_profile(profile: OffsetProfile, centre: float, halfwidth: float, step: float) -> float:
-    """Best grid offset, extending the grid (up to 4 times) while the minimum is at an end."""
-    lo, hi = centre - halfwidth, centre + halfwidth
+    """Best offset of a grid (step ``step``) around ``centre``, evaluated from the centre
+    outwards; extended by ``halfwidth`` (up to 4 times) while the minimum is at an end."""
+    n = int(round(halfwidth / step))
+    lo, hi = -n, n  # grid indices: offset = centre + i * step
     for _ in range(5):
-        grid = np.arange(lo, hi + step / 2, step)
-        vals = np.array([profile(o) for o in grid])
-        k = int(np.argmin(vals))
-        if 0 < k < grid.size - 1:
-            return float(grid[k])
-        if k == 0:
-            lo, hi = lo - halfwidth, lo
+        for i in sorted(range(lo, hi + 1), key=abs):
+            profile(centre + i * step)
+        vals = {i: profile(centre + i * step) for i in range(lo, hi + 1)}
+        k = min(vals, key=vals.get)
+        if lo < k < hi:
+            return float(centre + k * step)
+        if k == lo:
+            lo -= n
         else:
-            lo, hi = hi, hi + halfwidth
+            hi += n
     raise CalibError(
         "sync (model): the offset profile has no minimum within "
         f"{5 * halfwidth:.2f} s of the cross-correlation offset (is the encoder channel of "
@@ -296,13 +322,16 @@ def clock_from_model(
     profile = OffsetProfile(blocks, log, t_c, 0.0, cfg.model, fit_config)
     step = cfg.profile_step_s
     best = scan_profile(profile, o_x, cfg.profile_halfwidth_s, step)
+    profile.cold = False  # refinement: warm starts only
     best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     drift, drift_sd = 0.0, float("nan")
     if cfg.estimate_drift:
-        o_gn, drift, cov = drift_gauss_newton(profile, best, 0.0)
-        drift_sd = float(np.sqrt(cov[1, 1]))
-        profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config)
-        best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
+        for _ in range(2):  # drift with the models fixed, then the offset refitted at it
+            _, drift, cov = drift_gauss_newton(profile, best, drift)
+            drift_sd = float(np.sqrt(cov[1, 1]))
+            seeds = profile.best_params()
+            profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
+            best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     sd_c = profile_stderr(profile, best, 1.5 * step)
     offset0 = best - drift * PPM * t_c  # offset at camera time 0 (t_ctrl - t_cam)
     var_d = drift_sd**2 if np.isfinite(drift_sd) else 0.0

@@ -60,6 +60,9 @@ def run_case(effect, params, noise, seed) -> dict:
     dt = time.perf_counter() - t0
     named = diag.named_effects
     shrink = 1.0 - diag.final.holdout_rmse_deg / diag.baseline.holdout_rmse_deg
+    # the systematic part of the held-out error, sqrt(RMSE^2 - noise^2)
+    sys_b = np.sqrt(max(diag.baseline.holdout_rmse_deg**2 - noise**2, 0.0))
+    sys_f = np.sqrt(max(diag.final.holdout_rmse_deg**2 - noise**2, 0.0))
     return {
         "effect": effect or "clean",
         "params": params or {},
@@ -69,6 +72,7 @@ def run_case(effect, params, noise, seed) -> dict:
         "baseline_holdout_deg": diag.baseline.holdout_rmse_deg,
         "final_holdout_deg": diag.final.holdout_rmse_deg,
         "shrink": shrink,
+        "sys_shrink": 1.0 - sys_f / sys_b if sys_b > 0 else float("nan"),
         "seconds": dt,
     }
 
@@ -108,18 +112,37 @@ def main() -> None:
     only = sum(r["named"] == [r["effect"]] for r in hidden)
     none = sum(not r["named"] for r in clean)
     shrink = np.array([r["shrink"] for r in hidden])
+    sys_shrink = np.array([r["sys_shrink"] for r in hidden])
     secs = np.array([r["seconds"] for r in rows])
     print()
     print(confusion(rows))
     print()
-    print(f"right effect named first : {right}/{len(hidden)} = {100 * right / len(hidden):.1f}% (target >= 90%)")
+    print(
+        f"right effect named first : {right}/{len(hidden)} = {100 * right / len(hidden):.1f}% (target >= 90%)"
+    )
     print(f"exactly the right effect : {only}/{len(hidden)} = {100 * only / len(hidden):.1f}%")
-    print(f"clean: nothing named     : {none}/{len(clean)} = {100 * none / len(clean):.1f}% (target >= 95%)")
+    print(
+        f"clean: nothing named     : {none}/{len(clean)} = {100 * none / len(clean):.1f}% (target >= 95%)"
+    )
     print(
         f"held-out RMSE shrink     : median {100 * np.median(shrink):.1f}%, min {100 * shrink.min():.1f}%,"
         f" cases >= 50%: {int((shrink >= 0.5).sum())}/{shrink.size} (target >= 50%)"
     )
-    print(f"time per case (start fit + diagnosis): median {np.median(secs):.1f} s, max {secs.max():.1f} s")
+    print(
+        f"systematic part shrink   : median {100 * np.nanmedian(sys_shrink):.1f}%, min {100 * np.nanmin(sys_shrink):.1f}%,"
+        f" cases >= 50%: {int((sys_shrink >= 0.5).sum())}/{sys_shrink.size}  [sqrt(RMSE^2 - noise^2)]"
+    )
+    for name in CATALOGUE:
+        sel = [r for r in hidden if r["effect"] == name]
+        if sel:
+            print(
+                f"  {name:<21} first right {sum(r['first'] == name for r in sel)}/{len(sel)},"
+                f" shrink median {100 * np.median([r['shrink'] for r in sel]):.0f}%,"
+                f" systematic {100 * np.nanmedian([r['sys_shrink'] for r in sel]):.0f}%"
+            )
+    print(
+        f"time per case (start fit + diagnosis): median {np.median(secs):.1f} s, max {secs.max():.1f} s"
+    )
 
 
 if __name__ == "__main__":

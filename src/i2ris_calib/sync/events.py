@@ -332,20 +332,23 @@ def _pairs_for_offset(cam, log, offset_s, drift_ppm, tol):
 
 
 def edge_log_likelihood(
-    cam: Edge, log: Edge, offset_c_s: np.ndarray, drift_ppm: np.ndarray, t_c_s: float
+    cams: list[Edge], log: Edge, offset_c_s: np.ndarray, drift_ppm: np.ndarray, t_c_s: float
 ) -> np.ndarray:
-    """Log-likelihood of one matched edge's frame brightnesses on a grid of clocks.
+    """Log-likelihood of one logged edge's camera observations on a grid of clocks.
 
     For each clock (offset at camera time ``t_c_s``, drift) the logged edge time,
     uniform in ``[log.t_lo_s, log.t_hi_s]``, maps to an interval of camera edge times
-    ``u``; the frames' lit fractions predicted by :func:`lit_fraction` are compared
-    with the observed ones (Gaussian, sd ``cam.frac_sd``) and the likelihood is
-    averaged over that interval exactly, through the cumulative integral of the
-    likelihood on a fine ``u`` grid. Flat stretches (an edge between two exposures)
-    stay flat: the constraint is a hard interval, softened only by the noise.
+    ``u`` (one camera clock: the same ``u`` for every camera that saw the edge). The
+    frames' lit fractions predicted by :func:`lit_fraction` are compared with the
+    observed ones (Gaussian, sd ``frac_sd``) for all ``cams`` together, and the
+    likelihood is averaged over that interval exactly, through its cumulative integral
+    on a fine ``u`` grid. Flat stretches (an edge between two exposures) stay flat:
+    the constraint is a hard interval, softened only by the noise.
 
     Parameters
     ----------
+    cams : list of Edge
+        The camera edges matched to ``log`` (one per camera).
     offset_c_s, drift_ppm : ndarray, shape (G,)
         Grid of clocks; ``t_ctrl = offset_c_s + t_c_s + (1 + drift*1e-6) * (t_cam - t_c_s)``.
 
@@ -353,10 +356,15 @@ def edge_log_likelihood(
     -------
     ndarray, shape (G,)
     """
-    start, end = exposure_windows(cam.frames_t_s, cam.exposure_s, cam.ref)
-    step = max(cam.exposure_s * cam.frac_sd / 4.0, 1e-7)
-    grid = np.arange(start.min() - step, end.max() + 2 * step, step)
-    sse = (((lit_fraction(grid, start, end, cam.rising) - cam.frac) / cam.frac_sd) ** 2).sum(axis=1)
+    windows = [exposure_windows(c.frames_t_s, c.exposure_s, c.ref) for c in cams]
+    step = max(min(c.exposure_s * c.frac_sd for c in cams) / 4.0, 1e-7)
+    lo = min(w[0].min() for w in windows)
+    hi = max(w[1].max() for w in windows)
+    grid = np.arange(lo - step, hi + 2 * step, step)
+    sse = sum(
+        (((lit_fraction(grid, a, b, c.rising) - c.frac) / c.frac_sd) ** 2).sum(axis=1)
+        for c, (a, b) in zip(cams, windows, strict=True)
+    )
     sse_min = float(sse.min())
     like = np.exp(-0.5 * (sse - sse_min))
     cum = np.concatenate([[0.0], np.cumsum(0.5 * (like[1:] + like[:-1]) * step)])
@@ -390,8 +398,8 @@ def posterior_clock(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Posterior mean and covariance of (offset at ``t_c_s``, drift) on an adaptive grid.
 
-    Flat prior; likelihood = product of :func:`edge_log_likelihood` over matched
-    edges. The grid is widened while posterior mass sits on its border and narrowed
+    Flat prior; likelihood = product of :func:`edge_log_likelihood` over the logged
+    edges (the cameras that saw one logged edge share its unknown time). The grid is widened while posterior mass sits on its border and narrowed
     while the posterior is under-resolved.
 
     Returns
@@ -400,6 +408,10 @@ def posterior_clock(
         (offset_c_s, drift_ppm).
     cov : ndarray, shape (2, 2)
     """
+    by_log: dict[int, tuple[list[Edge], Edge]] = {}
+    for ce, le in pairs:  # one likelihood term per LOGGED edge: its time is shared
+        by_log.setdefault(id(le), ([], le))[0].append(ce)
+    groups = list(by_log.values())
     c = np.array(centre, dtype=float)
     h = np.array(halfwidth, dtype=float)
     if not fit_drift:
@@ -408,7 +420,7 @@ def posterior_clock(
         o_ax = c[0] + np.linspace(-h[0], h[0], n_grid)
         d_ax = c[1] + (np.linspace(-h[1], h[1], n_grid) if fit_drift else np.zeros(1))
         oo, dd = (a.ravel() for a in np.meshgrid(o_ax, d_ax, indexing="ij"))
-        ll = sum(edge_log_likelihood(ce, le, oo, dd, t_c_s) for ce, le in pairs)
+        ll = sum(edge_log_likelihood(cs, le, oo, dd, t_c_s) for cs, le in groups)
         w = np.exp(ll - ll.max())
         w /= w.sum()
         mean = np.array([w @ oo, w @ dd])

@@ -51,7 +51,7 @@ def recovery(n_sets: int, config: FitConfig) -> bool:
     print(
         f"{'set':>3} {'range':>6} {'EGPI fit':>9} {'EGPI hold':>9} {'GPI hold':>9} {'ratio':>6} {'v_f true':>8} {'v_f fit':>8} {'s':>5}"
     )
-    ok = True
+    ok, n_pass = True, 0
     for k in range(n_sets):
         rng = np.random.default_rng(1000 + k)
         truth = random_i2ris_egpi_params(rng)
@@ -63,6 +63,7 @@ def recovery(n_sets: int, config: FitConfig) -> bool:
         ratio = gp.holdout_metrics.rmse_deg / eg.holdout_metrics.rmse_deg
         good = eg.holdout_metrics.rmse_deg <= 1.05 * NOISE_DEG and ratio >= 4.0
         ok &= good
+        n_pass += good
         print(
             f"{k:>3} {np.ptp(theta):6.1f} {eg.metrics.rmse_deg:9.4f} {eg.holdout_metrics.rmse_deg:9.4f} "
             f"{gp.holdout_metrics.rmse_deg:9.4f} {ratio:6.1f} {truth['v_f']:8.0f} {eg.params['v_f']:8.0f} {dt:5.2f}"
@@ -93,7 +94,7 @@ def speed(config: FitConfig) -> bool:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2 parameter sets, skip the speed part")
-    ap.add_argument("--sets", type=int, default=6, help="number of random true parameter sets")
+    ap.add_argument("--sets", type=int, default=10, help="number of random true parameter sets")
     args = ap.parse_args()
     config = FitConfig()
     ok = recovery(2 if args.quick else args.sets, config)

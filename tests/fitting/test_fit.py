@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from conftest import NOISE
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
@@ -22,6 +21,8 @@ from i2ris_calib.fitting.pipeline import (
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
+
+NOISE = 0.1  # deg, the noise of the egpi_data fixture (conftest.py)
 
 
 def test_egpi_recovers_truth_to_noise_floor(egpi_data):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import gpi_reference, play_reference, triangle
+from hyst_reference import gpi_reference, play_reference, triangle
 
 from i2ris_calib.hysteresis.kernel import (
     family_outputs,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import triangle
+from hyst_reference import triangle
 
 from i2ris_calib.hysteresis.model import Model, Signals
 from i2ris_calib.hysteresis.models import egpi_model, gpi_model, i2ris_egpi_model

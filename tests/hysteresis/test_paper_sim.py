@@ -7,7 +7,7 @@ from collections import Counter
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import triangle
+from hyst_reference import triangle
 
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.paper import PAPER_SIM_VALUES, dead_zones, run_paper_sim

@@ -67,8 +67,8 @@ def random_i2ris_egpi_params(
     a2 = pr / P  # loading from rest starts at ~0 deg
     a3 = a1 * rng.uniform(0.9, 1.15)
     a4 = a2 - rng.uniform(0.5, 2.0)
-    kappa = rng.uniform(3.0, 8.0)
-    a5 = a1 * rng.uniform(1.5, 2.5)
+    kappa = rng.uniform(4.0, 9.0)
+    a5 = a1 * rng.uniform(2.0, 3.0)
     a6 = a4 + (1.0 - kappa) * pr / P  # both families meet at v = 0 when fully unloaded
     v_f = rng.uniform(0.62, 0.75) * v_max_counts
     keys = ("a1", "a2", "a3", "a4", "a5", "a6", "lam", "sigma", "r1", "rn", "kappa", "v_f")

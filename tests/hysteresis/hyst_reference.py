@@ -1,4 +1,4 @@
-"""Fixtures and independent reference implementations for the hysteresis tests."""
+"""Independent reference implementations and inputs for the hysteresis tests."""
 
 from __future__ import annotations
 

@@ -220,7 +220,7 @@ class I2RISEGPIModel(ParametricModel):
     """
 
     n: int = 30
-    deadband_counts: float = 0.0
+    deadband_counts: float = 2.0
 
     def families(self, v: np.ndarray, values: np.ndarray) -> np.ndarray:
         """Outputs y1, y2 of both operator families, shape (2, n_samples) (Eq18-19)."""
@@ -240,7 +240,7 @@ class I2RISEGPIModel(ParametricModel):
         return i2ris_egpi_output(_input(signals), x, int(self.n), float(self.deadband_counts))
 
 
-def i2ris_egpi_model(n: int = 30, deadband_counts: float = 0.0, **values: float) -> I2RISEGPIModel:
+def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:
     """An I2RIS EGPI with default (paper-like yaw+) values, overridden by ``values``."""
     params = (
         _P("a1", 7.0e-3, doc="loading envelope slope gamma_l", **_SLOPE),

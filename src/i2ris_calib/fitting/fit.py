@@ -295,10 +295,12 @@ def _result(
     if res is not None and lsq_idx and n > k:
         J = np.asarray(res.jac, dtype=float)
         s2 = rss / (n - k)
-        u, sv, vt = np.linalg.svd(J, full_matrices=False)
-        tol = sv.max() * max(J.shape) * np.finfo(float).eps if sv.size else 0.0
-        ok = sv > tol
-        c = (vt[ok].T / sv[ok] ** 2) @ vt[ok] * s2
+        # pseudo-inverse of the column-scaled J^T J (p x p, cheap) by eigen-decomposition
+        norm = np.linalg.norm(J, axis=0)
+        d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
+        evals, evecs = np.linalg.eigh((J * d).T @ (J * d))
+        ok = evals > max(evals.max(), 0.0) * 1e-12
+        c = d[:, None] * ((evecs[:, ok] / evals[ok]) @ evecs[:, ok].T) * d[None, :] * s2
         for a, ia in enumerate(lsq_idx):
             for b, ib in enumerate(lsq_idx):
                 cov[ia, ib] = c[a, b]

@@ -127,3 +127,9 @@ def test_explicit_alignment_overrides_the_numeric_guess():
     assert "|---|---|" in text
     page = render_html(Document("t", "s", (Section("a", "A", (t,)),)), TEMPLATE, "", "1")
     assert '<td class="text">1</td>' in page
+
+
+def test_markdown_table_cells_cannot_start_emphasis_or_html():
+    t = Table(("key", "value"), (("clock", "t = a*1e-6) * t_cam <b>"),))
+    text, _ = render_markdown(Document("t", "s", (Section("a", "A", (t,)),)))
+    assert "| clock | t = a\\*1e-6) \\* t_cam \\<b> |" in text

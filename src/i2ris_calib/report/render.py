@@ -276,7 +276,7 @@ def _md_table(t: Table) -> list[str]:
     if t.group_header:
         labels = [label for label, n in t.group_header for _ in range(n)]
         header = [f"{g} {h}".strip() for g, h in zip(labels, header, strict=True)]
-    cell = lambda s: _md_text(s).replace("|", "\\|")  # noqa: E731
+    cell = lambda s: _md_text(s).replace("|", "\\|").replace("*", "\\*")  # noqa: E731
     numeric = column_alignment(t)
     out = ["| " + " | ".join(cell(h) for h in header) + " |"]
     out.append("|" + "|".join("---:" if num else "---" for num in numeric) + "|")

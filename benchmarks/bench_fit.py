@@ -45,13 +45,21 @@ def synthetic(rng: np.random.Generator, truth: dict, config: FitConfig):
 
 
 def recovery(n_sets: int, config: FitConfig) -> bool:
+    """Fit both models to data from ``n_sets`` random true EGPI sets; print and check targets.
+
+    Targets per set: EGPI held-out RMSE <= 1.05 sigma, and GPI >= 4x worse than EGPI
+    on the same data. The GPI/EGPI ratio is printed on the fitted cycles (what the
+    paper's Tables 1-2 compare) and on the held-out cycles; both must reach 4.
+    """
     print(
-        f"== parameter recovery: {n_sets} random true EGPI sets, {N_SAMPLES} samples, noise {NOISE_DEG} deg"
+        f"== parameter recovery: {n_sets} random true EGPI sets, {N_SAMPLES} samples, "
+        f"noise {NOISE_DEG} deg, 1 of 5 loading cycles held out"
     )
     print(
-        f"{'set':>3} {'range':>6} {'EGPI fit':>9} {'EGPI hold':>9} {'GPI hold':>9} {'ratio':>6} {'v_f true':>8} {'v_f fit':>8} {'s':>5}"
+        f"{'set':>3} {'range':>6} {'EGPI fit':>9} {'EGPI hold':>9} {'GPI fit':>8} {'GPI hold':>9} "
+        f"{'x fit':>6} {'x hold':>6} {'v_f true':>8} {'v_f fit':>8} {'s':>5}"
     )
-    ok, n_pass = True, 0
+    n_pass = {"egpi": 0, "ratio_fit": 0, "ratio_hold": 0, "all": 0}
     for k in range(n_sets):
         rng = np.random.default_rng(1000 + k)
         truth = random_i2ris_egpi_params(rng)
@@ -60,19 +68,28 @@ def recovery(n_sets: int, config: FitConfig) -> bool:
         res = fit_all(v, theta, config)
         dt = time.perf_counter() - t0
         eg, gp = res["egpi"], res["gpi"]
-        ratio = gp.holdout_metrics.rmse_deg / eg.holdout_metrics.rmse_deg
-        good = eg.holdout_metrics.rmse_deg <= 1.05 * NOISE_DEG and ratio >= 4.0
-        ok &= good
-        n_pass += good
+        x_fit = gp.metrics.rmse_deg / eg.metrics.rmse_deg
+        x_hold = gp.holdout_metrics.rmse_deg / eg.holdout_metrics.rmse_deg
+        checks = {
+            "egpi": eg.holdout_metrics.rmse_deg <= 1.05 * NOISE_DEG,
+            "ratio_fit": x_fit >= 4.0,
+            "ratio_hold": x_hold >= 4.0,
+        }
+        checks["all"] = all(checks.values())
+        for key, good in checks.items():
+            n_pass[key] += good
         print(
             f"{k:>3} {np.ptp(theta):6.1f} {eg.metrics.rmse_deg:9.4f} {eg.holdout_metrics.rmse_deg:9.4f} "
-            f"{gp.holdout_metrics.rmse_deg:9.4f} {ratio:6.1f} {truth['v_f']:8.0f} {eg.params['v_f']:8.0f} {dt:5.2f}"
-            + ("" if good else "  <-- target missed")
+            f"{gp.metrics.rmse_deg:8.3f} {gp.holdout_metrics.rmse_deg:9.3f} {x_fit:6.1f} {x_hold:6.1f} "
+            f"{truth['v_f']:8.0f} {eg.params['v_f']:8.0f} {dt:5.2f}"
+            + ("" if checks["all"] else "  <-- target missed")
         )
     print(
-        f"targets (EGPI hold <= {1.05 * NOISE_DEG:.3f} deg, GPI/EGPI >= 4): {'PASS' if ok else 'FAIL'}"
+        f"EGPI held-out RMSE <= {1.05 * NOISE_DEG:.3f} deg: {n_pass['egpi']}/{n_sets} sets; "
+        f"GPI >= 4x EGPI: {n_pass['ratio_fit']}/{n_sets} (fitted cycles), "
+        f"{n_pass['ratio_hold']}/{n_sets} (held-out cycles); all targets: {n_pass['all']}/{n_sets}"
     )
-    return ok
+    return n_pass["all"] == n_sets
 
 
 def speed(config: FitConfig) -> bool:

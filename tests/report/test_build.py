@@ -72,7 +72,8 @@ def test_complete_run_has_every_section_and_figure(run_data):
     units = {r[0]: r[1] for r in params.subsections[0].blocks[0].rows}
     assert units["a1"] == "deg/count" and units["kappa"] == "1"  # from the model declarations
     acc = _blocks(doc, "accuracy", Table)
-    assert [t.caption.split(":")[0] for t in acc] == ["yaw", "pitch"]
+    assert [t.caption.split(":")[0] for t in acc] == ["yaw", "yaw", "pitch", "pitch"]
+    assert [t.rows[0][1] for t in acc] == ["fitted", "paper", "fitted", "paper"]
 
 
 def test_progress_is_called_once_per_section(run_data):
@@ -203,4 +204,15 @@ def test_provenance_lists_every_stage_json(run_data):
         "fit/yaw/fit.json",
         "fit/pitch/fit.json",
         "diagnose/yaw/diagnosis.json",
+    ]
+
+
+def test_missing_axis_that_does_not_move_is_explained(run_data):
+    run, _ = run_data
+    still = run.synced.assign(enc_pitch=7)
+    run = replace(run, fits=run.fits[:1], synced=still, absent={"fit/pitch/fit.json": "not found"})
+    notes = [b.text for b in _blocks(build_document(run, CFG), "accuracy", Note)]
+    assert notes == [
+        "fit/pitch/fit.json: not found (its encoder does not move in sync/synced.csv); "
+        "this axis is not shown."
     ]

@@ -200,3 +200,20 @@ def test_provenance_table_lists_every_input_hash():
         and rows["input b.mkv"] == "sha256 " + "cd" * 32
     )
     assert rows["package version"] == "0.1.0" and rows["git"] == "abc"
+
+
+def test_paper_table_mirrors_model_md():
+    t = tables.paper_table("yaw")
+    assert [g for g, _ in t.group_header] == ["", "yaw+ (paper)", "yaw- (paper)"]
+    assert t.rows == (
+        ("EGPI", "paper", "0.36", "0.98", "1.07", "0.35", "1.12", "1.15"),
+        ("GPI", "paper", "2.23", "6.07", "4.88", "2.38", "7.50", "5.37"),
+    )
+    assert tables.paper_table("pitch").rows[1][2:] == (
+        "2.51",
+        "7.16",
+        "6.73",
+        "2.64",
+        "8.38",
+        "5.53",
+    )

@@ -11,6 +11,7 @@ import re
 from collections.abc import Callable, Mapping
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from i2ris_calib.report import figures, tables
@@ -160,15 +161,28 @@ def _no_fit_note(run: RunData) -> Note:
 
 def _missing_fit_notes(run: RunData) -> list[Note]:
     """Notes for expected axes without fit.json when other axes were fitted."""
-    return [
-        Note(f"{k}: {v}; this axis is not shown.")
-        for k, v in run.absent.items()
-        if k.startswith("fit/") and k.endswith("/fit.json")
-    ]
+    notes = []
+    for k, v in run.absent.items():
+        if k.startswith("fit/") and k.endswith("/fit.json"):
+            axis = k.split("/")[1]
+            why = (
+                " (its encoder does not move in sync/synced.csv)" if _axis_still(run, axis) else ""
+            )
+            notes.append(Note(f"{k}: {v}{why}; this axis is not shown."))
+    return notes
+
+
+def _axis_still(run: RunData, axis: str) -> bool:
+    """True when synced.csv is there and ``enc_<axis>`` spans less than one count."""
+    col = f"enc_{axis}"
+    if run.synced is None or col not in run.synced:
+        return False
+    enc = run.synced[col].to_numpy(dtype=float)
+    return bool(enc.size) and float(np.nanmax(enc) - np.nanmin(enc)) < 1.0
 
 
 def accuracy_section(run: RunData) -> Section:
-    """Tables shaped like the paper's Tables 1-2, one per axis."""
+    """Tables shaped like the paper's Tables 1-2, one per axis, each followed by the paper's."""
     if not run.fits:
         return Section("accuracy", "Model accuracy (paper Tables 1-2)", (_no_fit_note(run),))
     blocks: list = _missing_fit_notes(run)
@@ -179,6 +193,8 @@ def accuracy_section(run: RunData) -> Section:
             if ds
             else Note(f"fit/{fd.axis}/fit.json has no datasets.")
         )
+        if fd.axis in tables.PAPER_RESULTS:
+            blocks.append(tables.paper_table(fd.axis))
     return Section("accuracy", "Model accuracy (paper Tables 1-2)", tuple(blocks))
 
 

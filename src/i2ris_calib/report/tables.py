@@ -89,6 +89,43 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
     )
 
 
+# The paper's Tables 1-2 (Yue et al., real I2RIS data): (RMSE deg, NRMSE %, MAE deg).
+PAPER_RESULTS = {
+    "yaw": {
+        "yaw+": {"egpi": (0.36, 0.98, 1.07), "gpi": (2.23, 6.07, 4.88)},
+        "yaw-": {"egpi": (0.35, 1.12, 1.15), "gpi": (2.38, 7.50, 5.37)},
+    },
+    "pitch": {
+        "pitch+": {"egpi": (0.58, 1.65, 1.62), "gpi": (2.51, 7.16, 6.73)},
+        "pitch-": {"egpi": (0.49, 1.12, 1.62), "gpi": (2.64, 8.38, 5.53)},
+    },
+}
+
+
+def paper_table(axis: str) -> Table:
+    """The paper's published accuracy for ``axis``, in the layout of :func:`metrics_table`."""
+    results = PAPER_RESULTS[axis]
+    header = ["model", "data"]
+    groups: list[tuple[str, int]] = [("", 2)]
+    for name in results:
+        header += [label for _, label, _ in METRIC_COLUMNS]
+        groups.append((f"{name} (paper)", len(METRIC_COLUMNS)))
+    rows = []
+    for key, label in MODELS:
+        row = [label, "paper"]
+        for name in results:
+            rmse, nrmse, mae = results[name][key]
+            row += [f"{rmse:.2f}", f"{nrmse:.2f}", f"{mae:.2f}"]
+        rows.append(tuple(row))
+    return Table(
+        header=tuple(header),
+        rows=tuple(rows),
+        group_header=tuple(groups),
+        caption=f"{axis}: the paper's published values on real I2RIS data (Yue et al., Tables "
+        "1-2), for comparison; negative sets fitted as |input| -> |angle|.",
+    )
+
+
 def _abs_note(datasets: list[dict[str, Any]]) -> str:
     names = [str(d.get("name")) for d in datasets if d.get("abs_fitted")]
     return f" {', '.join(names)}: fitted as |input| -> |angle|." if names else ""

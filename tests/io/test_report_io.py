@@ -201,3 +201,20 @@ def test_config_section_is_validated(tmp_path, run_dir, capsys):
     assert "did you mean 'figure_dpi'" in _one_line_error(
         ["report", str(run_dir), "--config", str(cfg)], capsys
     )
+
+
+def test_fit_json_with_no_datasets_is_a_note_not_an_error(tmp_path):
+    root = tmp_path / "s"
+    (root / "fit" / "yaw").mkdir(parents=True)
+    (root / "fit" / "yaw" / "fit.json").write_text(
+        '{"schema": "i2ris-calib.fit/1", "datasets": []}'
+    )
+    write_report(root, None, CFG)
+    assert "fit/yaw/fit.json has no datasets." in (root / "report" / "report.md").read_text()
+
+
+def test_folder_in_place_of_a_file_counts_as_missing(run_dir):
+    (run_dir / "sync" / "sync.json").unlink()
+    (run_dir / "sync" / "sync.json").mkdir()  # a folder where a file is expected
+    run, _ = load_run(run_dir)
+    assert run.sync is None and run.absent["sync/sync.json"] == "not found"

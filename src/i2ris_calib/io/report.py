@@ -80,6 +80,8 @@ def read_json_object(path: Path) -> dict[str, Any]:
         raise CalibError(
             f"{path}: malformed JSON ({exc}); re-run the stage that writes it"
         ) from None
+    except OSError as exc:
+        raise CalibError(f"{path}: cannot read ({exc.strerror}); check its permissions") from None
     if not isinstance(obj, dict):
         raise CalibError(
             f"{path}: expected a JSON object at top level, got {type(obj).__name__}; "
@@ -101,6 +103,8 @@ def read_csv_checked(path: Path, columns: Mapping[str, bool]) -> pd.DataFrame:
         raise CalibError(
             f"{path}: malformed CSV ({msg}); re-run the stage that writes it"
         ) from None
+    except OSError as exc:
+        raise CalibError(f"{path}: cannot read ({exc.strerror}); check its permissions") from None
     missing = [c for c in columns if c not in frame.columns]
     if missing:
         raise CalibError(
@@ -132,7 +136,7 @@ def check_fit_json(fit: Mapping[str, Any], path: Path) -> None:
         isinstance(datasets, list) and all(isinstance(d, dict) for d in datasets)
     ):
         raise CalibError(f"{path}: 'datasets' must be a list of objects; re-run 'fit'")
-    for i, d in enumerate(datasets or [fit]):
+    for i, d in enumerate(datasets if datasets is not None else [fit]):
         models = d.get("models")
         if not isinstance(models, dict):
             raise CalibError(f"{path}: datasets[{i}] has no 'models' object; re-run 'fit'")

@@ -58,3 +58,19 @@ def test_interrupted_stage_is_redone(tmp_path):
     assert not (tmp_path / "stage" / STAMP).exists()
     assert run_stage(make_stage(tmp_path, calls), force=False) == "ran"
     assert (tmp_path / "stage" / "result.txt").read_text() == "C"
+
+
+def test_folder_inputs_cover_every_file_below(tmp_path):
+    calls = []
+    d = tmp_path / "fit"
+    (d / "yaw").mkdir(parents=True)
+    (d / "yaw" / "fit.json").write_text("{}")
+    (d / "yaw" / ".stamp.json").write_text("ignored")
+    out = tmp_path / "report"
+    st = Stage("report", out, (d,), Cfg(), lambda: (calls.append(1), out.mkdir(exist_ok=True)))
+    run_stage(st, force=False)
+    assert is_up_to_date(st)
+    (d / "yaw" / ".stamp.json").write_text("changed")  # dotfiles do not count
+    assert is_up_to_date(st)
+    (d / "yaw" / "predictions.csv").write_text("new file")
+    assert not is_up_to_date(st)

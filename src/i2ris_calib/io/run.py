@@ -48,8 +48,25 @@ def stamp_of(stage: Stage) -> dict[str, Any]:
         "stage": stage.name,
         "version": __version__,
         "config_sha256": hashlib.sha256(cfg.encode()).hexdigest(),
-        "inputs": {str(p): cached_sha256(p) for p in stage.inputs if p.is_file()},
+        "inputs": {str(p): cached_sha256(p) for p in expand_inputs(stage.inputs)},
     }
+
+
+def expand_inputs(paths: tuple[Path, ...]) -> list[Path]:
+    """Files behind ``paths``: a folder stands for every file below it (dotfiles excluded)."""
+    files: list[Path] = []
+    for p in paths:
+        if p.is_dir():
+            files.extend(
+                sorted(
+                    f
+                    for f in p.rglob("*")
+                    if f.is_file() and not any(part.startswith(".") for part in f.relative_to(p).parts)
+                )
+            )
+        elif p.is_file():
+            files.append(p)
+    return files
 
 
 @functools.lru_cache(maxsize=256)
@@ -128,12 +145,11 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
                 fit_files([synced], axis=axis, model="all", out=fit_dir, config=config)
 
         stages.append(Stage(f"fit {axis}", fit_dir, (synced,), config.fit, fit_axis))
-    fit_jsons = tuple(run_dir / "fit" / a / "fit.json" for a in AXES)
     stages.append(
         Stage(
             "report",
             run_dir / "report",
-            (angles, synced, *fit_jsons),
+            (track_dir, sync_dir, run_dir / "fit", run_dir / "diagnose"),
             config.report,
             lambda: write_report(run_dir, run_dir / "report", config),
         )

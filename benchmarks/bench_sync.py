@@ -42,7 +42,8 @@ class Scenario:
 
 
 def scenarios() -> list[Scenario]:
-    """Event scenarios (three sync set-ups) and no-event scenarios (backlash 0/2/6 deg)."""
+    """Event scenarios (three sync set-ups), auto (coarse event + model) and no-event
+    scenarios (backlash 6/2/0.5 deg)."""
     return [
         Scenario(
             "event: exposure = frame interval, LED on 1 kHz ticks, 3 flashes",
@@ -62,6 +63,16 @@ def scenarios() -> list[Scenario]:
                 log_rate_hz=100.0,
             ),
             SyncConfig(method="event", log_edge_at="midpoint", exposure_s=0.01),
+        ),
+        Scenario(
+            "auto: the simulator-like event above refined by the EGPI profile, backlash 6 deg",
+            dict(
+                flashes=((0.5, 0.2), (59.0, 0.2)),
+                exposure_frac=0.3,
+                log_rate_hz=100.0,
+                backlash_deg=6.0,
+            ),
+            SyncConfig(method="auto", log_edge_at="midpoint", exposure_s=0.01),
         ),
         *[
             Scenario(
@@ -83,8 +94,8 @@ def run_case(sc: Scenario, seed: int, duration_s: float) -> dict:
     t0 = time.perf_counter()
     clk = estimate_clock(case.angles, case.log, sc.sync)
     elapsed = time.perf_counter() - t0
-    out = {"seconds": elapsed, **errors(clk, case)}
-    if sc.sync.method == "model":
+    out = {"seconds": elapsed, "method": clk.method, **errors(clk, case)}
+    if sc.sync.method in ("model", "auto"):
         xc = estimate_clock(case.angles, case.log, SyncConfig(method="xcorr", drift_windows=4))
         out["xcorr"] = errors(xc, case)
     return out
@@ -129,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
             print(
                 f"{s:>4} {r['offset_err_ms']:+14.3f} {r['offset_sd_ms']:7.3f} "
                 f"{r['max_clock_err_ms']:17.3f} {r['drift_err_ppm']:+14.2f} "
-                f"{r['drift_sd_ppm']:7.2f} {r['seconds']:7.1f}{xs}"
+                f"{r['drift_sd_ppm']:7.2f} {r['seconds']:7.1f}{xs}  [{r['method']}]"
             )
         line = (
             f"worst |offset err| {worst(rows, 'offset_err_ms'):.3f} ms, worst max clock err "

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from i2ris_calib.sync.config import SyncConfig
-from i2ris_calib.sync.estimate import axis_series
+from i2ris_calib.sync.estimate import axis_series, estimate_clock
 from i2ris_calib.sync.joint import clock_from_model, golden_min, scan_profile
 from i2ris_calib.sync.synthetic import make_sync_case
 from i2ris_calib.sync.xcorr import clock_from_xcorr
@@ -67,3 +69,25 @@ def test_golden_and_scan_find_a_parabola_minimum():
     best = scan_profile(F(), 0.0, 0.1, 0.02)  # minimum outside the first grid: extended
     assert best == pytest.approx(0.3137, abs=0.02)
     assert golden_min(F(), best - 0.02, best + 0.02, 1e-5) == pytest.approx(0.3137, abs=2e-5)
+
+
+def test_auto_refines_a_coarse_event_with_the_model():
+    """Short exposure, 100 Hz sampled LED log, 2 flashes: the event alone is good to a
+    few ms; auto searches the model profile inside its +-4 sd and does better."""
+    case = make_sync_case(
+        seed=2,
+        backlash_deg=6.0,
+        duration_s=25.0,
+        n_cycles=2,
+        flashes=((0.5, 0.2), (24.0, 0.2)),
+        exposure_frac=0.3,
+        log_rate_hz=100.0,
+    )
+    cfg = SyncConfig(log_edge_at="midpoint", exposure_s=0.01)
+    event = estimate_clock(case.angles, case.log, replace(cfg, method="event"))
+    auto = estimate_clock(case.angles, case.log, cfg)
+    assert auto.method == "model" and "too coarse" in auto.evidence["auto"]
+    t_ref = auto.evidence["t_ref_cam_s"]
+    # the model stays inside the event's +-4 sd window and meets the 5 ms requirement
+    assert abs(auto.offset_at(t_ref) - event.offset_at(t_ref)) <= 4 * event.offset_stderr_at(t_ref)
+    assert abs(_mid_error_s(auto, case)) <= 2e-3

@@ -32,6 +32,9 @@ class SyncConfig:
     use_falling_edges: bool = True  # use LED-off edges as well as LED-on edges
     max_edge_residual_s: float = 0.02  # a camera edge farther than this from its log edge: no match
     min_drift_span_s: float = 5.0  # fit drift only if the matched edges span this long
+    # auto: an event clock coarser than this (offset sd, s) is refined by the model profile
+    # within the event's +-4 sd (0 = never)
+    auto_refine_stderr_s: float = 0.0005
 
     # --- offset search (model and xcorr)
     offset_guess_s: float = 0.0  # prior offset (ctrl - cam); used when offset_search_s > 0

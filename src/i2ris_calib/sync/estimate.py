@@ -118,7 +118,10 @@ def estimate_clock(
         lg = log_edges(log.flash, cfg.log_edge_at) if log.flash is not None else []
         cam = video_edges(angles, cfg)
         if lg and cam:
-            return clock_from_events(cam, lg, cfg)
+            event = clock_from_events(cam, lg, cfg)
+            if method == "auto":
+                return refined_event_clock(event, angles, log, cfg, fit_config)
+            return event
         reason = (
             "the encoder log has no sync_flash column/topic"
             if log.flash is None
@@ -140,6 +143,39 @@ def estimate_clock(
     clock = clock_from_model(series, log, cfg, fit_config)
     if reason:
         clock.evidence["auto"] = f"model method used: {reason}"
+    return clock
+
+
+def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncConfig, fit_config):
+    """``auto`` with a coarse sync event: refine it with the hysteresis model.
+
+    When the event's offset standard error (middle of the recording) exceeds
+    ``cfg.auto_refine_stderr_s`` and an axis moves, the model profile is searched
+    within the event's +-4 standard errors (method ``model``, the event kept in
+    ``evidence["event"]``). If the model's minimum sits on that window's edge (model
+    and event disagree) or the model cannot run, the event clock is returned.
+    """
+    series = axis_series(angles)
+    t_mid = float(np.mean(angles["time_s"].to_numpy(dtype=float)))
+    sd = event.offset_stderr_at(t_mid)
+    if cfg.auto_refine_stderr_s <= 0 or not series or not sd > cfg.auto_refine_stderr_s:
+        return event
+    try:
+        clock = clock_from_model(series, log, cfg, fit_config, prior=event)
+    except CalibError as exc:
+        event.evidence["auto"] = f"event kept; model refinement failed: {exc}"
+        return event
+    clock.evidence["event"] = {
+        "offset_s": event.offset_s,
+        "drift_ppm": event.drift_ppm,
+        "offset_stderr_s": event.offset_stderr_s,
+        "drift_stderr_ppm": event.drift_stderr_ppm,
+        "evidence": event.evidence,
+    }
+    clock.evidence["auto"] = (
+        f"sync event too coarse (offset sd {sd * 1e3:.2f} ms > auto_refine_stderr_s): "
+        "hysteresis-model profile searched within its +-4 sd"
+    )
     return clock
 
 

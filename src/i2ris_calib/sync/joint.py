@@ -174,12 +174,15 @@ class OffsetProfile:
         return k, np.array([self.cache[x][0] for x in k])
 
 
-def scan_profile(profile: OffsetProfile, centre: float, halfwidth: float, step: float) -> float:
+def scan_profile(
+    profile: OffsetProfile, centre: float, halfwidth: float, step: float, extend: bool = True
+) -> float:
     """Best offset of a grid (step ``step``) around ``centre``, evaluated from the centre
-    outwards; extended by ``halfwidth`` (up to 4 times) while the minimum is at an end."""
-    n = int(round(halfwidth / step))
+    outwards; extended by ``halfwidth`` (up to 4 times) while the minimum is at an end
+    (``extend=False``: CalibError instead)."""
+    n = max(int(round(halfwidth / step)), 1)
     lo, hi = -n, n  # grid indices: offset = centre + i * step
-    for _ in range(5):
+    for _ in range(5 if extend else 1):
         for i in sorted(range(lo, hi + 1), key=abs):
             profile(centre + i * step)
         vals = {i: profile(centre + i * step) for i in range(lo, hi + 1)}
@@ -285,9 +288,18 @@ def drift_gauss_newton(
 
 
 def clock_from_model(
-    series: list[AxisSeries], log: EncoderLog, cfg: SyncConfig, fit_config=None
+    series: list[AxisSeries],
+    log: EncoderLog,
+    cfg: SyncConfig,
+    fit_config=None,
+    prior: ClockModel | None = None,
 ) -> ClockModel:
     """Offset and drift minimising the hysteresis-model residual (method ``model``).
+
+    Without ``prior`` the offset grid is centred on the cross-correlation offset and
+    extended as needed; with ``prior`` (an event clock) the search is confined to its
+    +-4 standard errors and a minimum on the window's edge is a CalibError (model and
+    event disagree).
 
     Parameters
     ----------
@@ -299,6 +311,8 @@ def clock_from_model(
         ``model`` (egpi/gpi), ``profile_*``, ``estimate_drift``, ``min_axis_range_counts``.
     fit_config : FitConfig, optional
         Fitting settings (``[fit]``); holdout is disabled for the profile.
+    prior : ClockModel, optional
+        A coarser clock (sync event) bounding the offset search.
 
     Returns
     -------
@@ -310,9 +324,16 @@ def clock_from_model(
     from i2ris_calib.fitting.config import FitConfig
 
     fit_config = replace(fit_config or FitConfig(), holdout_fraction=0.0)
-    o_x = coarse_xcorr_offset(series, log, cfg)
     t_c = float(np.mean(np.concatenate([s.t_cam_s for s in series])))
-    margin = 5 * cfg.profile_halfwidth_s
+    step = cfg.profile_step_s
+    if prior is None:
+        o_x, halfwidth = coarse_xcorr_offset(series, log, cfg), cfg.profile_halfwidth_s
+        margin = 5 * halfwidth
+    else:
+        o_x = prior.offset_at(t_c)
+        halfwidth = max(4 * prior.offset_stderr_at(t_c), 4 * cfg.profile_tol_s)
+        step = min(step, halfwidth / 2)
+        margin = 2 * halfwidth
     blocks = model_blocks(series, log, o_x, t_c, margin, fit_config, cfg.min_axis_range_counts)
     if not blocks:
         raise CalibError(
@@ -320,8 +341,7 @@ def clock_from_model(
             f"(need > {cfg.min_axis_range_counts:g} counts of motion; use a sync flash instead)"
         )
     profile = OffsetProfile(blocks, log, t_c, 0.0, cfg.model, fit_config)
-    step = cfg.profile_step_s
-    best = scan_profile(profile, o_x, cfg.profile_halfwidth_s, step)
+    best = scan_profile(profile, o_x, halfwidth, step, extend=prior is None)
     profile.cold = False  # refinement: warm starts only
     best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     drift, drift_sd = 0.0, float("nan")
@@ -341,7 +361,8 @@ def clock_from_model(
     x, y = profile.points()
     evidence = {
         "model": cfg.model,
-        "xcorr_offset_s": o_x,
+        "xcorr_offset_s" if prior is None else "prior_offset_at_t_ref_s": o_x,
+        "search_halfwidth_s": halfwidth,
         "t_ref_cam_s": t_c,
         "blocks": [{"name": b.name, "n_frames": int(b.t_cam_s.size)} for b in blocks],
         "profile": {"offset_at_t_ref_s": x, "rss_deg2": y},

@@ -55,3 +55,13 @@ def test_holdout_whole_cycles_never_first(rng):
         assert hold[cyc == c].all()
     assert not holdout_mask(np.zeros(50, int), 0.25).any()
     assert not holdout_mask(cyc, 0.0).any()
+
+
+def test_holdout_never_extrapolates():
+    """A cycle reaching beyond the input range of the other cycles is not held out."""
+    v = np.r_[0, 100, 0, 50, 0, 200, 0, 80, 0].astype(float)
+    cyc = np.r_[0, 0, 1, 1, 2, 2, 3, 3, 3]
+    held = np.unique(cyc[holdout_mask(cyc, 0.5, v)])
+    assert 2 not in held and 0 not in held and held.size >= 1
+    # two cycles, the second the larger one: nothing can be held out
+    assert not holdout_mask(np.r_[0, 0, 1, 1], 0.5, np.r_[0, 50, 0, 90.0]).any()

@@ -36,13 +36,18 @@ def cycle_index(v: np.ndarray, deadband: float | None = None) -> np.ndarray:
     return np.cumsum(marks)
 
 
-def holdout_mask(cycles: np.ndarray, fraction: float = 0.25) -> np.ndarray:
-    """Samples held out for validation: whole cycles, evenly spread, never cycle 0.
+def holdout_mask(
+    cycles: np.ndarray, fraction: float = 0.25, v: np.ndarray | None = None
+) -> np.ndarray:
+    """Samples held out for validation: whole loading cycles, evenly spread.
 
-    ``max(1, round(fraction * n_cycles))`` cycles out of 1..n_cycles-1 are held out
-    (deterministic, evenly spaced). With fewer than 2 cycles, or ``fraction <= 0``,
-    nothing is held out. The model is still evaluated over the whole input sequence
-    (the operator state needs every sample); held-out angles only leave the loss.
+    ``max(1, round(fraction * n_cycles))`` cycles are held out among the eligible ones:
+    never cycle 0 (it carries the initial operator state), and - when the input ``v``
+    is given - only cycles whose input range lies within the range of the cycles left
+    for fitting (a held-out cycle must test interpolation, not extrapolation beyond the
+    fitted input range). With fewer than 2 cycles, ``fraction <= 0`` or no eligible
+    cycle, nothing is held out. The model is still evaluated over the whole input
+    sequence (the operator state needs every sample); held-out angles only leave the loss.
 
     Returns
     -------
@@ -51,11 +56,28 @@ def holdout_mask(cycles: np.ndarray, fraction: float = 0.25) -> np.ndarray:
     """
     cycles = np.asarray(cycles, dtype=int)
     n_cyc = int(cycles.max()) + 1 if cycles.size else 0
+    none = np.zeros(cycles.shape, dtype=bool)
     if n_cyc < 2 or fraction <= 0:
-        return np.zeros(cycles.shape, dtype=bool)
-    k = int(min(n_cyc - 1, max(1, round(fraction * n_cyc))))
-    if k >= n_cyc - 1:
-        chosen = np.arange(1, n_cyc)
-    else:
-        chosen = np.unique(np.round(np.linspace(1, n_cyc - 1, k + 2)[1:-1]).astype(int))
+        return none
+    eligible = np.arange(1, n_cyc)
+    if v is not None:
+        v = np.asarray(v, dtype=float)
+        hi = np.array([v[cycles == c].max() for c in range(n_cyc)])
+        lo = np.array([v[cycles == c].min() for c in range(n_cyc)])
+        eligible = np.array(
+            [
+                c
+                for c in eligible
+                if hi[c] <= np.delete(hi, c).max() and lo[c] >= np.delete(lo, c).min()
+            ],
+            dtype=int,
+        )
+    if eligible.size == 0:
+        return none
+    k = int(min(eligible.size, max(1, round(fraction * n_cyc))))
+    chosen = eligible[
+        np.unique(np.round(np.linspace(0, eligible.size - 1, k + 2)[1:-1]).astype(int))
+    ]
+    if k >= eligible.size:
+        chosen = eligible
     return np.isin(cycles, chosen)

@@ -14,7 +14,7 @@ The fitted result is a new object; the input model is never changed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -53,8 +53,10 @@ class FitResult:
     converged : bool
         Optimiser reported convergence (not the evaluation limit) with a finite cost.
     message : str
-        Optimiser message of the best start; names any free parameter that ended
-        outside its bounds (possible with the unbounded ``"lm"``).
+        Optimiser message of the best start. When the unbounded ``"lm"`` ends with
+        free parameters outside their bounds (unphysical: negative slopes, thresholds,
+        sigma or kappa), those are held at the violated bound and LM refits the rest
+        (up to 3 rounds); the message names them and their stderr is NaN.
     nfev : int
         Model evaluations in total (all starts, Jacobians, profile searches).
     n_samples : int
@@ -217,7 +219,8 @@ def fit_model(
         Start vectors (all parameters, model order); default ``[model values]``.
         Use :func:`i2ris_calib.fitting.initial.start_values` for data-driven starts.
     method : {"lm", "trf"}
-        Unbounded Levenberg-Marquardt or bounded trust-region reflective.
+        Levenberg-Marquardt (unbounded; parameters ending outside their bounds are
+        held at the bound and the rest refitted) or bounded trust-region reflective.
     max_nfev : int, optional
         Limit on LM iterations (function evaluations not counting the finite-difference
         Jacobian, scipy >= 1.16) of each LM call of the final run; the result is flagged
@@ -274,13 +277,49 @@ def fit_model(
     else:
         best = run(starts[0], max_nfev, first + ("fine", "lm"))
     cost, full, res = best
-    return _result(
-        model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts)
+    # Unphysical values (negative slopes, thresholds, sigma, kappa) extrapolate badly:
+    # an unbounded LM end point outside the bounds is repaired by an active-set step -
+    # the offending parameters are held at the violated bound and LM refits the rest.
+    held: list[int] = []
+    for _ in range(3):
+        outside = _outside(full, lsq_free, lower, upper)
+        if method != "lm" or not outside:
+            break
+        full = full.copy()
+        full[outside] = np.clip(full[outside], lower[outside], upper[outside])
+        held += outside
+        lsq_free = np.array([i for i in lsq_free if i not in held], dtype=int)
+        if lsq_free.size:
+            full, res = _lsq(counter, full, lsq_free, lower, upper, "lm", max_nfev, ftol)
+    result = _result(
+        model,
+        s,
+        theta,
+        used,
+        hold,
+        full,
+        res,
+        names,
+        is_free,
+        pidx,
+        counter.n,
+        len(starts),
+        lsq_free,
     )
+    if not held:
+        return result
+    stderr = result.stderr | {names[i]: float("nan") for i in held}
+    note = f" [LM left the bounds; held at the bound: {', '.join(names[i] for i in held)}]"
+    return replace(result, message=result.message + note, stderr=stderr)
+
+
+def _outside(full, free, lower, upper) -> list[int]:
+    """Indices of free parameters outside their bounds."""
+    return [int(i) for i in free if not lower[i] <= full[i] <= upper[i]]
 
 
 def _result(
-    model, s, theta, used, hold, full, res, names, is_free, pidx, nfev, n_starts
+    model, s, theta, used, hold, full, res, names, is_free, pidx, nfev, n_starts, lsq_idx
 ) -> FitResult:
     fitted = model.with_values(full)
     y = model.evaluate(s, full)
@@ -291,7 +330,7 @@ def _result(
     p = len(names)
     cov = np.zeros((p, p))
     stderr = dict.fromkeys(names, 0.0)
-    lsq_idx = [i for i in np.flatnonzero(is_free) if i not in pidx]
+    lsq_idx = [int(i) for i in lsq_idx]
     if res is not None and lsq_idx and n > k:
         J = np.asarray(res.jac, dtype=float)
         s2 = rss / (n - k)

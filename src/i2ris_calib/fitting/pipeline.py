@@ -52,7 +52,7 @@ def model_from_params(
 def split_masks(v: np.ndarray, config: FitConfig = FitConfig()) -> tuple[np.ndarray, np.ndarray]:
     """(cycle index (n,), held-out mask (n,)) for ``v`` (see fitting.cycles)."""
     cyc = cycle_index(v, deadband_for(v, config))
-    return cyc, holdout_mask(cyc, config.holdout_fraction)
+    return cyc, holdout_mask(cyc, config.holdout_fraction, v)
 
 
 def fit_kind(

@@ -171,3 +171,15 @@ def test_play_output_stays_within_the_band(vals, h):
     # the output only moves when the input pushes it to the band's edge
     moved = np.flatnonzero(np.diff(u) != 0) + 1
     assert np.allclose(np.abs(u[moved] - v[moved]), h)
+
+
+def test_coupling_needs_the_other_axis_to_move():
+    from i2ris_calib.diagnosis.effects import other_axis_moves
+
+    t = np.arange(0, 10, 0.1)
+    noise = np.random.default_rng(1).normal(0, 0.2, t.size)
+    assert not other_axis_moves(Signals(v=t, v_other=np.zeros_like(t), theta_other_deg=noise))
+    assert not other_axis_moves(Signals(v=t, theta_other_deg=noise))
+    assert other_axis_moves(Signals(v=t, theta_other_deg=10 * np.sin(t) + noise))
+    assert other_axis_moves(Signals(v=t, v_other=t))
+    assert CATALOGUE["axis_coupling"].available(Signals(v=t)) is not None

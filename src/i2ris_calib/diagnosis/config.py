@@ -30,6 +30,11 @@ class DiagnosisConfig:
         Cap on least-squares iterations of each candidate's joint refit.
     profile_nfev : int
         Cap on least-squares iterations of the base refit at each grid start.
+    restart_nfev : int
+        Cap on least-squares iterations of the base refit from a data-driven
+        start at the ``n_restarts`` best grid points (input-side effects).
+    n_restarts : int
+        Grid points (best profiles first) that also get a data-driven base start.
     start_max_nfev : int
         Cap on least-squares iterations when the starting model is polished.
     n_global_starts : int
@@ -55,6 +60,8 @@ class DiagnosisConfig:
     max_samples: int = 4000
     max_nfev: int = 30
     profile_nfev: int = 4
+    restart_nfev: int = 20
+    n_restarts: int = 5
     start_max_nfev: int = 60
     n_global_starts: int = 3
     global_max_nfev: int = 400
@@ -81,11 +88,22 @@ class DiagnosisConfig:
             raise ValueError("min_delta_bic must be >= 0")
         if self.max_samples < 100:
             raise ValueError("max_samples must be >= 100")
+        if self.n_restarts < 0:
+            raise ValueError("n_restarts must be >= 0")
         if self.n_finalists < 1:
             raise ValueError("n_finalists must be >= 1")
         if not 0 <= self.tie_rel < 0.5:
             raise ValueError("tie_rel must be in [0, 0.5)")
         if self.n_global_starts < 0:
             raise ValueError("n_global_starts must be >= 0")
-        if min(self.max_nfev, self.start_max_nfev, self.profile_nfev, self.global_max_nfev) < 1:
+        if (
+            min(
+                self.max_nfev,
+                self.start_max_nfev,
+                self.profile_nfev,
+                self.restart_nfev,
+                self.global_max_nfev,
+            )
+            < 1
+        ):
             raise ValueError("max_nfev, profile_nfev and start_max_nfev must be >= 1")

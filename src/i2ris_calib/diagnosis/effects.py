@@ -89,15 +89,22 @@ class Effect:
         """None when ``signals`` carry what the effect needs, else the reason."""
         if "t_s" in self.needs and signals.t_s is None:
             return "needs sample times (t_s)"
-        if "other" in self.needs:
-            other = [
-                a
-                for a in (signals.v_other, signals.theta_other_deg)
-                if a is not None and np.nanstd(np.asarray(a, float)) > 0
-            ]
-            if not other:
-                return "needs the other axis's input or angle, and it does not move"
+        if "other" in self.needs and not other_axis_moves(signals):
+            return "needs the other axis's input or angle, and it does not move"
         return None
+
+
+def other_axis_moves(signals: Signals, min_angle_range_deg: float = 1.0) -> bool:
+    """True when the other axis moves: its input changes, or (input unknown) its
+    measured angle spans more than ``min_angle_range_deg`` (1st-99th percentile),
+    so that measurement noise alone does not count as motion."""
+    if signals.v_other is not None:
+        return bool(np.ptp(np.asarray(signals.v_other, float)) > 0)
+    if signals.theta_other_deg is not None:
+        th = np.asarray(signals.theta_other_deg, float)
+        th = th[np.isfinite(th)]
+        return th.size > 0 and float(np.subtract(*np.percentile(th, [99, 1]))) > min_angle_range_deg
+    return False
 
 
 def _span(a: np.ndarray) -> float:
@@ -318,7 +325,7 @@ class DeadZone(Effect):
 
     def start_grid(self, signals, y_deg):
         span = _span(signals.v)
-        return [np.array([f * span]) for f in (0.005, 0.01, 0.02, 0.04, 0.08)]
+        return [np.array([f * span]) for f in (0.01, 0.02, 0.04, 0.06, 0.1)]
 
 
 @dataclass(frozen=True)

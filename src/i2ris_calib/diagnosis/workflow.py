@@ -36,6 +36,7 @@ from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.diagnosis.cycles import Segmentation, holdout_units, segment
 from i2ris_calib.diagnosis.effects import (
     CATALOGUE,
+    Effect,
     EffectModel,
     base_of,
     effects_of,
@@ -309,6 +310,32 @@ def _n_free(model: Model) -> int:
     return int(sum(not p.fixed for p in model.parameters))
 
 
+def _restart_base(current: Model, x_cur: np.ndarray, effect, s0: np.ndarray, d: _Data):
+    """A fresh base start for an input-side effect at ``s0`` (None if not applicable).
+
+    The fitting stage's data-driven start of a GPI/EGPI computed on the input as
+    the effect transforms it: a fit without the effect has bent its thresholds
+    to absorb it, and a few profile iterations from there cannot undo that.
+    """
+    base = base_of(current)
+    if type(effect).transform_input is Effect.transform_input or not isinstance(
+        base, ParametricModel
+    ):
+        return None
+    from i2ris_calib.fitting.initial import initial_values
+
+    v_eff = effect.transform_input(d.signals, s0).v
+    try:
+        xb = initial_values(base, v_eff, np.where(d.fit, d.theta, np.nan))
+    except (ValueError, CalibError, np.linalg.LinAlgError):
+        return None
+    if not np.all(np.isfinite(xb)):
+        return None
+    x = x_cur.copy()
+    x[: xb.size] = xb
+    return x
+
+
 def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> Candidate:
     """Fit effect ``name`` as an extension of the fitted ``current`` model.
 
@@ -353,6 +380,22 @@ def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> 
         )
         nfev += r.nfev
         profiles.append(r)
+    profiles.sort(key=lambda r: r.sse_deg2)
+    for top in profiles[: cfg.n_restarts]:
+        s0 = top.values[m:]
+        xb = _restart_base(current, x_cur, effect, s0, d)
+        if xb is not None:
+            r = refit(
+                proto,
+                d.signals,
+                d.theta,
+                d.fit,
+                np.concatenate([xb, s0]),
+                free=base_only,
+                max_nfev=cfg.restart_nfev,
+            )
+            nfev += r.nfev
+            profiles.append(r)
     profiles.sort(key=lambda r: r.sse_deg2)
     best = None
     for start in profiles[:2]:

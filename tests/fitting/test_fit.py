@@ -156,3 +156,14 @@ def test_lm_out_of_bounds_is_held_at_the_bound(rng):
     assert res.params["r1"] == pytest.approx(lo)
     assert "r1" in res.message and math.isnan(res.stderr["r1"]) and res.converged
     assert all(p.lower <= p.value <= p.upper for p in res.model.parameters)
+
+
+def test_unidentified_parameters_get_nan_stderr(rng):
+    """Loading only: the stage-2 envelope never acts, its stderr is NaN, the rest finite."""
+    v = np.r_[np.zeros(20), np.linspace(0, 6000, 600)]
+    t = paper_like_params("yaw+")
+    theta = i2ris_egpi_model().evaluate_dict(v, t) + rng.normal(0, 0.1, v.size)
+    model = i2ris_egpi_model().with_fixed(fixed=("lam", "r1", "rn", "sigma"))
+    res = fit_model(model, v, theta, starts=[model.vector(t)])
+    assert math.isnan(res.stderr["a5"]) and math.isnan(res.stderr["kappa"])
+    assert math.isfinite(res.stderr["a1"]) and res.stderr["a1"] > 0

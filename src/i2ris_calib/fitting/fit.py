@@ -343,9 +343,12 @@ def _result(
         for a, ia in enumerate(lsq_idx):
             for b, ib in enumerate(lsq_idx):
                 cov[ia, ib] = c[a, b]
-        rank_def = not ok.all()
+        # parameters in the Jacobian's null space (unidentified by these data) get NaN
+        unidentified = (np.abs(evecs[:, ~ok]) > 0.1).any(axis=1)
         for a, ia in enumerate(lsq_idx):
-            stderr[names[ia]] = float("nan") if rank_def else float(np.sqrt(max(c[a, a], 0.0)))
+            stderr[names[ia]] = (
+                float("nan") if unidentified[a] else float(np.sqrt(max(c[a, a], 0.0)))
+            )
     for i in pidx:
         stderr[names[i]] = float("nan")
     converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)

@@ -45,7 +45,7 @@ class FitConfig:
     """
 
     method: str = "lm"
-    n_starts: int = 3
+    n_starts: int = 2
     n_starts_gpi: int = 2
     seed: int = 0
     max_nfev: int = 300

@@ -150,3 +150,28 @@ def test_bad_model_file_is_a_calib_error():
                 "effects": [{"name": "wobble", "params": {}}],
             }
         )
+
+
+def test_read_synced_selects_one_direction(tmp_path):
+    from i2ris_calib.io.diagnose import read_synced
+
+    t = np.arange(0, 30, 0.1)
+    enc = np.where(t < 10, 300 * t, np.where(t < 20, -200 * (t - 10), 0.0))  # +, -, rest
+    csv = tmp_path / "s.csv"
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": 0.01 * enc, "status": "measured"}).to_csv(
+        csv, index=False
+    )
+    sig, theta, neg = read_synced(csv, "yaw", "-")
+    assert neg and np.all(sig.v >= 0) and np.all(theta[np.isfinite(theta)] >= 0)
+    assert sig.v.size == int((enc < 5).sum())  # negative excursion and the rests
+    np.testing.assert_allclose(theta, 0.01 * sig.v)
+    sig, _, neg = read_synced(csv, "yaw", "auto")
+    assert not neg and sig.v.max() == enc.max()  # more samples on the + side
+
+
+def test_bad_direction_is_a_one_line_error(tmp_path, capsys):
+    csv = tmp_path / "s.csv"
+    t = np.arange(0, 10, 0.1)
+    pd.DataFrame({"time_s": t, "enc_yaw": 100 * t, "yaw_deg": t}).to_csv(csv, index=False)
+    rc, err = _run_error(capsys, [str(csv), "--axis", "yaw", "--direction", "up"])
+    assert rc == 2 and "--direction must be" in err

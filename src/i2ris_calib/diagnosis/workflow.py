@@ -355,47 +355,22 @@ def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> 
     m = x_cur.size
     base_only = np.ones(m + len(effect.params), dtype=bool)
     base_only[m:] = False
-    profiles, nfev = (
-        [
-            refit(
-                proto,
-                d.signals,
-                d.theta,
-                d.fit,
-                np.concatenate([x_cur, effect.neutral()]),
-                free=np.zeros(base_only.size, dtype=bool),
-            )
-        ],
-        0,
-    )
-    for s0 in effect.start_grid(d.signals, y_cur):
-        r = refit(
-            proto,
-            d.signals,
-            d.theta,
-            d.fit,
-            np.concatenate([x_cur, s0]),
-            free=base_only,
-            max_nfev=cfg.profile_nfev,
-        )
-        nfev += r.nfev
-        profiles.append(r)
+
+    def profile(x0: np.ndarray, nfev_cap: int):
+        return refit(proto, d.signals, d.theta, d.fit, x0, free=base_only, max_nfev=nfev_cap)
+
+    neutral = np.concatenate([x_cur, effect.neutral()])
+    profiles = [refit(proto, d.signals, d.theta, d.fit, neutral, free=np.zeros_like(base_only))]
+    profiles += [
+        profile(np.concatenate([x_cur, s0]), cfg.profile_nfev)
+        for s0 in effect.start_grid(d.signals, y_cur)
+    ]
     profiles.sort(key=lambda r: r.sse_deg2)
     for top in profiles[: cfg.n_restarts]:
-        s0 = top.values[m:]
-        xb = _restart_base(current, x_cur, effect, s0, d)
+        xb = _restart_base(current, x_cur, effect, top.values[m:], d)
         if xb is not None:
-            r = refit(
-                proto,
-                d.signals,
-                d.theta,
-                d.fit,
-                np.concatenate([xb, s0]),
-                free=base_only,
-                max_nfev=cfg.restart_nfev,
-            )
-            nfev += r.nfev
-            profiles.append(r)
+            profiles.append(profile(np.concatenate([xb, top.values[m:]]), cfg.restart_nfev))
+    nfev = sum(r.nfev for r in profiles)
     profiles.sort(key=lambda r: r.sse_deg2)
     best = None
     for start in profiles[:2]:

@@ -8,6 +8,7 @@ and one residual figure per model (``residual_00_start.png``,
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +22,17 @@ STARTS = ("gpi", "egpi")
 SCHEMA = "i2ris-calib.diagnosis/1"
 
 
-def read_synced(path: Path, axis: str) -> tuple[Signals, np.ndarray, bool]:
+def read_synced(
+    path: Path, axis: str, direction: str = "auto", zero_band_counts: float = 5.0
+) -> tuple[Signals, np.ndarray, bool]:
     """Signals and measured angle of ``axis`` from a synced CSV (docs/formats.md).
 
     Rows whose ``status`` is not ``measured`` keep their input but get a NaN
-    angle. When the axis's input is mostly negative, |counts| -> |deg| is used
-    (the paper's convention for negative-input datasets).
+    angle. One motion direction is diagnosed: ``"+"`` keeps the rows with input
+    above ``-zero_band_counts`` (positive excursions and rests), ``"-"`` those
+    below ``+zero_band_counts`` and uses |counts| -> |deg| (the paper's
+    convention), ``"auto"`` picks the direction with more samples outside the
+    zero band.
 
     Returns
     -------
@@ -78,10 +84,6 @@ def read_synced(path: Path, axis: str) -> tuple[Signals, np.ndarray, bool]:
         theta[df["status"].astype(str).to_numpy() != "measured"] = np.nan
     if np.isfinite(theta).sum() < 10:
         raise CalibError(f"{path}: fewer than 10 measured {axis} angles")
-    v = cols[f"enc_{axis}"]
-    abs_input = bool(np.median(v) < 0)
-    if abs_input:
-        v, theta = np.abs(v), np.abs(theta)
     th_other = cols.get(f"{other}_deg")
     if th_other is not None and "status" in df.columns:
         th_other = th_other.copy()
@@ -89,8 +91,32 @@ def read_synced(path: Path, axis: str) -> tuple[Signals, np.ndarray, bool]:
     if th_other is not None:
         ok = np.isfinite(th_other)
         th_other = np.interp(t, t[ok], th_other[ok]) if ok.sum() >= 2 else None
+    v = cols[f"enc_{axis}"]
+    sign = _direction(v, direction, zero_band_counts, path)
+    keep = v * sign > -zero_band_counts
+    theta = np.where(keep, theta, np.nan)[keep]
     sig = Signals(v=v, t_s=t, v_other=cols.get(f"enc_{other}"), theta_other_deg=th_other)
-    return sig, theta, abs_input
+    sig = sig.take(np.flatnonzero(keep))
+    if sign < 0:
+        sig = replace(sig, v=np.abs(sig.v))
+        theta = np.abs(theta)
+    if np.isfinite(theta).sum() < 10:
+        raise CalibError(f"{path}: fewer than 10 measured {axis} angles in direction {direction}")
+    return sig, theta, sign < 0
+
+
+def _direction(v: np.ndarray, direction: str, zero_band: float, path) -> int:
+    """+1 or -1: the motion direction to diagnose (see :func:`read_synced`)."""
+    n_pos, n_neg = int((v > zero_band).sum()), int((v < -zero_band).sum())
+    if direction == "auto":
+        if n_pos == 0 and n_neg == 0:
+            raise CalibError(f"{path}: the axis input never leaves +-{zero_band} counts")
+        return 1 if n_pos >= n_neg else -1
+    if direction not in ("+", "-"):
+        raise CalibError(f"--direction must be auto, + or -, got '{direction}'")
+    if (n_pos if direction == "+" else n_neg) < 10:
+        raise CalibError(f"{path}: fewer than 10 samples in direction {direction}")
+    return 1 if direction == "+" else -1
 
 
 def _figure(model: Model, signals: Signals, theta: np.ndarray, holdout: np.ndarray, title: str):
@@ -147,7 +173,12 @@ def _save(fig, path: Path) -> None:
 
 
 def diagnose_file(
-    data: Path, axis: str, start: str = "egpi", out: Path | None = None, config=None
+    data: Path,
+    axis: str,
+    start: str = "egpi",
+    out: Path | None = None,
+    config=None,
+    direction: str = "auto",
 ) -> dict:
     """Run the diagnosis on ``data`` and write ``out`` (see module doc). Returns diagnosis.json."""
     from rich.progress import Progress
@@ -163,7 +194,7 @@ def diagnose_file(
         raise CalibError(f"--start must be gpi or egpi, got '{start}'")
     cfg = config or PipelineConfig()
     out = Path(out) if out is not None else Path("diagnose_out")
-    signals, theta, abs_input = read_synced(Path(data), axis)
+    signals, theta, abs_input = read_synced(Path(data), axis, direction, cfg.fit.zero_band_counts)
     with Progress(transient=True) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {axis}: fitting {start}", total=None)
         base = fit_start_model(start, signals, theta, cfg.diagnose, cfg.fit)
@@ -183,6 +214,7 @@ def diagnose_file(
         axis=axis,
         start=start,
         source=str(data),
+        direction="-" if abs_input else "+",
         abs_input=abs_input,
         n_samples=int(theta.size),
         provenance=provenance([data], cfg),

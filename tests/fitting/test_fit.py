@@ -167,3 +167,23 @@ def test_unidentified_parameters_get_nan_stderr(rng):
     res = fit_model(model, v, theta, starts=[model.vector(t)])
     assert math.isnan(res.stderr["a5"]) and math.isnan(res.stderr["kappa"])
     assert math.isfinite(res.stderr["a1"]) and res.stderr["a1"] > 0
+
+
+def test_robust_loss_resists_outliers(egpi_data):
+    """Tracking outliers (5 % of samples, +-8 deg) pull plain LS; soft_l1 (trf) resists."""
+    truth, v, theta = egpi_data
+    rng = np.random.default_rng(11)
+    bad = theta.copy()
+    idx = rng.choice(v.size, v.size // 20, replace=False)
+    bad[idx] += rng.choice([-8.0, 8.0], idx.size)
+    y_true = i2ris_egpi_model().evaluate_dict(v, truth)
+
+    def model_err(cfg):
+        res = fit_kind("egpi", v, bad, cfg)
+        return float(np.sqrt(np.mean((res.predict(v) - y_true) ** 2)))
+
+    plain = model_err(FitConfig(n_starts=1))
+    robust = model_err(FitConfig(n_starts=1, method="trf", loss="soft_l1", f_scale_deg=0.3))
+    assert robust < 0.05 and robust < plain / 2
+    with pytest.raises(ValueError, match="trf"):
+        FitConfig(loss="huber").validate()

@@ -42,6 +42,11 @@ class FitConfig:
         |input| at or below this belongs to no motion-direction dataset.
     min_block_samples : int
         Motion-direction blocks with fewer samples are ignored.
+    loss : str
+        ``"linear"`` (Eq24, plain least squares), or the robust ``"soft_l1"`` /
+        ``"huber"`` (need ``method = "trf"``) against tracking outliers.
+    f_scale_deg : float
+        Residual scale (deg) beyond which a robust loss down-weights.
     """
 
     method: str = "lm"
@@ -57,6 +62,8 @@ class FitConfig:
     holdout_fraction: float = 0.25
     zero_band_counts: float = 5.0
     min_block_samples: int = 50
+    loss: str = "linear"
+    f_scale_deg: float = 0.5
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
@@ -70,6 +77,12 @@ class FitConfig:
             raise ValueError("n_operators must be >= 1")
         if not 0.0 <= self.holdout_fraction < 1.0:
             raise ValueError("holdout_fraction must be in [0, 1)")
+        if self.loss not in ("linear", "soft_l1", "huber"):
+            raise ValueError(f"loss '{self.loss}' is not one of linear, soft_l1, huber")
+        if self.loss != "linear" and self.method != "trf":
+            raise ValueError(f"loss '{self.loss}' needs method = \"trf\"")
+        if self.f_scale_deg <= 0:
+            raise ValueError("f_scale_deg must be > 0")
         if self.zero_band_counts < 0:
             raise ValueError("zero_band_counts must be >= 0")
         known_gpi = {"a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn"}

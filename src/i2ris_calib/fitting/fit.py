@@ -89,9 +89,24 @@ class FitResult:
 
 
 class _Counter:
-    def __init__(self, model, signals, theta, used):
+    def __init__(self, model, signals, theta, used, loss="linear", f_scale=1.0):
         self.model, self.signals, self.theta, self.used = model, signals, theta, used
+        self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
+
+    def sq_cost(self, full: np.ndarray) -> float:
+        """Plain sum of squared residuals. The flag-point profile always uses it: a
+        robust loss would treat the residuals of a misplaced output step as outliers."""
+        return float(np.sum(self.residuals(full) ** 2))
+
+    def cost(self, full: np.ndarray) -> float:
+        """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
+        z = (self.residuals(full) / self.f_scale) ** 2
+        if self.loss == "soft_l1":
+            z = 2.0 * (np.sqrt(1.0 + z) - 1.0)
+        elif self.loss == "huber":
+            z = np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0)
+        return float(np.sum(z) * self.f_scale**2)
 
     def residuals(self, full: np.ndarray) -> np.ndarray:
         self.n += 1
@@ -131,7 +146,15 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
         lo, hi = lower[free], upper[free]
         x0 = np.clip(x0, lo + 1e-12 * np.abs(lo), hi - 1e-12 * np.abs(hi))
         res = least_squares(
-            fun, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev
+            fun,
+            x0,
+            bounds=(lo, hi),
+            method="trf",
+            x_scale="jac",
+            max_nfev=max_nfev,
+            ftol=ftol,
+            loss=counter.loss,
+            f_scale=counter.f_scale,
         )
     elif method == "lm":
         res = least_squares(fun, x0, method="lm", x_scale="jac", max_nfev=max_nfev, ftol=ftol)
@@ -144,11 +167,11 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
 
 def _profile(counter, full, idx, grid):
     """Best value of parameter ``idx`` on ``grid`` with the others held; returns (value, cost)."""
-    best = (full[idx], float(np.sum(counter.residuals(full) ** 2)))
+    best = (full[idx], counter.sq_cost(full))
     trial = full.copy()
     for g in grid:
         trial[idx] = g
-        c = float(np.sum(counter.residuals(trial) ** 2))
+        c = counter.sq_cost(trial)
         if c < best[1]:
             best = (g, c)
     return best
@@ -180,7 +203,7 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
         trial = full.copy()
         for j, c in enumerate(cands):
             trial[idx] = c
-            costs[j] = np.sum(counter.residuals(trial) ** 2)
+            costs[j] = counter.sq_cost(trial)
         tied = np.flatnonzero(costs <= costs.min() * (1 + 1e-12))
         run = tied[np.concatenate(([0], np.flatnonzero(np.diff(tied) > 1) + 1))[0] :]
         run = run[: np.argmax(np.diff(np.append(run, run[-1] + 2)) > 1) + 1]
@@ -201,6 +224,8 @@ def fit_model(
     max_nfev: int | None = 300,
     screen_nfev: int = 20,
     ftol: float = 1e-7,
+    loss: str = "linear",
+    f_scale_deg: float = 0.5,
 ) -> FitResult:
     """Fit ``model`` to measured angles by least squares (Eq24).
 
@@ -230,6 +255,10 @@ def fit_model(
         iterations; only the best is run to convergence.
     ftol : float
         Relative cost-reduction tolerance of ``least_squares``.
+    loss : {"linear", "soft_l1", "huber"}
+        ``"linear"`` is Eq24 (plain least squares). The robust losses down-weight
+        residuals beyond ``f_scale_deg`` (e.g. tracking outliers); they need
+        ``method="trf"``. Metrics are always Eq25-27 on every sample.
 
     Returns
     -------
@@ -256,7 +285,13 @@ def fit_model(
     if fit_mask is not None:
         used &= np.asarray(fit_mask, bool)
     _validate(s, theta, int(is_free.sum()), used)
-    counter = _Counter(model, s, theta, used)
+    if loss not in ("linear", "soft_l1", "huber"):
+        raise CalibError(f"fit: unknown loss '{loss}'; use linear, soft_l1 or huber")
+    if loss != "linear" and method != "trf":
+        raise CalibError(
+            f"fit: loss '{loss}' needs method 'trf' (MINPACK LM is plain least squares)"
+        )
+    counter = _Counter(model, s, theta, used, loss, f_scale_deg)
     starts = [np.array([p.value for p in params], dtype=float)] if not starts else starts
 
     def run(x0, nfev_limit, steps):
@@ -266,12 +301,23 @@ def fit_model(
                 full, res = _lsq(counter, full, lsq_free, lower, upper, method, nfev_limit, ftol)
             elif step in ("wide", "fine"):
                 full = _refine_profiled(counter, full, pidx, v, lower, upper, wide=step == "wide")
-        return float(np.sum(counter.residuals(full) ** 2)), full, res
+        return counter.cost(full), full, res
 
     # every start: fine v_f grid, LM, wide v_f grid, LM (short when several starts); then the best
     # one: LM to convergence, fine v_f grid, LM.
     first = ("fine", "lm", "wide", "lm")
-    if len(starts) > 1:
+    if loss != "linear":
+        # robust fits start from the plain least-squares fit (outliers also bias the
+        # data-driven starts), then refine with the robust loss
+        plain = fit_model(
+            model, s, theta, fit_mask=fit_mask, holdout_mask=holdout_mask, starts=starts,
+            method=method, max_nfev=max_nfev, screen_nfev=screen_nfev, ftol=ftol,
+        )  # fmt: skip
+        counter.n += plain.nfev
+        best = run(
+            np.array([p.value for p in plain.model.parameters]), max_nfev, ("lm", "fine", "lm")
+        )
+    elif len(starts) > 1:
         screened = [run(x0, screen_nfev, first) for x0 in starts]
         best = run(min(screened, key=lambda c: c[0])[1], max_nfev, ("lm", "fine", "lm"))
     else:

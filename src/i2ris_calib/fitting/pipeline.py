@@ -99,6 +99,8 @@ def fit_kind(
         starts=starts,
         method=config.method,
         max_nfev=config.max_nfev,
+        loss=config.loss,
+        f_scale_deg=config.f_scale_deg,
     )
 
 

@@ -322,14 +322,33 @@ def fit_model(
         best = run(min(screened, key=lambda c: c[0])[1], max_nfev, ("lm", "fine", "lm"))
     else:
         best = run(starts[0], max_nfev, first + ("fine", "lm"))
-    cost, full, res = best
-    # Unphysical values (negative slopes, thresholds, sigma, kappa) extrapolate badly:
-    # an unbounded LM end point outside the bounds is repaired by an active-set step -
-    # the offending parameters are held at the violated bound and LM refits the rest.
+    _, full, res = best
     held: list[int] = []
-    for _ in range(3):
+    if method == "lm":
+        full, res, lsq_free, held = _hold_at_bounds(
+            counter, full, res, lsq_free, lower, upper, max_nfev, ftol
+        )
+    result = _result(
+        model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts), lsq_free
+    )  # fmt: skip
+    if not held:
+        return result
+    stderr = result.stderr | {names[i]: float("nan") for i in held}
+    note = f" [LM left the bounds; held at the bound: {', '.join(names[i] for i in held)}]"
+    return replace(result, message=result.message + note, stderr=stderr)
+
+
+def _hold_at_bounds(counter, full, res, lsq_free, lower, upper, max_nfev, ftol, rounds=3):
+    """Active-set repair of an unbounded LM end point.
+
+    Unphysical values (negative slopes, thresholds, sigma, kappa) extrapolate badly:
+    parameters outside their bounds are held at the violated bound and LM refits the
+    rest, up to ``rounds`` times. Returns (full, res, remaining free indices, held indices).
+    """
+    held: list[int] = []
+    for _ in range(rounds):
         outside = _outside(full, lsq_free, lower, upper)
-        if method != "lm" or not outside:
+        if not outside:
             break
         full = full.copy()
         full[outside] = np.clip(full[outside], lower[outside], upper[outside])
@@ -337,26 +356,7 @@ def fit_model(
         lsq_free = np.array([i for i in lsq_free if i not in held], dtype=int)
         if lsq_free.size:
             full, res = _lsq(counter, full, lsq_free, lower, upper, "lm", max_nfev, ftol)
-    result = _result(
-        model,
-        s,
-        theta,
-        used,
-        hold,
-        full,
-        res,
-        names,
-        is_free,
-        pidx,
-        counter.n,
-        len(starts),
-        lsq_free,
-    )
-    if not held:
-        return result
-    stderr = result.stderr | {names[i]: float("nan") for i in held}
-    note = f" [LM left the bounds; held at the bound: {', '.join(names[i] for i in held)}]"
-    return replace(result, message=result.message + note, stderr=stderr)
+    return full, res, lsq_free, held
 
 
 def _outside(full, free, lower, upper) -> list[int]:

@@ -241,8 +241,8 @@ class RateDependence(Effect):
         """Backlash half-width ``h = gain_s * S`` (counts), shape (n,).
 
         ``S`` is the peak input speed of the current movement (running maximum
-        of the 5-sample moving average of |dv/dt|, counts/s), held while the
-        input stops (speed below 5 % of its 95th percentile).
+        of the speed over the last 0.2 s, counts/s), held while the input stops
+        (speed below 5 % of its 95th percentile).
         """
         from i2ris_calib.diagnosis._kernels import held_speed
 
@@ -260,11 +260,19 @@ class RateDependence(Effect):
         return [np.array([f * span / s95]) for f in (0.003, 0.007, 0.015, 0.03, 0.06)]
 
 
+SPEED_WINDOW_S = 0.2
+
+
 def _stroke_speed(signals: Signals) -> tuple[np.ndarray, float]:
-    """Smoothed speed |dv/dt| (counts/s), shape (n,), and the 'moving' threshold."""
-    speed = np.abs(_rate(signals))
-    if speed.size >= 5:
-        speed = np.convolve(speed, np.full(5, 0.2), mode="same")
+    """Input speed over the last ``SPEED_WINDOW_S`` seconds (counts/s), shape (n,),
+    and the 'moving' threshold (5 % of its 95th percentile).
+
+    ``|v(t) - v(t - w)| / w`` with ``v`` interpolated in time, so the estimate does
+    not depend on the sampling rate (the diagnosis may decimate the signal).
+    """
+    t = np.asarray(signals.t_s, float)
+    v = np.asarray(signals.v, float)
+    speed = np.abs(v - np.interp(t - SPEED_WINDOW_S, t, v)) / SPEED_WINDOW_S
     thr = 0.05 * float(np.quantile(speed, 0.95)) if speed.size else 0.0
     return np.ascontiguousarray(speed), thr
 

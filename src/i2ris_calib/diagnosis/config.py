@@ -43,7 +43,9 @@ class DiagnosisConfig:
     global_max_nfev : int
         Evaluation cap of that global refit (its screening runs get a quarter).
     n_finalists : int
-        Significant candidates refitted globally before the choice.
+        Promising candidates refitted globally (and judged again) before the choice.
+    promising_z : float
+        Held-out z above which a warm-fitted candidate may become a finalist.
     tie_rel : float
         Finalists whose held-out RMSE is within this fraction of the best are
         ranked by BIC instead.
@@ -65,7 +67,8 @@ class DiagnosisConfig:
     start_max_nfev: int = 60
     n_global_starts: int = 3
     global_max_nfev: int = 400
-    n_finalists: int = 2
+    n_finalists: int = 3
+    promising_z: float = 1.0
     tie_rel: float = 0.02
     seed: int = 0
 

@@ -27,7 +27,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import stats
@@ -122,6 +122,7 @@ class Candidate:
     comparison: Comparison | None
     skipped: str | None = None
     nfev: int = 0
+    stage: str = "warm"
 
     def as_dict(self) -> dict:
         """JSON-ready dict (parameters of the effect only)."""
@@ -132,6 +133,7 @@ class Candidate:
             "params": effects_of(self.model)[-1][2],
             "metrics": self.metrics.as_dict(),
             "evidence": self.comparison.as_dict(),
+            "fit": self.stage,
             "nfev": self.nfev,
         }
 
@@ -384,19 +386,11 @@ def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> 
     )
 
 
-def _choose(passing: list[Candidate], d: _Data, cfg: DiagnosisConfig) -> Candidate:
-    """The winner among significant candidates, after a global refit of the best
-    ``n_finalists``: lowest held-out RMSE; within ``tie_rel`` of it, lowest BIC.
-
-    Candidates that mimic each other (a delay and a fast creep, say) reach
-    similar errors from a warm start; refitting the finalists globally before
-    choosing keeps the choice from depending on which local fit happened to
-    converge further.
-    """
-    ranked = sorted(passing, key=lambda c: c.metrics.holdout_rmse_deg)
-    finals = [_polished(c, d, cfg) for c in ranked[: cfg.n_finalists]]
-    top = min(c.metrics.holdout_rmse_deg for c in finals)
-    close = [c for c in finals if c.metrics.holdout_rmse_deg <= top * (1 + cfg.tie_rel)]
+def _pick(passing: list[Candidate], cfg: DiagnosisConfig) -> Candidate:
+    """The winner: lowest held-out RMSE; finalists within ``tie_rel`` of it are
+    ranked by BIC (so the simpler of two equivalent effects wins)."""
+    top = min(c.metrics.holdout_rmse_deg for c in passing)
+    close = [c for c in passing if c.metrics.holdout_rmse_deg <= top * (1 + cfg.tie_rel)]
     return min(close, key=lambda c: c.metrics.bic)
 
 
@@ -443,7 +437,12 @@ def _polished(c: Candidate, d: _Data, cfg: DiagnosisConfig) -> Candidate:
     best = r.values if r.sse_deg2 <= sse(model, d.signals, d.theta, d.fit, x) else x
     model = model.with_values(best)
     return Candidate(
-        c.effect, model, metrics_of(model, best, d, _n_free(model)), c.comparison, nfev=c.nfev
+        c.effect,
+        model,
+        metrics_of(model, best, d, _n_free(model)),
+        c.comparison,
+        nfev=c.nfev,
+        stage="global",
     )
 
 
@@ -509,7 +508,7 @@ def _analysis(model: Model, d: _Data) -> tuple[dict, tuple[str, ...]]:
 
 
 def _round(current, cur_m, names, d, cfg, progress) -> tuple[Candidate, ...]:
-    """Every catalogue effect not yet in ``current``, fitted and compared."""
+    """Every catalogue effect not yet in ``current``, warm-fitted and compared."""
     done = {e for e, _, _ in effects_of(current)}
     cands = []
     for name in names:
@@ -518,11 +517,37 @@ def _round(current, cur_m, names, d, cfg, progress) -> tuple[Candidate, ...]:
         if progress:
             progress(name)
         c = fit_candidate(current, name, d, cfg)
-        if c.model is not None:
-            comp = compare((current, cur_m), (c.model, c.metrics), d, cfg)
-            c = Candidate(c.effect, c.model, c.metrics, comp, nfev=c.nfev)
-        cands.append(c)
+        cands.append(_judged(c, current, cur_m, d, cfg))
     return tuple(cands)
+
+
+def _judged(c: Candidate, current: Model, cur_m: Metrics, d: _Data, cfg) -> Candidate:
+    """``c`` with its held-out comparison against the current model."""
+    if c.model is None:
+        return c
+    comp = compare((current, cur_m), (c.model, c.metrics), d, cfg)
+    return replace(c, comparison=comp)
+
+
+def _finalists(cands, current, cur_m, d, cfg, progress) -> list[Candidate]:
+    """The promising candidates (held-out z > ``promising_z`` and held-out RMSE
+    lower), best ``n_finalists`` by held-out RMSE, refitted globally and judged
+    again. A warm fit can miss an effect the base has absorbed (its comparison
+    then looks weak); the global refit gives it a fair chance."""
+    promising = [
+        c
+        for c in cands
+        if c.comparison is not None
+        and c.comparison.z > cfg.promising_z
+        and c.comparison.rel_improvement > 0
+    ]
+    ranked = sorted(promising, key=lambda c: c.metrics.holdout_rmse_deg)[: cfg.n_finalists]
+    out = []
+    for c in ranked:
+        if progress:
+            progress(f"{c.effect} (global refit)")
+        out.append(_judged(_polished(c, d, cfg), current, cur_m, d, cfg))
+    return out
 
 
 def _null_reference(current, cur_m, best: Candidate, d, cfg):
@@ -612,8 +637,11 @@ def _diagnose(start, signals, theta_deg, cfg, progress) -> Diagnosis:
     for _ in range(cfg.max_steps):
         analysis, sentences = _analysis(current, d)
         cands = _round(current, cur_m, names, d, cfg, progress)
+        finals = _finalists(cands, current, cur_m, d, cfg, progress)
+        refitted = {c.effect: c for c in finals}
+        cands = tuple(refitted.get(c.effect, c) for c in cands)
         last = cands
-        passing = [c for c in cands if c.comparison is not None and c.comparison.significant]
+        passing = [c for c in finals if c.comparison.significant]
         if not passing:
             break
         best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
@@ -624,7 +652,7 @@ def _diagnose(start, signals, theta_deg, cfg, progress) -> Diagnosis:
             if not passing:
                 current, cur_m = ref
                 continue
-        best = _choose(passing, d, cfg)
+        best = _pick(passing, cfg)
         steps.append(
             Step(
                 effect=best.effect,

@@ -76,3 +76,54 @@ def test_residual_analysis_locates_branch_rate_and_lag():
     assert abs(a["xcorr_input"]["peak_rate_lag_s"] - 0.5) <= 0.1
     text = " ".join(concentration_sentences(a))
     assert "unloading branch" in text and "lag +0.5" in text
+
+
+def test_markdown_section_from_a_record():
+    from i2ris_calib.diagnosis.report import diagnosis_markdown
+
+    m = {"fit_rmse_deg": 0.2, "holdout_rmse_deg": 0.21, "bic": -10.0, "n_free": 12}
+    ev = {
+        "rel_improvement": 0.5,
+        "z": 9.0,
+        "p_value": 1e-9,
+        "units_improved": 5,
+        "n_units": 6,
+        "delta_bic": -50.0,
+        "significant": True,
+    }
+    rec = {
+        "axis": "pitch",
+        "start": "egpi",
+        "baseline": m | {"holdout_rmse_deg": 0.42},
+        "final": m,
+        "named_effects": ["creep"],
+        "figures": ["a.png", "b.png"],
+        "notes": [],
+        "steps": [
+            {
+                "effect": "creep",
+                "meaning": "slow",
+                "params": {"gain": 0.2, "tau_s": 1.0},
+                "location_before": ["x"],
+                "holdout_rmse_before_deg": 0.42,
+                "holdout_rmse_after_deg": 0.21,
+                "delta_bic": -50.0,
+                "evidence": ev,
+                "candidates": [
+                    {"effect": "creep", "fit": "global", "metrics": m, "evidence": ev},
+                    {"effect": "axis_coupling", "skipped": "no other axis"},
+                ],
+                "figures": {"before": "a.png", "after": "b.png"},
+            }
+        ],
+        "location_final": ["y"],
+        "last_candidates": [],
+    }
+    md = diagnosis_markdown(rec)
+    assert md.startswith("## Model diagnosis (pitch)")
+    assert "**creep**" in md and "0.42 -> 0.21 deg (50% lower)" in md
+    assert "![residual after creep](b.png)" in md
+    rows = [
+        r for r in md.splitlines() if r.startswith("| creep |") or r.startswith("| axis_coupling |")
+    ]
+    assert len({r.count("|") for r in rows}) == 1  # skipped rows keep the table's columns

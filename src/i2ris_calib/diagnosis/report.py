@@ -114,8 +114,8 @@ def diagnosis_markdown(rec: dict) -> str:
             f"{ev['units_improved']}/{ev['n_units']} held-out strokes improved, "
             f"BIC change {s['delta_bic']:.1f}.",
             "",
-            "| candidate | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
-            "|---|---|---|---|---|---|",
+            "| candidate | fit | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
+            "|---|---|---|---|---|---|---|",
         ]
         lines += _candidate_rows(s["candidates"], s["effect"])
         lines += ["", f"![residual after {s['effect']}]({s['figures']['after']})", ""]
@@ -124,8 +124,8 @@ def diagnosis_markdown(rec: dict) -> str:
         lines += [
             "Last round (nothing named):",
             "",
-            "| candidate | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
-            "|---|---|---|---|---|---|",
+            "| candidate | fit | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
+            "|---|---|---|---|---|---|---|",
             *_candidate_rows(rec["last_candidates"], None),
             "",
         ]
@@ -138,11 +138,11 @@ def _candidate_rows(cands: list[dict], chosen: str | None) -> list[str]:
     rows = []
     for c in cands:
         if "skipped" in c:
-            rows.append(f"| {c['effect']} | skipped: {c['skipped']} | | | | |")
+            rows.append(f"| {c['effect']} | skipped: {c['skipped']} | | | | | |")
             continue
         e = c["evidence"]
         rows.append(
-            f"| {c['effect']} | {_fmt(c['metrics']['holdout_rmse_deg'])} | "
+            f"| {c['effect']} | {c.get('fit', 'warm')} | {_fmt(c['metrics']['holdout_rmse_deg'])} | "
             f"{100 * e['rel_improvement']:.1f}% | {e['z']:.1f} | {e['delta_bic']:.1f} | "
             f"{'yes' if c['effect'] == chosen else 'no'} |"
         )

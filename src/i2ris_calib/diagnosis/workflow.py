@@ -18,10 +18,12 @@
    - BIC on the fitted samples falls by at least ``min_delta_bic`` (10 is "very
      strong" evidence on the Kass-Raftery scale).
 
-   It must also beat, by the same rule, the current model refitted from the
-   candidate's base values (so an effect is never credited with what was only a
-   better optimum of the base model). Among significant candidates the lowest
-   held-out RMSE wins.
+   Warm fits that look promising (held-out z > ``promising_z``) are refitted
+   globally (the fitting stage's multi-start fit) and judged again; only these
+   finalists can be named. The winner must also beat, by the same rule, the
+   current model refitted from its base values (so an effect is never credited
+   with what was only a better optimum of the base model). Among significant
+   finalists the lowest held-out RMSE wins, BIC breaking near-ties.
 3. *Add and repeat* until no candidate is significant or ``max_steps`` is reached.
 """
 

@@ -104,7 +104,7 @@ def sync(
     ),
     config: Path | None = ConfigOpt,
     method: str | None = typer.Option(
-        None, "--method", help="auto, event, model or xcorr (overrides [sync] method)."
+        None, "--method", help="auto, event, model or xcorr (overrides sync.method of the config)."
     ),
 ) -> None:
     """Estimate camera/encoder clock offset and drift; write the synced CSV."""

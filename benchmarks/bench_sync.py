@@ -18,7 +18,7 @@ import argparse
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -30,6 +30,9 @@ from i2ris_calib.sync.estimate import estimate_clock  # noqa: E402
 from i2ris_calib.sync.synthetic import make_sync_case  # noqa: E402
 
 FLASHES_3 = ((0.5, 0.4), (30.0, 0.6), (58.0, 0.3))
+# like i2ris-calib simulate's defaults: 10 ms exposure at 30 fps, 100 Hz log sampling the LED
+SIM_LIKE = {"flashes": ((0.5, 0.2), (59.0, 0.2)), "exposure_frac": 0.3, "log_rate_hz": 100.0}
+SIM_LIKE_SYNC = SyncConfig(method="auto", log_edge_at="midpoint", exposure_s=0.01)
 
 
 @dataclass(frozen=True)
@@ -57,22 +60,13 @@ def scenarios() -> list[Scenario]:
         ),
         Scenario(
             "event: 10 ms exposure @30 fps, LED sampled at 100 Hz, 2 flashes (simulator-like)",
-            dict(
-                flashes=((0.5, 0.2), (59.0, 0.2)),
-                exposure_frac=0.3,
-                log_rate_hz=100.0,
-            ),
-            SyncConfig(method="event", log_edge_at="midpoint", exposure_s=0.01),
+            SIM_LIKE,
+            replace(SIM_LIKE_SYNC, method="event"),
         ),
         Scenario(
             "auto: the simulator-like event above refined by the EGPI profile, backlash 6 deg",
-            dict(
-                flashes=((0.5, 0.2), (59.0, 0.2)),
-                exposure_frac=0.3,
-                log_rate_hz=100.0,
-                backlash_deg=6.0,
-            ),
-            SyncConfig(method="auto", log_edge_at="midpoint", exposure_s=0.01),
+            SIM_LIKE | {"backlash_deg": 6.0},
+            SIM_LIKE_SYNC,
         ),
         *[
             Scenario(

@@ -133,7 +133,7 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
             "sync",
             sync_dir,
             (*raw, angles),
-            config.sync,
+            (config.sync, config.fit),  # the model-based clock estimate refits with [fit]
             lambda: sync_session(session, angles, sync_dir, config),
         ),
     ]

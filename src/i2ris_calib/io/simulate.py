@@ -209,7 +209,7 @@ def _render_all(plans: list[CameraPlan], cube, cfg: SimulationConfig, progress: 
 
     from rich.progress import Progress
 
-    ctx = mp.get_context("fork")
+    ctx = mp.get_context("spawn")  # fork can deadlock on inherited OpenCV threads
     counter = ctx.Value("l", 0)
     total = sum(len(p.rotations) for p in plans)
     with ProcessPoolExecutor(

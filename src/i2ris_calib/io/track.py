@@ -200,7 +200,7 @@ def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: 
     }
     if cfg.workers <= 1:
         return {n: detect_stream(*a) for n, a in jobs.items()}
-    ctx = mp.get_context("fork")
+    ctx = mp.get_context("spawn")  # fork can deadlock on inherited OpenCV threads
     counter = ctx.Value("l", 0)
     with ProcessPoolExecutor(min(cfg.workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
                              initargs=(counter,)) as ex:  # fmt: skip

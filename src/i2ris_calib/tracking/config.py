@@ -35,6 +35,12 @@ class TrackingConfig:
     # --- reference (straight) pose -----------------------------------------------
     reference_start_s: float = 0.0  # window start, s after the first frame
     reference_duration_s: float = 0.8  # window length (s); the tip must be straight in it
+    # --- calibrate: the ChArUco board ----------------------------------------------
+    charuco_squares: tuple[int, int] = (7, 5)  # squares along x, y
+    charuco_square_mm: float = 1.0
+    charuco_marker_mm: float = 0.7
+    charuco_dictionary: str = "DICT_4X4_50"
+    calibration_every_nth_frame: int = 10  # video input: use every n-th frame
     # --- output -------------------------------------------------------------------
     plain: bool = True  # also write single-camera IPPE top-solution angles (comparison)
 
@@ -52,5 +58,11 @@ class TrackingConfig:
             raise ValueError("reference_duration_s must be > 0")
         if self.ambiguity_ratio < 1.0:
             raise ValueError("ambiguity_ratio must be >= 1")
+        if not 0 < self.charuco_marker_mm < self.charuco_square_mm:
+            raise ValueError("charuco_marker_mm must be > 0 and smaller than charuco_square_mm")
+        if min(self.charuco_squares) < 2 or self.calibration_every_nth_frame < 1:
+            raise ValueError(
+                "charuco_squares must be >= 2 each and calibration_every_nth_frame >= 1"
+            )
         if self.max_reproj_err_px <= 0 or self.iterations < 1:
             raise ValueError("max_reproj_err_px must be > 0 and iterations >= 1")

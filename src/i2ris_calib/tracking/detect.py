@@ -65,6 +65,8 @@ class MarkerDetector:
         p.cornerRefinementWinSize = int(cfg.corner_win_size_px)
         p.cornerRefinementMaxIterations = int(cfg.corner_max_iterations)
         p.cornerRefinementMinAccuracy = float(cfg.corner_accuracy_px)
+        # markers near the border are kept here and judged by touches_border()
+        p.minDistanceToBorder = 0
         self._full = cv2.aruco.ArucoDetector(aruco_dictionary(dictionary), p)
         self._last: np.ndarray | None = None
 

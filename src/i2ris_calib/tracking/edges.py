@@ -78,21 +78,37 @@ def _edge_line(gray, p0, p1, centre, hw, span):
     steps, start, runs = steps[ok], start[ok], runs[ok]
     vals = gray[steps[:, None], runs] if vertical else gray[runs, steps[:, None]]
     vals = vals.astype(float)
-    # the marker (dark) lies towards the centre
+    # the marker (dark) lies towards the centre; orient runs bright -> dark
     inner_high = centre[b] > np.mean(pos)
-    bright = vals[:, :2].mean(axis=1) if inner_high else vals[:, -2:].mean(axis=1)
-    dark = vals[:, -2:].mean(axis=1) if inner_high else vals[:, :2].mean(axis=1)
-    contrast = bright - dark
-    good = contrast > 10.0
+    if not inner_high:
+        vals = vals[:, ::-1]
+    norm, good = _normalised(vals)
     if good.sum() < 5:
         return None
-    norm = (vals[good] - dark[good, None]) / contrast[good, None]
     s = norm.sum(axis=1)
     cross = (start[good] - 0.5 + s) if inner_high else (runs[good, -1] + 0.5 - s)
     pts = np.empty((good.sum(), 2))
     pts[:, a] = steps[good]
     pts[:, b] = cross
     return _fit_line(pts)
+
+
+def _normalised(vals: np.ndarray):
+    """(I - dark) / (bright - dark) per pixel for runs (m, k) ordered bright -> dark.
+
+    Bright and dark levels are the means of the three end pixels of each run,
+    extrapolated along the run with the slope pooled over all runs of the edge:
+    uneven illumination (a linear ramp across the edge) then biases nothing.
+    """
+    k = vals.shape[1]
+    x = np.arange(k, dtype=float)
+    slope_b = float(np.mean(vals[:, 2] - vals[:, 0]) / 2.0)
+    slope_d = float(np.mean(vals[:, -1] - vals[:, -3]) / 2.0)
+    bright = vals[:, :3].mean(axis=1)[:, None] + slope_b * (x - 1.0)[None, :]
+    dark = vals[:, -3:].mean(axis=1)[:, None] + slope_d * (x - (k - 2.0))[None, :]
+    contrast = bright - dark
+    good = contrast.min(axis=1) > 10.0
+    return ((vals - dark) / np.where(contrast > 1e-6, contrast, 1.0))[good], good
 
 
 def _fit_line(pts: np.ndarray):

@@ -42,6 +42,7 @@ class StreamResult:
     roi_hits: int
     edge_refined: int
     seconds: float
+    cpu_seconds: float
 
 
 def track_session(session: Path, out: Path | None, config) -> Path:
@@ -165,6 +166,7 @@ def detect_stream(
     det = MarkerDetector(dictionary, marker_id, cfg)
     corners, gray, border, others = [], [], [], {}
     shape, roi_hits, edge_refined, t0 = (0, 0), 0, 0, time.perf_counter()
+    c0 = time.process_time()
     for k, img in enumerate(iter_frames(video)):
         shape = img.shape[:2]
         d = det.detect(img)
@@ -183,7 +185,8 @@ def detect_stream(
             with _COUNTER.get_lock():
                 _COUNTER.value += 20
     return StreamResult(np.array(corners).reshape(-1, 4, 2), np.array(gray), np.array(border, bool), others,
-                        shape, roi_hits, edge_refined, time.perf_counter() - t0)  # fmt: skip
+                        shape, roi_hits, edge_refined, time.perf_counter() - t0,
+                        time.process_time() - c0)  # fmt: skip
 
 
 def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: bool) -> dict:
@@ -360,7 +363,9 @@ def _summary(df: pd.DataFrame, res: fz.FusionResult, streams: dict, names, M, re
              "edge_refined": int(s.edge_refined),
              "other_ids_seen": {str(k): v for k, v in s.other_ids.items()},
              "seconds": round(s.seconds, 3),
-             "frames_per_s": round(len(s.corners) / max(s.seconds, 1e-9), 1)}
+             "frames_per_s": round(len(s.corners) / max(s.seconds, 1e-9), 1),
+             "cpu_seconds": round(s.cpu_seconds, 3),
+             "frames_per_cpu_s": round(len(s.corners) / max(s.cpu_seconds, 1e-9), 1)}
         for n_, s in streams.items()
     }  # fmt: skip
     return {

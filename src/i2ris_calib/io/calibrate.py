@@ -19,9 +19,10 @@ def _node_matrix(node, rows: int, cols: int | None = None) -> np.ndarray:
     """Matrix from an OpenCV matrix node or a ROS ``{rows, cols, data}`` map."""
     if node.empty():
         return np.zeros((0,))
-    m = node.mat()
-    if m is not None and m.size:
-        return np.asarray(m, dtype=float)
+    if not (node.isMap() and node.getNode("dt").empty()):  # OpenCV matrix node
+        m = node.mat()
+        if m is not None and m.size:
+            return np.asarray(m, dtype=float)
     data = node.getNode("data") if node.isMap() else node
     if not data.isSeq():
         return np.zeros((0,))
@@ -54,7 +55,8 @@ def read_camera_yaml(path: str | Path) -> tuple[np.ndarray, np.ndarray, int, int
         w = int(fs.getNode("image_width").real()) if not fs.getNode("image_width").empty() else 0
         h = int(fs.getNode("image_height").real()) if not fs.getNode("image_height").empty() else 0
     except (cv2.error, ValueError) as exc:
-        raise CalibError(f"{p}: malformed camera_matrix/distortion_coefficients ({exc})") from None
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        raise CalibError(f"{p}: malformed camera_matrix/distortion_coefficients ({msg})") from None
     finally:
         fs.release()
     if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:

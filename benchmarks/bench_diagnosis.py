@@ -29,6 +29,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.effects import CATALOGUE  # noqa: E402
 from i2ris_calib.diagnosis.synthetic import STRENGTHS, make_case  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model  # noqa: E402
@@ -51,12 +52,12 @@ def cases(quick: bool) -> list[tuple[str | None, dict | None, float, int]]:
     return out
 
 
-def run_case(effect, params, noise, seed) -> dict:
+def run_case(effect, params, noise, seed, config=None) -> dict:
     """Diagnose one case; the row of the results table."""
     case = make_case(seed, effect, params, noise_deg=noise)
     t0 = time.perf_counter()
-    start = fit_start_model("egpi", case.signals, case.theta_deg)
-    diag = diagnose(start, case.signals, case.theta_deg)
+    start = fit_start_model("egpi", case.signals, case.theta_deg, config)
+    diag = diagnose(start, case.signals, case.theta_deg, config)
     dt = time.perf_counter() - t0
     named = diag.named_effects
     shrink = 1.0 - diag.final.holdout_rmse_deg / diag.baseline.holdout_rmse_deg
@@ -95,10 +96,14 @@ def confusion(rows: list[dict]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one strength, one noise level")
+    ap.add_argument(
+        "--choose-by", default="holdout", choices=("holdout", "bic"), help="[diagnose] choose_by"
+    )
     args = ap.parse_args()
+    config = DiagnosisConfig(choose_by=args.choose_by)
     rows = []
     for effect, params, noise, seed in cases(args.quick):
-        r = run_case(effect, params, noise, seed)
+        r = run_case(effect, params, noise, seed, config)
         rows.append(r)
         print(
             f"{r['effect']:<21} {str(r['params']):<48} noise {noise:.1f}  named {r['named']}"

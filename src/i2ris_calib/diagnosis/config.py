@@ -46,9 +46,10 @@ class DiagnosisConfig:
         Promising candidates refitted globally (and judged again) before the choice.
     promising_z : float
         Held-out z above which a warm-fitted candidate may become a finalist.
-    tie_rel : float
-        Finalists whose held-out RMSE is within this fraction of the best are
-        ranked by BIC instead.
+    choose_by : str
+        ``"holdout"`` (lowest held-out RMSE, unless a finalist with a much lower
+        BIC is not significantly worse on the held-out cycles) or ``"bic"``
+        (lowest BIC) to choose among significant finalists.
     seed : int
         Seed of the random start variations of the global refit.
     """
@@ -69,7 +70,7 @@ class DiagnosisConfig:
     global_max_nfev: int = 400
     n_finalists: int = 3
     promising_z: float = 1.0
-    tie_rel: float = 0.02
+    choose_by: str = "holdout"
     seed: int = 0
 
     def validate(self) -> None:
@@ -91,12 +92,12 @@ class DiagnosisConfig:
             raise ValueError("min_delta_bic must be >= 0")
         if self.max_samples < 100:
             raise ValueError("max_samples must be >= 100")
+        if self.choose_by not in ("holdout", "bic"):
+            raise ValueError("choose_by must be 'holdout' or 'bic'")
         if self.n_restarts < 0:
             raise ValueError("n_restarts must be >= 0")
         if self.n_finalists < 1:
             raise ValueError("n_finalists must be >= 1")
-        if not 0 <= self.tie_rel < 0.5:
-            raise ValueError("tie_rel must be in [0, 0.5)")
         if self.n_global_starts < 0:
             raise ValueError("n_global_starts must be >= 0")
         if (

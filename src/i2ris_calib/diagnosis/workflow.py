@@ -388,12 +388,27 @@ def fit_candidate(current: Model, name: str, d: _Data, cfg: DiagnosisConfig) -> 
     )
 
 
-def _pick(passing: list[Candidate], cfg: DiagnosisConfig) -> Candidate:
-    """The winner: lowest held-out RMSE; finalists within ``tie_rel`` of it are
-    ranked by BIC (so the simpler of two equivalent effects wins)."""
-    top = min(c.metrics.holdout_rmse_deg for c in passing)
-    close = [c for c in passing if c.metrics.holdout_rmse_deg <= top * (1 + cfg.tie_rel)]
-    return min(close, key=lambda c: c.metrics.bic)
+def _pick(passing: list[Candidate], d: _Data, cfg: DiagnosisConfig) -> Candidate:
+    """The winner among significant finalists.
+
+    ``choose_by = "holdout"`` (default): the lowest held-out RMSE wins unless a
+    finalist with a BIC lower by at least ``min_delta_bic`` is not significantly
+    worse on the held-out cycles (one-sided held-out z-test of the better one
+    against it, level ``alpha``): the held-out cycles decide when they can tell
+    two effects apart, BIC on the many fitted samples when they cannot.
+    ``choose_by = "bic"``: lowest BIC.
+    """
+    if cfg.choose_by == "bic":
+        return min(passing, key=lambda c: c.metrics.bic)
+    ranked = sorted(passing, key=lambda c: c.metrics.holdout_rmse_deg)
+    best = ranked[0]
+    for c in ranked[1:]:
+        if c.metrics.bic > best.metrics.bic - cfg.min_delta_bic:
+            continue
+        held_out_better = compare((c.model, c.metrics), (best.model, best.metrics), d, cfg)
+        if not held_out_better.p_value < cfg.alpha:
+            best = c
+    return best
 
 
 def _polished(c: Candidate, d: _Data, cfg: DiagnosisConfig) -> Candidate:
@@ -654,7 +669,7 @@ def _diagnose(start, signals, theta_deg, cfg, progress) -> Diagnosis:
             if not passing:
                 current, cur_m = ref
                 continue
-        best = _pick(passing, cfg)
+        best = _pick(passing, d, cfg)
         steps.append(
             Step(
                 effect=best.effect,

@@ -26,7 +26,7 @@ def test_one_motor_moves_at_a_time_with_the_dataset_sign():
     for b in tj.session_blocks(cfg):
         inside = (t >= b.t0_s) & (t <= b.t1_s)
         v = (ey if b.axis == "yaw" else ep)[inside]
-        assert np.all(np.sign(v[v != 0]) == b.sign) and np.abs(v).max() == 3000
+        assert np.all(np.sign(v[v != 0]) == b.sign) and np.abs(v).max() == 4500
 
 
 def test_truth_is_continuous_and_zero_at_every_dataset_boundary():

@@ -45,7 +45,7 @@ class SimulationConfig:
     exposure_s: float = 0.01  # exposure time (motion blur)
     # --- motion: Fig-5-like encoder input per dataset ---------------------------
     datasets: tuple[str, ...] = DATASETS
-    amplitude_counts: tuple[float, float] = (4000.0, 4000.0)  # (yaw, pitch) peak |input|
+    amplitude_counts: tuple[float, float] = (6000.0, 6000.0)  # (yaw, pitch) peak |input|
     cycles: int = 2  # ramp out and back this many times per dataset
     cycle_fractions: tuple[float, ...] = (0.6, 1.0)  # peak of each cycle / amplitude
     ramp_s: float = 5.0  # duration of one full ramp 0 -> amplitude

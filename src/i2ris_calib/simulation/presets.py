@@ -15,7 +15,7 @@ PRESETS: dict[str, dict] = {
     "ci": dict(width_px=320, height_px=256, marker_size_px=80.0, focal_px=20000.0,
                datasets=("yaw+", "pitch-"), cycles=1, cycle_fractions=(1.0,), ramp_s=1.2,
                pause_s=0.3, rest_s=1.0, settle_s=0.4, blur_sigma_px=1.0, noise_sigma=2.0,
-               amplitude_counts=(3000.0, 3000.0), pivot_mm=0.8),
+               amplitude_counts=(4500.0, 4500.0), pivot_mm=0.8),
     # sample_data/: 640x512, all four datasets, ~45 s, lossy mp4 (a few MB).
     "sample": dict(width_px=640, height_px=512, marker_size_px=110.0, video_format="mp4",
                    cycles=2, cycle_fractions=(0.6, 1.0), ramp_s=2.5, pause_s=0.6, rest_s=1.5,

@@ -1,7 +1,9 @@
 """True bending angles: EGPI hysteresis per dataset, hidden effects, continuity.
 
 For each dataset the I2RIS EGPI model (Eq16-23, :mod:`i2ris_calib.hysteresis.models`)
-maps |encoder| -> |angle|; the angle is ``sign * model(|v|)`` (the paper fits
+with the hysteresis engineer's paper-like parameters
+(:func:`i2ris_calib.hysteresis.presets.paper_like_params`, scaled to the dataset's
+amplitude; overridable per dataset with ``models``) maps |encoder| -> |angle|; the angle is ``sign * model(|v|)`` (the paper fits
 negative-input datasets on absolute values). Hidden effects (config ``effects``)
 wrap the model via :func:`i2ris_calib.diagnosis.effects.build_model`.
 
@@ -24,20 +26,6 @@ import numpy as np
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.simulation.trajectory import Block, session_blocks, session_inputs
 
-#: Paper-like EGPI parameter values per dataset (deg, counts). Ranges ~30-45 deg
-#: for 4000 counts, distinct per axis and direction like the paper's four datasets.
-DEFAULT_PARAMS: dict[str, dict[str, float]] = {
-    "yaw+": dict(a1=7.0e-3, a2=0.5, a3=7.0e-3, a4=-0.5, a5=6.2e-3, a6=-2.0,
-                 lam=0.06, sigma=0.2, r1=0.3, rn=3.0, kappa=3.0),
-    "yaw-": dict(a1=6.5e-3, a2=0.4, a3=6.6e-3, a4=-0.6, a5=5.8e-3, a6=-1.8,
-                 lam=0.055, sigma=0.2, r1=0.3, rn=3.2, kappa=2.5),
-    "pitch+": dict(a1=7.4e-3, a2=0.3, a3=7.3e-3, a4=-0.8, a5=6.4e-3, a6=-2.4,
-                   lam=0.058, sigma=0.18, r1=0.35, rn=3.5, kappa=3.5),
-    "pitch-": dict(a1=8.0e-3, a2=0.6, a3=8.0e-3, a4=-0.4, a5=7.0e-3, a6=-2.2,
-                   lam=0.062, sigma=0.22, r1=0.25, rn=2.8, kappa=2.0),
-}  # fmt: skip
-#: Flag point v_f as a fraction of the dataset's amplitude.
-FLAG_FRACTION = 0.45
 #: Controller-clock sampling of the truth (Hz); frames interpolate from it.
 TRUTH_RATE_HZ = 1000.0
 
@@ -67,9 +55,10 @@ class Truth:
 def dataset_model(cfg: SimulationConfig, block: Block):
     """The truth model of one dataset (EGPI wrapped by the hidden effects)."""
     from i2ris_calib.hysteresis.models import i2ris_egpi_model
+    from i2ris_calib.hysteresis.presets import paper_like_params
 
     amp = cfg.amplitude_counts[0 if block.axis == "yaw" else 1]
-    values = {**DEFAULT_PARAMS[block.name], "v_f": FLAG_FRACTION * amp}
+    values = dict(paper_like_params(block.name, v_max_counts=amp))
     values.update(cfg.models.get(block.name, {}))
     model = i2ris_egpi_model(**values)
     return apply_hidden_effects(model, cfg.effects)

@@ -18,7 +18,7 @@ class TrackingConfig:
     corner_max_iterations: int = 50
     corner_accuracy_px: float = 0.001  # sub-pixel refinement stops below this step
     use_roi: bool = True  # search around the last detection first
-    roi_margin: float = 0.75  # ROI = marker bounding box grown by this fraction of its size
+    roi_margin: float = 0.4  # ROI = marker bounding box grown by this fraction of its size
     workers: int = 2  # camera streams decoded/detected in parallel (processes); 1 = serial
     # --- optics -------------------------------------------------------------------
     weak_perspective_focal_px: float = 1.0e6  # pinhole stand-in for weak perspective

@@ -71,6 +71,11 @@ def main() -> None:
     )
     ap.add_argument("--keep", type=Path, help="keep (or reuse, if it exists) the session here")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument(
+        "--subpix",
+        action="store_true",
+        help="also track with ArUco SUBPIX corners (no edge refinement) for comparison",
+    )
     args = ap.parse_args()
 
     over = dict(video_format=args.format, seed=args.seed)
@@ -121,6 +126,21 @@ def main() -> None:
             f"{c['frames_per_cpu_s']} frames/CPU-s (one core), ROI hits {c['roi_hits']}, "
             f"edge-refined {c['edge_refined']}"
         )
+    if args.subpix:
+        res2 = track(folder, load_session(folder), TrackingConfig(corner_refinement="subpix"))
+        f2 = evaluate(folder, res2["angles"])
+        print("with ArUco SUBPIX corners instead of edge corners:")
+        for axis, cam in (("yaw", "top"), ("pitch", "side")):
+            print(
+                f"  {axis:5s} fused: RMS {f2[f'fused_{axis}_rms']:.4f} max {f2[f'fused_{axis}_max']:.4f} "
+                f">1 deg: {f2[f'fused_{axis}_over_1deg']} | plain {cam} (the in-plane camera): "
+                f"RMS {f2[f'plain_{cam}_{axis}_rms']:.3f} max {f2[f'plain_{cam}_{axis}_max']:.3f}"
+            )
+            other = "side" if cam == "top" else "top"
+            print(
+                f"  {axis:5s} plain {other} (out-of-plane camera): RMS {f2[f'plain_{other}_{axis}_rms']:.3f} "
+                f"max {f2[f'plain_{other}_{axis}_max']:.3f} >1 deg: {f2[f'plain_{other}_{axis}_over_1deg']}"
+            )
     if args.keep is None:
         shutil.rmtree(folder, ignore_errors=True)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -61,7 +62,8 @@ def expand_inputs(paths: tuple[Path, ...]) -> list[Path]:
                 sorted(
                     f
                     for f in p.rglob("*")
-                    if f.is_file() and not any(part.startswith(".") for part in f.relative_to(p).parts)
+                    if f.is_file()
+                    and not any(part.startswith(".") for part in f.relative_to(p).parts)
                 )
             )
         elif p.is_file():
@@ -164,11 +166,21 @@ def run_one_session(
     return [(st.name, run_stage(st, force)) for st in session_stages(session, run_dir, config)]
 
 
-def session_name(session: Path) -> str:
-    """The session's name from session.toml (folder name as fallback)."""
-    from i2ris_calib.io.session import load_session
+def checked_session_name(session: Path) -> str:
+    """The session's name from session.toml, after checking every file it names exists.
 
-    return load_session(session).name or session.name
+    Checking up front means a session missing its encoder log fails before the
+    (long) tracking stage rather than after it.
+    """
+    from i2ris_calib.io.encoders import encoder_log_path
+    from i2ris_calib.io.session import load_session, session_file
+
+    spec = load_session(session)
+    for cam_name, cam in spec.cameras.items():
+        session_file(session, cam.video, f"video of camera '{cam_name}'")
+        session_file(session, cam.timestamps, f"timestamps of camera '{cam_name}'")
+    encoder_log_path(session, spec.encoder)
+    return spec.name or session.name
 
 
 def run_sessions(
@@ -194,7 +206,7 @@ def run_sessions(
     from rich.console import Console
 
     console = Console(stderr=True)
-    names = [session_name(Path(s)) for s in sessions]
+    names = [checked_session_name(Path(s)) for s in sessions]
     if len(set(names)) != len(names):
         raise CalibError(
             f"two sessions share a name ({', '.join(names)}); give each a unique [name] in session.toml"
@@ -207,7 +219,9 @@ def run_sessions(
             console.print(f"[bold]{name}[/]: {s}")
             results[name] = run_one_session(Path(s), run_dirs[name], config, force)
     else:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(sessions))) as pool:
+        # spawn, not fork: a forked child inherits OpenCV/numba thread pools and can deadlock
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=min(jobs, len(sessions)), mp_context=ctx) as pool:
             futures = {
                 pool.submit(run_one_session, Path(s), run_dirs[name], config, force): name
                 for s, name in zip(sessions, names, strict=True)

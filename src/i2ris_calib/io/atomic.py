@@ -60,7 +60,7 @@ def write_json(path: str | Path, obj: Any) -> None:
     write_text(path, json.dumps(_json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
-def write_csv(path: str | Path, frame: Any, float_format: str = "%.6g") -> None:
+def write_csv(path: str | Path, frame: Any, float_format: str = "%.10g") -> None:
     """Atomically write a pandas DataFrame as CSV without the index."""
     with atomic_path(path) as tmp:
         frame.to_csv(tmp, index=False, float_format=float_format)

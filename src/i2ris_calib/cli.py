@@ -121,12 +121,15 @@ def fit(
     model: str = typer.Option("all", "--model", help="gpi, egpi or all."),
     out: Path = typer.Option(Path("fit_out"), "--out", "-o", help="Output folder."),
     config: Path | None = ConfigOpt,
+    model_file: Path | None = typer.Option(
+        None, "--model-file", help="Also refit a final_model.json written by 'diagnose'."
+    ),
 ) -> None:
     """Fit GPI and EGPI hysteresis models (Levenberg-Marquardt) per motion direction."""
     cfg = _config(config)
     from i2ris_calib.io.fit import fit_files
 
-    fit_files(data, axis=axis, model=model, out=out, config=cfg)
+    fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
 
 
 @app.command("paper-sim")

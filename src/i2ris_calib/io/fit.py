@@ -150,16 +150,43 @@ def model_record(res, kind: str, model) -> dict[str, Any]:
         "nfev": res.nfev,
         "n_samples": res.n_samples,
         "n_holdout": res.holdout_metrics.n_samples,
-        "n_operators": int(model.n),
+        "n_operators": int(getattr(base_model(model), "n", 0)),
         "v_f": res.params.get("v_f"),
     }
-    if kind == "egpi":
-        rec["deadband_counts"] = float(model.deadband_counts)
+    if hasattr(base_model(model), "deadband_counts"):
+        rec["deadband_counts"] = float(base_model(model).deadband_counts)
     return rec
 
 
-def fit_datasets(datasets: Sequence[Dataset], kinds: Sequence[str], fit_config, progress=None):
-    """Fit every model kind to every dataset: list of (dataset, holdout mask, {kind: FitResult})."""
+def base_model(model):
+    """The GPI/EGPI model inside a model extended by diagnosed effects (itself otherwise)."""
+    from i2ris_calib.diagnosis.effects import base_of
+
+    return base_of(model)
+
+
+def fit_saved(model, sig, theta_deg: np.ndarray, holdout: np.ndarray, fit_config):
+    """Refit a saved (diagnosed) model to one dataset, starting from its saved values."""
+    from i2ris_calib.fitting.fit import fit_model
+
+    return fit_model(
+        model,
+        sig,
+        theta_deg,
+        fit_mask=np.isfinite(theta_deg) & ~holdout,
+        holdout_mask=holdout,
+        max_nfev=fit_config.max_nfev,
+    )
+
+
+def fit_datasets(
+    datasets: Sequence[Dataset], kinds: Sequence[str], fit_config, progress=None, saved=None
+):
+    """Fit every model kind to every dataset: list of (dataset, holdout mask, {kind: FitResult}).
+
+    ``saved`` is an optional model from ``final_model.json`` (diagnose), fitted as kind
+    ``"diagnosed"`` when that kind is listed.
+    """
     from i2ris_calib.fitting.pipeline import fit_kind, split_masks
     from i2ris_calib.hysteresis.model import Signals
 
@@ -176,7 +203,10 @@ def fit_datasets(datasets: Sequence[Dataset], kinds: Sequence[str], fit_config, 
             if progress is not None:
                 progress(f"{d.name}: {kind}")
             try:
-                results[kind] = fit_kind(kind, sig, d.theta_deg, fit_config, holdout)
+                if kind == "diagnosed":
+                    results[kind] = fit_saved(saved, sig, d.theta_deg, holdout, fit_config)
+                else:
+                    results[kind] = fit_kind(kind, sig, d.theta_deg, fit_config, holdout)
             except CalibError as exc:
                 raise CalibError(f"{d.source} [{d.name}] {kind}: {exc}") from None
         out.append((d, holdout, results))
@@ -210,6 +240,8 @@ def fit_document(fitted, axis: str, kinds: Sequence[str], provenance: dict) -> d
 
 def predictions_frame(fitted) -> pd.DataFrame:
     """predictions.csv rows: one per sample of every dataset (fitted convention)."""
+    from i2ris_calib.hysteresis.model import Signals
+
     parts = []
     for d, holdout, results in fitted:
         cols = {
@@ -220,9 +252,15 @@ def predictions_frame(fitted) -> pd.DataFrame:
         }
         for kind in ("gpi", "egpi"):
             cols[f"{kind}_deg"] = results[kind].predict(d.v) if kind in results else np.nan
+        if "diagnosed" in results:
+            cols["diagnosed_deg"] = results["diagnosed"].predict(
+                Signals(v=d.v, t_s=d.time_s, v_other=d.v_other)
+            )
         cols["split"] = np.where(holdout, "holdout", "fit")
         parts.append(pd.DataFrame(cols))
-    return pd.concat(parts, ignore_index=True)[list(PRED_COLUMNS)]
+    frame = pd.concat(parts, ignore_index=True)
+    extra = ["diagnosed_deg"] if "diagnosed_deg" in frame else []
+    return frame[[*PRED_COLUMNS, *extra]]
 
 
 def results_table(fitted, kinds: Sequence[str], axis: str):
@@ -239,7 +277,7 @@ def results_table(fitted, kinds: Sequence[str], axis: str):
     for d, _, _ in fitted:
         for m in ("RMSE", "NRMSE", "MAE"):
             table.add_column(f"{d.name}\n{m}", justify="right", no_wrap=True)
-    for kind in [k for k in ("egpi", "gpi") if k in kinds]:
+    for kind in [k for k in ("diagnosed", "egpi", "gpi") if k in kinds]:
         for label, attr in (("fit", "metrics"), ("hold", "holdout_metrics")):
             row = [f"{kind.upper()} {label}"]
             for _, _, results in fitted:
@@ -252,11 +290,17 @@ def results_table(fitted, kinds: Sequence[str], axis: str):
 
 
 def fit_files(
-    paths: Sequence[str | Path], axis: str, model: str, out: str | Path, config
+    paths: Sequence[str | Path],
+    axis: str,
+    model: str,
+    out: str | Path,
+    config,
+    model_file: str | Path | None = None,
 ) -> dict[str, Any]:
     """Command body of ``i2ris-calib fit``: read, split, fit, write, print the table.
 
-    Returns the fit.json document.
+    ``model_file`` is a ``final_model.json`` written by ``diagnose``: that model is
+    refitted too, as model ``"diagnosed"`` in fit.json. Returns the fit.json document.
     """
     from rich.console import Console
     from rich.progress import Progress
@@ -269,6 +313,9 @@ def fit_files(
     if not paths:
         raise CalibError("give at least one synced CSV to fit")
     kinds = ("gpi", "egpi") if model == "all" else (model,)
+    saved = read_model_file(model_file) if model_file is not None else None
+    if saved is not None:
+        kinds = (*kinds, "diagnosed")
     fit_config = config.fit
     datasets = load_datasets(paths, axis, fit_config)
     console = Console(stderr=True)
@@ -278,8 +325,9 @@ def fit_files(
         def step(label: str) -> None:
             bar.update(task, description=f"fitting {label}", advance=1)
 
-        fitted = fit_datasets(datasets, kinds, fit_config, progress=step)
-    doc = fit_document(fitted, axis, kinds, provenance(paths, config))
+        fitted = fit_datasets(datasets, kinds, fit_config, progress=step, saved=saved)
+    inputs = [*paths, *([model_file] if model_file is not None else [])]
+    doc = fit_document(fitted, axis, kinds, provenance(inputs, config))
     out = Path(out)
     write_csv(out / "predictions.csv", predictions_frame(fitted))
     write_json(out / "fit.json", doc)
@@ -289,6 +337,25 @@ def fit_files(
             "* not converged: see 'message' in fit.json (try more starts or --config [fit] max_nfev)"
         )
     return doc
+
+
+def read_model_file(path: str | Path):
+    """The model saved in a ``final_model.json`` (docs/diagnosis.md); CalibError if unreadable."""
+    import json
+
+    from i2ris_calib.diagnosis.serialize import model_from_dict
+
+    p = Path(path)
+    try:
+        obj = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CalibError(
+            f"{p}: cannot read the model file ({exc}); give a final_model.json from 'diagnose'"
+        ) from None
+    try:
+        return model_from_dict(obj)
+    except CalibError as exc:
+        raise CalibError(f"{p}: {exc}") from None
 
 
 def read_fit_json(path: str | Path) -> dict[str, Any]:

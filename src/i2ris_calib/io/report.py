@@ -38,7 +38,7 @@ PREDICTION_COLUMNS = {
     "theta_deg": True,
     "split": False,
 }
-OPTIONAL_NUMERIC = ("reproj_err_px", "gpi_deg", "egpi_deg")
+OPTIONAL_NUMERIC = ("reproj_err_px", "gpi_deg", "egpi_deg", "diagnosed_deg")
 
 
 class _Reader:

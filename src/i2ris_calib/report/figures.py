@@ -15,6 +15,7 @@ import pandas as pd
 MEASURED_COLOR = "0.45"
 GPI_COLOR = "#D55E00"  # vermillion (Okabe-Ito, colour-blind safe)
 EGPI_COLOR = "#0072B2"  # blue
+DIAGNOSED_COLOR = "#009E73"  # bluish green
 HOLDOUT_COLOR = "#F0E442"
 STATUS_COLORS = {"not_found": "#E69F00", "ambiguous": "#CC79A7", "rejected": "#D55E00"}
 
@@ -72,7 +73,11 @@ def _shade_holdout(ax, spans: list[tuple[float, float]]) -> None:
 def _model_columns(pred: pd.DataFrame) -> list[tuple[str, str, str]]:
     """(column, label, colour) for each model column present with finite values."""
     out = []
-    for col, label, color in (("gpi_deg", "GPI", GPI_COLOR), ("egpi_deg", "EGPI", EGPI_COLOR)):
+    for col, label, color in (
+        ("gpi_deg", "GPI", GPI_COLOR),
+        ("egpi_deg", "EGPI", EGPI_COLOR),
+        ("diagnosed_deg", "EGPI + effects", DIAGNOSED_COLOR),
+    ):
         if col in pred and np.isfinite(pred[col].to_numpy(dtype=float)).any():
             out.append((col, label, color))
     return out

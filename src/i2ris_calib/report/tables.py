@@ -17,6 +17,8 @@ from i2ris_calib.report.document import Table
 
 DASH = "—"
 MODELS = (("egpi", "EGPI"), ("gpi", "GPI"))  # paper's row order
+# fitted models a fit.json may hold: the paper's two plus a model saved by `diagnose`
+FIT_MODELS = (("diagnosed", "EGPI + diagnosed effects"), *MODELS)
 METRIC_COLUMNS = (
     ("rmse_deg", "RMSE (deg)", 3),
     ("nrmse_pct", "NRMSE (%)", 2),
@@ -70,7 +72,7 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
         header += [label for _, label, _ in METRIC_COLUMNS]
         groups.append((str(d.get("name", "dataset")), len(METRIC_COLUMNS)))
     rows = []
-    for key, label in MODELS:
+    for key, label in FIT_MODELS:
         if not any(key in d.get("models", {}) for d in datasets):
             continue
         for split_key, split_label in (("metrics", "fitted"), ("holdout_metrics", "held-out")):
@@ -165,7 +167,9 @@ def params_table(
     parameters.
     """
     info = info or {}
-    models = [(k, lab) for k, lab in MODELS if isinstance(dataset.get("models", {}).get(k), dict)]
+    models = [
+        (k, lab) for k, lab in FIT_MODELS if isinstance(dataset.get("models", {}).get(k), dict)
+    ]
     names: list[str] = []
     for k, _ in models:
         for n in dataset["models"][k].get("params", {}) or {}:
@@ -215,7 +219,9 @@ FIT_INFO_KEYS = (
 
 def fit_info_table(dataset: Mapping[str, Any]) -> Table:
     """Convergence and information criteria per model for one dataset."""
-    models = [(k, lab) for k, lab in MODELS if isinstance(dataset.get("models", {}).get(k), dict)]
+    models = [
+        (k, lab) for k, lab in FIT_MODELS if isinstance(dataset.get("models", {}).get(k), dict)
+    ]
     rows = tuple(
         (lab, *(fmt(dataset["models"][k].get(key)) for key, _ in FIT_INFO_KEYS))
         for k, lab in models

@@ -22,7 +22,11 @@ def main(argv: list[str]) -> int:
         print(f"----- {bench.name}: exit {rc}, {time.perf_counter() - t0:.1f} s", flush=True)
         if rc != 0:
             failed.append(bench.name)
-    print("\nall benchmarks passed their targets" if not failed else f"\nmissed targets: {', '.join(failed)}")
+    print(
+        "\nall benchmarks passed their targets"
+        if not failed
+        else f"\nmissed targets: {', '.join(failed)}"
+    )
     return 1 if failed else 0
 
 

@@ -89,3 +89,37 @@ def test_missing_view_gives_not_found_and_nan(scene):
     assert (res.status[10:15] == fz.NOT_FOUND).all()
     assert np.isnan(res.Q[10:15]).all()
     assert (res.status[:10] == fz.MEASURED).all()
+
+
+def test_equal_cost_minima_resolved_by_continuity_else_ambiguous():
+    from i2ris_calib.tracking.fuse import _choose
+
+    n = 6
+    t = np.arange(n) / 30.0
+    good = np.stack([tip_rotation(0.1 * k, 0) for k in range(n)])
+    mirror = np.stack([tip_rotation(0.1 * k, 8.0) for k in range(n)])
+    z = np.zeros((n, 3))
+    c_good = np.full(n, 1.0)
+    c_mirror = np.full(n, 1.2)  # within ambiguity_ratio: cost alone cannot decide
+    c_mirror[0] = 50.0  # frame 0 is clear: the mirror fits badly there
+    cfg = TrackingConfig()
+    # the second start holds the right answer in frames 3-5: continuity must follow it
+    sol1 = (
+        np.concatenate([good[:3], mirror[3:]]),
+        z,
+        z,
+        np.concatenate([c_good[:3], c_mirror[3:]]),
+    )
+    sol2 = (
+        np.concatenate([mirror[:3], good[3:]]),
+        z,
+        z,
+        np.concatenate([c_mirror[:3], c_good[3:]]),
+    )
+    Q, _, _, cost, n_comp, n_cont = _choose([sol1, sol2], t, cfg)
+    assert np.allclose(Q, good) and np.isfinite(cost).all() and n_cont == n - 1 and n_comp == n
+    # no clear frame anywhere: every frame stays ambiguous (cost NaN), nothing guessed
+    sol1b = (good, z, z, c_good.copy())
+    sol2b = (mirror, z, z, np.full(n, 1.2))
+    _, _, _, cost_b, _, _ = _choose([sol1b, sol2b], t, cfg)
+    assert np.isnan(cost_b).all()

@@ -24,7 +24,9 @@ class SyncConfig:
     # --- sync event (LED flash seen as a jump of the mean grey level)
     flash_cameras: tuple[str, ...] = ()  # cameras whose mean_gray_<camera> to use; () = all
     flash_min_contrast_gray: float = 8.0  # min jump of mean grey level (0-255) for a flash
-    exposure_s: float = 0.0  # exposure time; 0 = whole frame interval (global shutter, 100% duty)
+    # exposure time; 0 = unknown: marginalised over 3-100 % of the frame interval, weighted
+    # by how well each explains the flash frames (a wrong value biases the edge times)
+    exposure_s: float = 0.0
     frame_time_ref: Literal["start", "middle", "end"] = "middle"  # where in the exposure time_s is
     # edge time in the log: "midpoint" = the LED switched somewhere between the last off and the
     # first on sample (state sampled by the logger); "first_on" = at the first on sample
@@ -70,7 +72,7 @@ class SyncConfig:
             if not value > 0:
                 raise ValueError(f"{name} must be > 0, got {value}")
         if self.exposure_s < 0:
-            raise ValueError(f"exposure_s must be >= 0 (0 = frame interval), got {self.exposure_s}")
+            raise ValueError(f"exposure_s must be >= 0 (0 = unknown), got {self.exposure_s}")
         if self.offset_search_s < 0:
             raise ValueError(f"offset_search_s must be >= 0, got {self.offset_search_s}")
         if self.profile_step_s > self.profile_halfwidth_s:

@@ -3,25 +3,39 @@
 The controller switches an LED that both microscopes see and logs it as
 ``sync_flash``. In the video the flash is a jump of the mean grey level. A frame
 whose exposure straddles the LED edge is partially bright; its brightness fraction
-gives the edge time inside the exposure (sub-frame timing). Matching camera edges to
-logged edges gives pairs ``(t_cam, t_ctrl)``; a weighted line through them gives
-offset and drift (several flashes are needed for drift).
+gives the edge time inside the exposure (sub-frame timing). An edge that falls
+between two exposures (short exposure, or a dropped frame) is only known to lie in
+that gap. The exact likelihood of the edge time is in :mod:`i2ris_calib.sync.edgetime`.
+When the exposure time is not configured it is marginalised over
+:data:`EXPOSURE_FRACTIONS` of the frame interval, weighted by how well each explains
+the frames. Matching camera edges to logged edges gives the clock posterior.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy.special import logsumexp
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.sync.clock import ClockModel, clock_from_offsets, clock_model
 from i2ris_calib.sync.config import SyncConfig
+from i2ris_calib.sync.edgetime import (
+    SsePieces,
+    edge_moments,
+    exposure_windows,  # noqa: F401  (re-exported: part of this module's API)
+    sse_pieces,
+    window_min_sse,
+)
 from i2ris_calib.sync.log import Channel
 
 TIME_FLOOR_S = 1e-5  # smallest standard deviation given to any edge time
 LEVEL_FRAMES = 8  # steady frames each side of an edge used for the dark/bright levels
-_REF = {"start": 0.0, "middle": 0.5, "end": 1.0}
+#: exposures tried when ``sync.exposure_s = 0`` (unknown), as fractions of the frame interval
+EXPOSURE_FRACTIONS = np.array([0.03, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
+#: exposures whose evidence is this many nats below the best are dropped from the clock posterior
+EXPOSURE_PRUNE_NATS = 40.0
 
 
 @dataclass(frozen=True)
@@ -38,9 +52,11 @@ class Edge:
         True for LED on, False for LED off.
     source : str
         Camera name, or ``"log"``.
-    frames_t_s, frac, frac_sd, exposure_s, ref
+    frames_t_s, frac, frac_sd, exposures_s, ref
         Camera edges only: timestamps and observed lit fractions of the frames
-        around the edge, the fraction's sd, the exposure and its time reference.
+        around the edge, the fraction's sd, the candidate exposure times (one when
+        configured, :data:`EXPOSURE_FRACTIONS` of the frame interval when not) and
+        where a timestamp lies in its exposure.
     t_lo_s, t_hi_s
         Log edges only: the interval the edge is known to lie in.
     """
@@ -53,7 +69,7 @@ class Edge:
     frames_t_s: np.ndarray | None = None
     frac: np.ndarray | None = None
     frac_sd: float = 0.0
-    exposure_s: float = 0.0
+    exposures_s: tuple[float, ...] = ()
     ref: str = "middle"
     # log edges: the edge lies in [t_lo_s, t_hi_s] (uniform)
     t_lo_s: float = 0.0
@@ -73,12 +89,6 @@ def two_level_split(g: np.ndarray, iters: int = 20) -> tuple[float, float]:
             break
         lo, hi = new
     return lo, hi
-
-
-def exposure_windows(t_s: np.ndarray, exposure_s: float, ref: str) -> tuple[np.ndarray, np.ndarray]:
-    """(start, end) of each frame's exposure, s, from timestamps and where they sit in it."""
-    start = t_s - _REF[ref] * exposure_s
-    return start, start + exposure_s
 
 
 def lit_fraction(
@@ -105,22 +115,32 @@ def lit_fraction(
     return np.clip(frac, 0.0, 1.0)
 
 
+def exposure_candidates(exposure_s: float, interval_s: float) -> tuple[float, ...]:
+    """Exposure times to consider: the configured one, or (0 = unknown) a grid of
+    :data:`EXPOSURE_FRACTIONS` of the frame interval ``interval_s``."""
+    if exposure_s > 0:
+        return (float(exposure_s),)
+    return tuple(float(x) for x in EXPOSURE_FRACTIONS * interval_s)
+
+
 def subframe_edge_time(
     t_s: np.ndarray,
     frac: np.ndarray,
     frac_sd: float,
-    exposure_s: float,
+    exposure_s: float | tuple[float, ...],
     ref: str,
     rising: bool,
     level_frames: int = 0,
 ) -> tuple[float, float]:
     """Edge time (s) and its standard deviation from frames around one edge.
 
-    Least squares over the edge time ``u`` of ``sum_j (lit_fraction_j(u) - frac_j)^2``
-    (the exposure integrates the LED edge, so a straddling frame is partly lit).
-    When no frame straddles the edge the objective is flat between the last dark and
-    the first bright exposure: the estimate is the middle of that interval and its
-    width enters the uncertainty as a uniform distribution.
+    Posterior mean and standard deviation of the edge time ``u`` under a flat prior
+    and the exact likelihood ``exp(-sse(u)/2)`` of the observed lit fractions
+    (:mod:`i2ris_calib.sync.edgetime`). A partly lit frame places the edge inside its
+    exposure to the noise level; when no frame is partly lit (an edge between two
+    exposures, or inside a dropped frame) the likelihood is flat over the gap and the
+    standard deviation is that of a uniform distribution over it (gap / sqrt(12)).
+    Several candidate exposures are averaged with weights given by their evidence.
 
     Parameters
     ----------
@@ -130,32 +150,46 @@ def subframe_edge_time(
         Observed lit fraction of each frame: (grey - dark) / (bright - dark).
     frac_sd : float
         Standard deviation of ``frac`` (grey-level noise / contrast).
-    level_frames : int
-        Frames behind each of the dark/bright levels (medians); their error is
-        propagated too (0 = levels known exactly).
-    exposure_s : float
-        Exposure time, s.
+    exposure_s : float or tuple of float
+        Exposure time, s, or candidate exposure times (equal prior weight).
     ref, rising
         See :func:`exposure_windows` and :func:`lit_fraction`.
+    level_frames : int
+        Frames behind each of the dark/bright levels (medians); their error is added
+        to ``frac_sd`` (0 = levels known exactly).
     """
-    start, end = exposure_windows(t_s, exposure_s, ref)
-    lo, hi = float(start.min()), float(end.max())
-    step = max(exposure_s * 1e-4, 1e-7)
-    grid = np.arange(lo, hi + step, step)
-    sse = ((lit_fraction(grid, start, end, rising) - frac) ** 2).sum(axis=1)
-    best = float(sse.min())
-    flat = grid[sse <= best + max(1e-12, 1e-9 * best)]
-    a, b = float(flat.min()), float(flat.max())
-    t_hat = 0.5 * (a + b)
-    # frames whose exposure contains the estimate carry the timing information
-    # (boundaries included: a clipped, nearly dark/bright frame still has noise)
-    eps = 1e-3 * step
-    n_partial = int(((start - eps <= t_hat) & (t_hat <= end + eps)).sum())
-    # noise of the partial frames plus that of the median levels (efficiency pi/2)
-    level_var = np.pi / 2 / level_frames if level_frames else 0.0
-    sd_noise = exposure_s * frac_sd * np.sqrt(1.0 / n_partial + level_var) if n_partial else 0.0
-    sd = float(np.sqrt(((b - a) ** 2) / 12.0 + sd_noise**2 + TIME_FLOOR_S**2))
-    return t_hat, sd
+    sd = frac_sd * np.sqrt(1.0 + (np.pi / 2 / level_frames if level_frames else 0.0))
+    exposures = np.atleast_1d(np.asarray(exposure_s, dtype=float))
+    moments = np.array([edge_moments(sse_pieces(t_s, frac, sd, e, ref, rising)) for e in exposures])
+    w = np.exp(moments[:, 0] - moments[:, 0].max())
+    return mixture_time(moments, w / w.sum())
+
+
+def mixture_time(moments: np.ndarray, weights: np.ndarray) -> tuple[float, float]:
+    """Mean and sd (floored at TIME_FLOOR_S) of an edge time averaged over exposures.
+
+    ``moments`` (E, 3): log evidence, mean, variance per exposure; ``weights`` (E,).
+    """
+    mean = float(weights @ moments[:, 1])
+    var = float(weights @ (moments[:, 2] + (moments[:, 1] - mean) ** 2))
+    return mean, float(np.sqrt(var + TIME_FLOOR_S**2))
+
+
+def edge_given_exposure(edge: Edge, weights: np.ndarray) -> Edge:
+    """``edge`` with its time and sd recomputed for exposure probabilities ``weights``
+    (the clock posterior's, which pools every edge) instead of its own evidence."""
+    if len(edge.exposures_s) < 2:
+        return edge
+    moments = np.array(
+        [
+            edge_moments(
+                sse_pieces(edge.frames_t_s, edge.frac, edge.frac_sd, e, edge.ref, edge.rising)
+            )
+            for e in edge.exposures_s
+        ]
+    )
+    t, sd = mixture_time(moments, weights)
+    return replace(edge, t_s=t, sd_s=sd)
 
 
 def camera_edges(t_s: np.ndarray, gray: np.ndarray, camera: str, cfg: SyncConfig) -> list[Edge]:
@@ -170,7 +204,8 @@ def camera_edges(t_s: np.ndarray, gray: np.ndarray, camera: str, cfg: SyncConfig
     camera : str
         Camera name (recorded in the edges).
     cfg : SyncConfig
-        ``flash_min_contrast_gray``, ``exposure_s``, ``frame_time_ref``, ``use_falling_edges``.
+        ``flash_min_contrast_gray``, ``exposure_s`` (0 = unknown), ``frame_time_ref``,
+        ``use_falling_edges``.
 
     Returns
     -------
@@ -188,7 +223,7 @@ def camera_edges(t_s: np.ndarray, gray: np.ndarray, camera: str, cfg: SyncConfig
         return []
     on = g > 0.5 * (dark + bright)
     interval = float(np.median(np.diff(t)))
-    exposure = cfg.exposure_s if cfg.exposure_s > 0 else interval
+    exposures = exposure_candidates(cfg.exposure_s, interval)
     change = np.flatnonzero(on[1:] != on[:-1]) + 1  # first frame of each new run
     noise = gray_noise_sd(g)
     bounds = np.concatenate([[0], change, [t.size]])
@@ -215,7 +250,7 @@ def camera_edges(t_s: np.ndarray, gray: np.ndarray, camera: str, cfg: SyncConfig
         n_lvl = max(min(win_before.size, win_after.size), 1)
         frac_sd = noise / (hi_lvl - lo_lvl)
         te, sd = subframe_edge_time(
-            t[idx], frac, frac_sd, exposure, cfg.frame_time_ref, rising, n_lvl
+            t[idx], frac, frac_sd, exposures, cfg.frame_time_ref, rising, n_lvl
         )
         edges.append(
             Edge(
@@ -226,7 +261,7 @@ def camera_edges(t_s: np.ndarray, gray: np.ndarray, camera: str, cfg: SyncConfig
                 frames_t_s=t[idx],
                 frac=frac,
                 frac_sd=float(frac_sd * np.sqrt(1.0 + np.pi / 2 / n_lvl)),
-                exposure_s=exposure,
+                exposures_s=exposures,
                 ref=cfg.frame_time_ref,
             )
         )
@@ -275,8 +310,9 @@ def match_edges(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> list[tuple
 
     Every (camera edge, log edge) pair of the same kind is tried as the anchor of a
     pure offset; the anchor that matches the most camera edges within
-    ``max_edge_residual_s`` wins (ties: smallest RMS residual). A clock is then fitted
-    to the matches (drift included) and the matching repeated once with it.
+    ``max_edge_residual_s`` (plus the edges' own uncertainty, :func:`_pair_tolerance`)
+    wins (ties: smallest RMS residual). A clock is then fitted to the matches (drift
+    included) and the matching repeated once with it.
 
     Raises
     ------
@@ -326,29 +362,67 @@ def _pairs_for_offset(cam, log, offset_s, drift_ppm, tol):
         if not same:
             continue
         g = min(same, key=lambda g: abs(g.t_s - t_ctrl))
-        if abs(g.t_s - t_ctrl) <= tol:
+        if abs(g.t_s - t_ctrl) <= _pair_tolerance(c, g, tol):
             pairs.append((c, g))
     return pairs
 
 
+def _pair_tolerance(cam: Edge, log: Edge, tol: float) -> float:
+    """Largest residual of a matching pair: ``tol`` plus the half-widths of both edges'
+    uncertainty intervals (sqrt(3) sd: the half-width of a uniform distribution), so a
+    coarse edge (between exposures, slow log) is not rejected for its own quantisation."""
+    return tol + np.sqrt(3.0) * (cam.sd_s + log.sd_s)
+
+
+@dataclass(frozen=True)
+class EdgeGroup:
+    """One logged edge and the frames of every camera that saw it (they share its time).
+
+    ``pieces[e]``, ``log_z[e]`` and ``sse_min[e]`` belong to ``exposures_s[e]``
+    (:func:`i2ris_calib.sync.edgetime.sse_pieces`, evidence and smallest misfit).
+    """
+
+    log: Edge
+    pieces: tuple[SsePieces, ...]
+    log_z: np.ndarray
+    sse_min: np.ndarray
+
+
+def edge_group(cams: list[Edge], log: Edge) -> EdgeGroup:
+    """The frames of ``cams`` (camera edges matched to ``log``) as one likelihood term."""
+    t = np.concatenate([c.frames_t_s for c in cams])
+    f = np.concatenate([c.frac for c in cams])
+    sd = np.concatenate([np.full(c.frac.size, c.frac_sd) for c in cams])
+    pieces, log_z, s_min = [], [], []
+    for k in range(len(cams[0].exposures_s)):  # the k-th candidate of every camera
+        e = np.concatenate([np.full(c.frac.size, c.exposures_s[k]) for c in cams])
+        pc = sse_pieces(t, f, sd, e, cams[0].ref, cams[0].rising)
+        pieces.append(pc)
+        log_z.append(edge_moments(pc)[0])
+        s_min.append(pc.minimum())
+    return EdgeGroup(log, tuple(pieces), np.array(log_z), np.array(s_min))
+
+
 def edge_log_likelihood(
-    cams: list[Edge], log: Edge, offset_c_s: np.ndarray, drift_ppm: np.ndarray, t_c_s: float
+    group: EdgeGroup, k: int, offset_c_s: np.ndarray, drift_ppm: np.ndarray, t_c_s: float
 ) -> np.ndarray:
-    """Log-likelihood of one logged edge's camera observations on a grid of clocks.
+    """Log-likelihood of one logged edge's frames on a grid of clocks, exposure ``k``.
 
     For each clock (offset at camera time ``t_c_s``, drift) the logged edge time,
-    uniform in ``[log.t_lo_s, log.t_hi_s]``, maps to an interval of camera edge times
-    ``u`` (one camera clock: the same ``u`` for every camera that saw the edge). The
-    frames' lit fractions predicted by :func:`lit_fraction` are compared with the
-    observed ones (Gaussian, sd ``frac_sd``) for all ``cams`` together, and the
-    likelihood is averaged over that interval exactly, through its cumulative integral
-    on a fine ``u`` grid. Flat stretches (an edge between two exposures) stay flat:
-    the constraint is a hard interval, softened only by the noise.
+    somewhere in ``[log.t_lo_s, log.t_hi_s]``, maps to an interval of camera edge
+    times ``u``. The term is the exposure's evidence (``log_z``: how well it explains
+    the frames with the edge time free) plus the best misfit inside that interval
+    relative to the overall best: the edge's position inside its log interval and
+    inside a gap between exposures is *profiled*, not averaged. Averaging would
+    assume these positions independent from edge to edge, which they are not when a
+    flash lasts a whole number of frames or log ticks (both edges then sit at the
+    same phase), and would make the posterior narrower than the truth allows.
 
     Parameters
     ----------
-    cams : list of Edge
-        The camera edges matched to ``log`` (one per camera).
+    group : EdgeGroup
+    k : int
+        Index of the exposure in ``group.pieces``.
     offset_c_s, drift_ppm : ndarray, shape (G,)
         Grid of clocks; ``t_ctrl = offset_c_s + t_c_s + (1 + drift*1e-6) * (t_cam - t_c_s)``.
 
@@ -356,35 +430,23 @@ def edge_log_likelihood(
     -------
     ndarray, shape (G,)
     """
-    windows = [exposure_windows(c.frames_t_s, c.exposure_s, c.ref) for c in cams]
-    step = max(min(c.exposure_s * c.frac_sd for c in cams) / 4.0, 1e-7)
-    lo = min(w[0].min() for w in windows)
-    hi = max(w[1].max() for w in windows)
-    grid = np.arange(lo - step, hi + 2 * step, step)
-    sse = sum(
-        (((lit_fraction(grid, a, b, c.rising) - c.frac) / c.frac_sd) ** 2).sum(axis=1)
-        for c, (a, b) in zip(cams, windows, strict=True)
-    )
-    sse_min = float(sse.min())
-    like = np.exp(-0.5 * (sse - sse_min))
-    cum = np.concatenate([[0.0], np.cumsum(0.5 * (like[1:] + like[:-1]) * step)])
-
-    def integral(u: np.ndarray) -> np.ndarray:
-        """Cumulative likelihood, extended linearly (constant likelihood) beyond the grid."""
-        inside = np.interp(u, grid, cum)
-        below = np.minimum(u - grid[0], 0.0) * like[0]
-        above = np.maximum(u - grid[-1], 0.0) * like[-1]
-        return inside + below + above
-
+    log = group.log
     scale = 1.0 + drift_ppm * 1e-6
     u_lo = t_c_s + (log.t_lo_s - offset_c_s - t_c_s) / scale
     u_hi = t_c_s + (log.t_hi_s - offset_c_s - t_c_s) / scale
-    width = u_hi - u_lo
-    if log.t_hi_s > log.t_lo_s:
-        mean_like = (integral(u_hi) - integral(u_lo)) / width
-    else:
-        mean_like = np.interp(u_hi, grid, like)
-    return -0.5 * sse_min + np.log(np.maximum(mean_like, 1e-300))
+    sse = window_min_sse(group.pieces[k], u_lo, u_hi)
+    return group.log_z[k] - 0.5 * (sse - group.sse_min[k])
+
+
+def clock_log_likelihood(
+    groups: list[EdgeGroup], keep: np.ndarray, oo: np.ndarray, dd: np.ndarray, t_c_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Log-likelihood of the clocks ``(oo, dd)`` (G,), marginal over the kept exposures,
+    and the log-likelihood per exposure (E, G) (rows of dropped exposures are -inf)."""
+    per = np.full((keep.size, oo.size), -np.inf)
+    for k in np.flatnonzero(keep):
+        per[k] = sum(edge_log_likelihood(g, k, oo, dd, t_c_s) for g in groups)
+    return logsumexp(per, axis=0), per
 
 
 def posterior_clock(
@@ -393,25 +455,36 @@ def posterior_clock(
     centre: tuple[float, float],
     halfwidth: tuple[float, float],
     fit_drift: bool,
-    n_grid: int = 121,
-    max_rounds: int = 6,
-) -> tuple[np.ndarray, np.ndarray]:
+    n_grid: int = 101,
+    max_rounds: int = 8,
+    temper: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Posterior mean and covariance of (offset at ``t_c_s``, drift) on an adaptive grid.
 
-    Flat prior; likelihood = product of :func:`edge_log_likelihood` over the logged
-    edges (the cameras that saw one logged edge share its unknown time). The grid is widened while posterior mass sits on its border and narrowed
-    while the posterior is under-resolved.
+    Flat prior on the clock and on the candidate exposures; likelihood = product of
+    :func:`edge_log_likelihood` over the logged edges (the cameras that saw one logged
+    edge share its unknown time), summed over the exposures, raised to ``1/temper``
+    (``temper > 1`` widens the posterior when the edges disagree more than the grey
+    noise allows). The grid is widened while posterior mass sits on its border and
+    narrowed while the posterior is under-resolved.
 
     Returns
     -------
     mean : ndarray, shape (2,)
         (offset_c_s, drift_ppm).
     cov : ndarray, shape (2, 2)
+    exposure_weights : ndarray, shape (E,)
+        Posterior probability of each candidate exposure.
+    misfit : float
+        ``sum_g (sse_g - min sse_g)`` at the most likely clock and exposure: how far the
+        edges are from all fitting one clock (0 when every edge's best time is allowed).
     """
     by_log: dict[int, tuple[list[Edge], Edge]] = {}
     for ce, le in pairs:  # one likelihood term per LOGGED edge: its time is shared
         by_log.setdefault(id(le), ([], le))[0].append(ce)
-    groups = list(by_log.values())
+    groups = [edge_group(cs, le) for cs, le in by_log.values()]
+    total_z = sum(g.log_z for g in groups)
+    keep = total_z >= total_z.max() - EXPOSURE_PRUNE_NATS
     c = np.array(centre, dtype=float)
     h = np.array(halfwidth, dtype=float)
     if not fit_drift:
@@ -420,7 +493,8 @@ def posterior_clock(
         o_ax = c[0] + np.linspace(-h[0], h[0], n_grid)
         d_ax = c[1] + (np.linspace(-h[1], h[1], n_grid) if fit_drift else np.zeros(1))
         oo, dd = (a.ravel() for a in np.meshgrid(o_ax, d_ax, indexing="ij"))
-        ll = sum(edge_log_likelihood(cs, le, oo, dd, t_c_s) for cs, le in groups)
+        ll, per = clock_log_likelihood(groups, keep, oo, dd, t_c_s)
+        ll, per = ll / temper, per / temper
         w = np.exp(ll - ll.max())
         w /= w.sum()
         mean = np.array([w @ oo, w @ dd])
@@ -441,7 +515,10 @@ def posterior_clock(
             h[1] = 0.0
     if not fit_drift:
         cov[1, :] = cov[:, 1] = 0.0
-    return mean, cov
+    pe = logsumexp(per, axis=1)
+    k, gi = np.unravel_index(np.argmax(per), per.shape)
+    misfit = float(-2.0 * (temper * per[k, gi] - total_z[k]))
+    return mean, cov, np.exp(pe - logsumexp(pe)), misfit
 
 
 def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> ClockModel:
@@ -449,8 +526,12 @@ def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> Cloc
 
     A weighted line through the per-edge times (:func:`clock_from_offsets`) gives a
     start; the estimate is then the posterior mean of (offset, drift) given every
-    matched frame's brightness (:func:`posterior_clock`), which combines the
-    interval constraints of many edges far better than averaging their midpoints.
+    matched frame's brightness (:func:`posterior_clock`), which intersects the
+    interval constraints of all edges instead of averaging their midpoints. With
+    ``cfg.exposure_s = 0`` the exposure is unknown and marginalised. When the edges
+    disagree more than the noise allows (misfit above its degrees of freedom: one per
+    logged edge less the fitted parameters) the likelihood is tempered by that ratio,
+    as least squares scales a covariance by the reduced chi-square.
     Drift is fitted when the matched edges span at least ``cfg.min_drift_span_s``;
     otherwise it is held at 0 ppm (stderr NaN).
 
@@ -475,16 +556,27 @@ def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> Cloc
     j = np.array([1.0, t_c * 1e-6])
     sd_c = float(np.sqrt(j @ cov0 @ j))
     halfwidth = (5 * max(sd_c, 2e-4), 5 * max(np.sqrt(cov0[1, 1]), 1.0))
-    mean, cov_c = posterior_clock(pairs, t_c, centre, halfwidth, fit_drift)
+    mean, cov_c, p_exposure, misfit = posterior_clock(pairs, t_c, centre, halfwidth, fit_drift)
+    n_groups = len({id(g) for _, g in pairs})
+    temper = max(1.0, misfit / max(n_groups - (2 if fit_drift else 1), 1))
+    if temper > 1.0:  # edges disagree beyond the grey noise (e.g. saturated bright pixels)
+        mean, cov_c, p_exposure, _ = posterior_clock(
+            pairs, t_c, tuple(mean), halfwidth, fit_drift, temper=temper
+        )
     jac = np.array([[1.0, -t_c * 1e-6], [0.0, 1.0]])
     o, d, cov = mean[0] - mean[1] * 1e-6 * t_c, mean[1], jac @ cov_c @ jac.T
-    resid = off - (o + d * 1e-6 * t)
+    pairs = [(edge_given_exposure(c, p_exposure), g) for c, g in pairs]
+    t = np.array([c.t_s for c, _ in pairs])
+    resid = np.array([g.t_s - c.t_s for c, g in pairs]) - (o + d * 1e-6 * t)
     evidence = {
         "n_camera_edges": len(cam),
         "n_log_edges": len(log),
         "n_matched": len(pairs),
         "drift_fitted": fit_drift,
         "line_fit": {"offset_s": o0, "drift_ppm": d0, "chi2_reduced": chi2},
+        "exposure": exposure_evidence(pairs[0][0].exposures_s, p_exposure, cfg.exposure_s),
+        "misfit": misfit,
+        "likelihood_temper": temper,
         "edges": [
             {
                 "camera": c.source,
@@ -499,3 +591,16 @@ def clock_from_events(cam: list[Edge], log: list[Edge], cfg: SyncConfig) -> Cloc
         ],
     }
     return clock_model(o, d, cov, "event", evidence, fit_drift)
+
+
+def exposure_evidence(exposures_s, weights: np.ndarray, configured_s: float) -> dict:
+    """JSON summary of the exposure: configured, or the posterior over the candidates."""
+    e = np.asarray(exposures_s, dtype=float)
+    mean = float(weights @ e)
+    return {
+        "configured_s": configured_s,
+        "mean_s": mean,
+        "sd_s": float(np.sqrt(max(weights @ (e - mean) ** 2, 0.0))),
+        "candidates_s": e.tolist(),
+        "posterior": weights.tolist(),
+    }

@@ -32,6 +32,9 @@ class SyntheticSync:
         True clock parameters.
     backlash_deg : float
         Stage-1 reversal dead band of the truth, deg.
+    meta : dict
+        seed, fps, exposure_s, truth_params (EGPI) and flash_intervals_ctrl_s (the
+        true LED on/off times, controller clock).
     """
 
     angles: pd.DataFrame
@@ -191,7 +194,13 @@ def make_sync_case(
         offset_s=offset_s,
         drift_ppm=drift_ppm,
         backlash_deg=backlash_deg,
-        meta={"seed": seed, "fps": fps, "exposure_s": exposure, "truth_params": truth},
+        meta={
+            "seed": seed,
+            "fps": fps,
+            "exposure_s": exposure,
+            "truth_params": truth,
+            "flash_intervals_ctrl_s": on_intervals,
+        },
     )
 
 

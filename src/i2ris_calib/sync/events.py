@@ -36,6 +36,10 @@ LEVEL_FRAMES = 8  # steady frames each side of an edge used for the dark/bright 
 EXPOSURE_FRACTIONS = np.array([0.03, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0])
 #: exposures whose evidence is this many nats below the best are dropped from the clock posterior
 EXPOSURE_PRUNE_NATS = 40.0
+#: evidence differences between exposures smaller than this (nats) are not trusted: the
+#: evidence assumes flash times random relative to the frames, but round flash times
+#: (e.g. 0.5 s at 30 fps) sit at frame centres and are partly lit whatever the exposure
+EXPOSURE_TRUST_NATS = 6.0
 
 
 @dataclass(frozen=True)
@@ -428,9 +432,8 @@ def edge_log_likelihood(
 
     For each clock (offset at camera time ``t_c_s``, drift) the logged edge time,
     somewhere in ``[log.t_lo_s, log.t_hi_s]``, maps to an interval of camera edge
-    times ``u``. The term is the exposure's evidence (``log_z``: how well it explains
-    the frames with the edge time free) plus the best misfit inside that interval
-    relative to the overall best: the edge's position inside its log interval and
+    times ``u``. The term is minus half the best misfit inside that interval relative
+    to the overall best: the edge's position inside its log interval and
     inside a gap between exposures is *profiled*, not averaged. Averaging would
     assume these positions independent from edge to edge, which they are not when a
     flash lasts a whole number of frames or log ticks (both edges then sit at the
@@ -453,17 +456,32 @@ def edge_log_likelihood(
     u_lo = t_c_s + (log.t_lo_s - offset_c_s - t_c_s) / scale
     u_hi = t_c_s + (log.t_hi_s - offset_c_s - t_c_s) / scale
     sse = window_min_sse(group.pieces[k], u_lo, u_hi)
-    return group.log_z[k] - 0.5 * (sse - group.sse_min[k])
+    return -0.5 * (sse - group.sse_min[k])
+
+
+def exposure_log_weights(groups: list[EdgeGroup]) -> np.ndarray:
+    """Log prior weight of each candidate exposure from the frames' evidence, (E,).
+
+    The summed evidence ``log_z`` (edge times free) rules out exposures that explain
+    the frames far worse, e.g. a full-interval exposure when no frame is partly lit;
+    differences below :data:`EXPOSURE_TRUST_NATS` are flattened, and exposures more
+    than :data:`EXPOSURE_PRUNE_NATS` below the best are dropped (-inf).
+    """
+    total = sum(g.log_z for g in groups)
+    rel = total - total.max()
+    return np.where(
+        rel >= -EXPOSURE_PRUNE_NATS, np.minimum(rel + EXPOSURE_TRUST_NATS, 0.0), -np.inf
+    )
 
 
 def clock_log_likelihood(
-    groups: list[EdgeGroup], keep: np.ndarray, oo: np.ndarray, dd: np.ndarray, t_c_s: float
+    groups: list[EdgeGroup], log_w: np.ndarray, oo: np.ndarray, dd: np.ndarray, t_c_s: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Log-likelihood of the clocks ``(oo, dd)`` (G,), marginal over the kept exposures,
-    and the log-likelihood per exposure (E, G) (rows of dropped exposures are -inf)."""
-    per = np.full((keep.size, oo.size), -np.inf)
-    for k in np.flatnonzero(keep):
-        per[k] = sum(edge_log_likelihood(g, k, oo, dd, t_c_s) for g in groups)
+    """Log-likelihood of the clocks ``(oo, dd)`` (G,), marginal over the exposures with
+    log weights ``log_w`` (E,), and the per-exposure terms (E, G) (-inf: dropped)."""
+    per = np.full((log_w.size, oo.size), -np.inf)
+    for k in np.flatnonzero(np.isfinite(log_w)):
+        per[k] = log_w[k] + sum(edge_log_likelihood(g, k, oo, dd, t_c_s) for g in groups)
     return logsumexp(per, axis=0), per
 
 
@@ -479,9 +497,10 @@ def posterior_clock(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """Posterior mean and covariance of (offset at ``t_c_s``, drift) on an adaptive grid.
 
-    Flat prior on the clock and on the candidate exposures; likelihood = product of
-    :func:`edge_log_likelihood` over the logged edges (the cameras that saw one logged
-    edge share its unknown time), summed over the exposures, raised to ``1/temper``
+    Flat prior on the clock, :func:`exposure_log_weights` on the candidate exposures;
+    likelihood = product of :func:`edge_log_likelihood` over the logged edges (the
+    cameras that saw one logged edge share its unknown time), summed over the
+    exposures, raised to ``1/temper``
     (``temper > 1`` widens the posterior when the edges disagree more than the grey
     noise allows). The grid is widened while posterior mass sits on its border and
     narrowed while the posterior is under-resolved.
@@ -501,8 +520,7 @@ def posterior_clock(
     for ce, le in pairs:  # one likelihood term per LOGGED edge: its time is shared
         by_log.setdefault(id(le), ([], le))[0].append(ce)
     groups = [edge_group(cs, le) for cs, le in by_log.values()]
-    total_z = sum(g.log_z for g in groups)
-    keep = total_z >= total_z.max() - EXPOSURE_PRUNE_NATS
+    log_w = exposure_log_weights(groups)
     c = np.array(centre, dtype=float)
     h = np.array(halfwidth, dtype=float)
     if not fit_drift:
@@ -511,7 +529,7 @@ def posterior_clock(
         o_ax = c[0] + np.linspace(-h[0], h[0], n_grid)
         d_ax = c[1] + (np.linspace(-h[1], h[1], n_grid) if fit_drift else np.zeros(1))
         oo, dd = (a.ravel() for a in np.meshgrid(o_ax, d_ax, indexing="ij"))
-        ll, per = clock_log_likelihood(groups, keep, oo, dd, t_c_s)
+        ll, per = clock_log_likelihood(groups, log_w, oo, dd, t_c_s)
         ll, per = ll / temper, per / temper
         w = np.exp(ll - ll.max())
         w /= w.sum()
@@ -535,7 +553,7 @@ def posterior_clock(
         cov[1, :] = cov[:, 1] = 0.0
     pe = logsumexp(per, axis=1)
     k, gi = np.unravel_index(np.argmax(per), per.shape)
-    misfit = float(-2.0 * (temper * per[k, gi] - total_z[k]))
+    misfit = float(-2.0 * (temper * per[k, gi] - log_w[k]))
     return mean, cov, np.exp(pe - logsumexp(pe)), misfit
 
 

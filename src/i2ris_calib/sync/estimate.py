@@ -6,6 +6,8 @@ Entry points: :func:`estimate_clock` (angles table + encoder log -> ClockModel) 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pandas as pd
 
@@ -153,7 +155,9 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     ``cfg.auto_refine_stderr_s`` and an axis moves, the model profile is searched
     within the event's +-4 standard errors (method ``model``, the event kept in
     ``evidence["event"]``). If the model's minimum sits on that window's edge (model
-    and event disagree) or the model cannot run, the event clock is returned.
+    and event disagree) or the model cannot run, the event clock is returned. When the
+    profile is too flat for a standard error, the model's clock is kept with the
+    event's covariance.
     """
     series = axis_series(angles)
     t_mid = float(np.mean(angles["time_s"].to_numpy(dtype=float)))
@@ -165,6 +169,18 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     except CalibError as exc:
         event.evidence["auto"] = f"event kept; model refinement failed: {exc}"
         return event
+    note = ""
+    if not np.isfinite(clock.offset_stderr_s):  # flat profile: keep the event's uncertainty
+        clock = replace(
+            clock,
+            cov=event.cov,
+            offset_stderr_s=event.offset_stderr_s,
+            drift_stderr_ppm=event.drift_stderr_ppm,
+        )
+        note = (
+            "; the model profile has no usable curvature there, so the standard errors "
+            "are the event's"
+        )
     clock.evidence["event"] = {
         "offset_s": event.offset_s,
         "drift_ppm": event.drift_ppm,
@@ -174,7 +190,7 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     }
     clock.evidence["auto"] = (
         f"sync event too coarse (offset sd {sd * 1e3:.2f} ms > auto_refine_stderr_s): "
-        "hysteresis-model profile searched within its +-4 sd"
+        "hysteresis-model profile searched within its +-4 sd" + note
     )
     return clock
 

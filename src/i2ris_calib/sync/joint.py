@@ -270,13 +270,19 @@ def profile_stderr(profile: OffsetProfile, best: float, halfwidth: float) -> flo
     ``var = 2 sigma^2 / RSS''`` with ``sigma^2 = RSS_min / (n - p - 1)``, inflated by
     ``(1 + rho) / (1 - rho)`` for the lag-1 autocorrelation ``rho`` of the residuals
     (model misfit is correlated in time; white-noise errors would be too optimistic).
+    The quadratic is fitted to the evaluated points within ``halfwidth`` of the
+    minimum, widened twice (x2, x4) while there are too few or the fit is not convex;
+    NaN if it never is.
     """
     x, y = profile.points()
-    sel = np.abs(x - best) <= halfwidth
-    if sel.sum() < 3:
-        return float("nan")
-    c2 = np.polyfit(x[sel] - best, y[sel], 2)[0]
-    if c2 <= 0:
+    c2 = 0.0
+    for width in (halfwidth, 2 * halfwidth, 4 * halfwidth):  # widen until curved
+        sel = np.abs(x - best) <= width
+        if sel.sum() >= 3:
+            c2 = np.polyfit(x[sel] - best, y[sel], 2)[0]
+            if c2 > 0:
+                break
+    if not c2 > 0:
         return float("nan")
     dof = max(profile.n_samples - profile.n_params - 1, 1)
     sigma2 = profile(best) / dof / TRIMMED_VARIANCE

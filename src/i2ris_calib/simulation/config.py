@@ -42,7 +42,7 @@ class SimulationConfig:
     illumination_falloff: float = 0.25  # relative brightness loss at the image corners
     illumination_gradient: float = 0.10  # left-right brightness ramp (fraction)
     motion_blur_samples: int = 1  # sub-frame renders averaged per frame (1 = off)
-    exposure_s: float = 0.01  # exposure time (motion blur)
+    exposure_s: float = 0.03  # exposure time, centred on the frame time (motion blur, flash edges)
     # --- motion: Fig-5-like encoder input per dataset ---------------------------
     datasets: tuple[str, ...] = DATASETS
     amplitude_counts: tuple[float, float] = (6000.0, 6000.0)  # (yaw, pitch) peak |input|
@@ -52,7 +52,7 @@ class SimulationConfig:
     pause_s: float = 1.0  # pause at each peak and after each return
     rest_s: float = 1.5  # rest at zero at the start of each dataset
     settle_s: float = 1.0  # end-of-dataset residual angle relaxed to 0 over this time
-    encoder_rate_hz: float = 100.0
+    encoder_rate_hz: float = 1000.0
     models: dict = field(default_factory=dict)  # per-dataset parameter overrides
     # --- clocks and events ------------------------------------------------------
     offset_s: float = 12.5  # t_ctrl = offset_s + (1 + drift_ppm 1e-6) t_cam
@@ -61,9 +61,10 @@ class SimulationConfig:
     second_camera_phase_s: float = 0.0  # side-camera frame times lag the top camera by this
     timestamp_jitter_s: float = 0.0  # Gaussian jitter of frame times (s)
     sync_flash: bool = True
-    flash_times_s: tuple[float, ...] = ()  # camera clock; () = 0.5 s after start and before end
+    flash_times_s: tuple[float, ...] = ()  # camera clock; () = n_flashes spread over the video
+    n_flashes: int = 4  # used when flash_times_s is empty
     flash_duration_s: float = 0.2
-    flash_gain: float = 0.35  # relative brightness increase while the LED is on
+    flash_gain: float = 0.15  # relative brightness increase while the LED is on (face stays < 255)
     drop_fraction: float = 0.0  # fraction of frames missing from each video
     occlusions: int = 0  # number of occlusion events per camera
     occlusion_s: float = 0.4  # duration of one occlusion event
@@ -87,6 +88,10 @@ class SimulationConfig:
             raise ValueError("cycles must be >= 1 and cycle_fractions non-empty")
         if min(self.ramp_s, self.pause_s, self.rest_s, self.settle_s) < 0 or self.ramp_s == 0:
             raise ValueError("ramp_s must be > 0; pause_s, rest_s, settle_s >= 0")
+        if not 0 < self.exposure_s <= 1.0 / self.fps:
+            raise ValueError("exposure_s must be > 0 and at most the frame interval 1/fps")
+        if self.n_flashes < 1:
+            raise ValueError("n_flashes must be >= 1 (set sync_flash = false for none)")
         if not 0 <= self.drop_fraction < 0.5:
             raise ValueError("drop_fraction must be in [0, 0.5)")
         if self.noise_sigma < 0 or self.blur_sigma_px < 0 or self.motion_blur_samples < 1:

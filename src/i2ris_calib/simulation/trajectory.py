@@ -124,11 +124,19 @@ def flash_intervals_cam(cfg: SimulationConfig) -> np.ndarray:
     """Sync-flash on/off intervals (k, 2) in camera-clock seconds (empty if disabled)."""
     if not cfg.sync_flash:
         return np.zeros((0, 2))
-    starts = cfg.flash_times_s or (
-        cfg.camera_start_s + 0.5 * LEAD_S,
-        cfg.camera_start_s + video_duration_s(cfg) - 0.5 * LEAD_S - cfg.flash_duration_s,
-    )
-    return np.array([[s, s + cfg.flash_duration_s] for s in starts])
+    if cfg.flash_times_s:
+        return np.array([[s, s + cfg.flash_duration_s] for s in cfg.flash_times_s])
+    # n_flashes spread over the recording (first 0.5 s after the first frame, last ending
+    # 0.5 s before the end), each a little longer than the one before so the sync can
+    # match them unambiguously, and shifted by a different fraction of a frame so their
+    # edges do not all fall at the same exposure phase.
+    k = np.arange(cfg.n_flashes)
+    durations = cfg.flash_duration_s * (1.0 + 0.25 * k)
+    first = cfg.camera_start_s + 0.5 * LEAD_S
+    last = cfg.camera_start_s + video_duration_s(cfg) - 0.5 * LEAD_S - durations[-1]
+    starts = np.linspace(first, last, cfg.n_flashes) if cfg.n_flashes > 1 else np.array([first])
+    starts = starts + (0.37 * k % 1.0) / cfg.fps
+    return np.column_stack([starts, starts + durations])
 
 
 def occlusion_intervals_cam(cfg: SimulationConfig, rng: np.random.Generator) -> np.ndarray:

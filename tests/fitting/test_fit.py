@@ -143,8 +143,8 @@ def test_config_fixes_parameters(egpi_data):
         FitConfig(fixed_gpi=("kappa",)).validate()
 
 
-def test_lm_out_of_bounds_is_held_at_the_bound(rng):
-    """LM is unbounded: a parameter ending outside its bounds is held there, rest refitted."""
+def test_lm_out_of_bounds_is_refitted_bounded(rng):
+    """LM is unbounded: an end point outside the bounds is refitted bounded (trf) from inside."""
     t = paper_like_params("yaw+")
     _, v = loading_trajectory(rng, n_cycles=3, n_samples=1500)
     theta = gpi_model().evaluate_dict(v, {k: t[k] for k in GPI_NAMES}) + rng.normal(0, 0.05, v.size)

@@ -53,10 +53,14 @@ class FitResult:
     converged : bool
         Optimiser reported convergence (not the evaluation limit) with a finite cost.
     message : str
-        Optimiser message of the best start. When the unbounded ``"lm"`` ends with
+        Optimiser message of the final run. When the unbounded ``"lm"`` ends with
         free parameters outside their bounds (unphysical: negative slopes, thresholds,
-        sigma or kappa), those are held at the violated bound and LM refits the rest
-        (up to 3 rounds); the message names them and their stderr is NaN.
+        sigma or kappa), the fit is redone bounded (``"trf"``) from that point clipped
+        into the bounds; the message names them, and parameters ending on a bound get
+        NaN stderr. When the result is worse than a start (or a screened point) inside
+        the bounds, it is refitted bounded from that point (trf never ends worse than
+        its start); should it still be worse, ``converged`` is False and the message
+        says "NOT a minimum".
     nfev : int
         Model evaluations in total (all starts, Jacobians, profile searches).
     n_samples : int
@@ -244,8 +248,9 @@ def fit_model(
         Start vectors (all parameters, model order); default ``[model values]``.
         Use :func:`i2ris_calib.fitting.initial.start_values` for data-driven starts.
     method : {"lm", "trf"}
-        Levenberg-Marquardt (unbounded; parameters ending outside their bounds are
-        held at the bound and the rest refitted) or bounded trust-region reflective.
+        Levenberg-Marquardt (unbounded; an end point outside the bounds is refitted
+        bounded by trf from inside them) or bounded trust-region reflective. Either
+        way the result is never worse (in cost) than the best start inside the bounds.
     max_nfev : int, optional
         Limit on LM iterations (function evaluations not counting the finite-difference
         Jacobian, scipy >= 1.16) of each LM call of the final run; the result is flagged
@@ -294,11 +299,11 @@ def fit_model(
     counter = _Counter(model, s, theta, used, loss, f_scale_deg)
     starts = [np.array([p.value for p in params], dtype=float)] if not starts else starts
 
-    def run(x0, nfev_limit, steps):
+    def run(x0, nfev_limit, steps, how=method):
         full, res = np.asarray(x0, dtype=float).copy(), None
         for step in steps if pidx else ("lm",):
             if step == "lm" and lsq_free.size:
-                full, res = _lsq(counter, full, lsq_free, lower, upper, method, nfev_limit, ftol)
+                full, res = _lsq(counter, full, lsq_free, lower, upper, how, nfev_limit, ftol)
             elif step in ("wide", "fine"):
                 full = _refine_profiled(counter, full, pidx, v, lower, upper, wide=step == "wide")
         return counter.cost(full), full, res
@@ -306,6 +311,11 @@ def fit_model(
     # every start: fine v_f grid, LM, wide v_f grid, LM (short when several starts); then the best
     # one: LM to convergence, fine v_f grid, LM.
     first = ("fine", "lm", "wide", "lm")
+    polish = ("lm", "fine", "lm")
+    # in-bounds points already reached (starts, screened ends): the result must not be worse
+    known = [
+        (counter.cost(np.asarray(x0, dtype=float)), np.asarray(x0, dtype=float)) for x0 in starts
+    ]
     if loss != "linear":
         # robust fits start from the plain least-squares fit (outliers also bias the
         # data-driven starts), then refine with the robust loss
@@ -314,49 +324,55 @@ def fit_model(
             method=method, max_nfev=max_nfev, screen_nfev=screen_nfev, ftol=ftol,
         )  # fmt: skip
         counter.n += plain.nfev
-        best = run(
-            np.array([p.value for p in plain.model.parameters]), max_nfev, ("lm", "fine", "lm")
-        )
+        best = run(np.array([p.value for p in plain.model.parameters]), max_nfev, polish)
     elif len(starts) > 1:
         screened = [run(x0, screen_nfev, first) for x0 in starts]
-        best = run(min(screened, key=lambda c: c[0])[1], max_nfev, ("lm", "fine", "lm"))
+        known += [(c, x) for c, x, _ in screened]
+        best = run(min(screened, key=lambda c: c[0])[1], max_nfev, polish)
     else:
         best = run(starts[0], max_nfev, first + ("fine", "lm"))
-    _, full, res = best
-    held: list[int] = []
-    if method == "lm":
-        full, res, lsq_free, held = _hold_at_bounds(
-            counter, full, res, lsq_free, lower, upper, max_nfev, ftol
+    cost, full, res = best
+    notes = []
+    left = _outside(full, lsq_free, lower, upper)
+    inside = [
+        (c, x) for c, x in known if np.isfinite(c) and not _outside(x, lsq_free, lower, upper)
+    ]
+    floor = min(inside, key=lambda c: c[0]) if inside else None
+    if left:
+        # unphysical end point of the unbounded LM: refit bounded (trf) from it, clipped
+        # into the bounds (measured: ends far better than trf from a better-scoring start)
+        cost, full, res = run(np.clip(full, lower, upper), max_nfev, polish, "trf")
+        notes.append(
+            f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded (trf)"
+        )
+    if floor is not None and not cost <= floor[0]:
+        # worse than a point already reached: refit bounded from that point (trf only
+        # accepts steps that lower the cost, so this cannot end worse than it)
+        cost, full, res = run(floor[1], max_nfev, polish, "trf")
+        notes.append(
+            f"ended worse than a start/screened point (cost {floor[0]:.4g}); refitted bounded (trf) from it"
         )
     result = _result(
         model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts), lsq_free
     )  # fmt: skip
-    if not held:
+    if floor is not None and not cost <= floor[0] * (1 + 1e-9):
+        result = replace(result, converged=False)
+        notes.append(f"NOT a minimum: cost {cost:.4g} above that of a start ({floor[0]:.4g})")
+    if not notes:
         return result
-    stderr = result.stderr | {names[i]: float("nan") for i in held}
-    note = f" [LM left the bounds; held at the bound: {', '.join(names[i] for i in held)}]"
-    return replace(result, message=result.message + note, stderr=stderr)
+    at_bound = (
+        [names[i] for i in lsq_free if _on_bound(full[i], lower[i], upper[i])] if left else []
+    )
+    if at_bound:
+        notes.append(f"at the bound: {', '.join(at_bound)}")
+    stderr = result.stderr | dict.fromkeys(at_bound, float("nan"))
+    message = result.message + "".join(f" [{n}]" for n in notes)
+    return replace(result, message=message, stderr=stderr)
 
 
-def _hold_at_bounds(counter, full, res, lsq_free, lower, upper, max_nfev, ftol, rounds=3):
-    """Active-set repair of an unbounded LM end point.
-
-    Unphysical values (negative slopes, thresholds, sigma, kappa) extrapolate badly:
-    parameters outside their bounds are held at the violated bound and LM refits the
-    rest, up to ``rounds`` times. Returns (full, res, remaining free indices, held indices).
-    """
-    held: list[int] = []
-    for _ in range(rounds):
-        outside = _outside(full, lsq_free, lower, upper)
-        if not outside:
-            break
-        full = full.copy()
-        full[outside] = np.clip(full[outside], lower[outside], upper[outside])
-        held += outside
-        lsq_free = np.array([i for i in lsq_free if i not in held], dtype=int)
-        if lsq_free.size:
-            full, res = _lsq(counter, full, lsq_free, lower, upper, "lm", max_nfev, ftol)
-    return full, res, lsq_free, held
+def _on_bound(x: float, lo: float, hi: float) -> bool:
+    """True when ``x`` sits on (within 1e-6 relative of) ``lo`` or ``hi``."""
+    return abs(x - lo) <= 1e-6 * (1 + abs(lo)) or abs(x - hi) <= 1e-6 * (1 + abs(hi))
 
 
 def _outside(full, free, lower, upper) -> list[int]:

@@ -61,8 +61,13 @@ def fit_kind(
     theta_deg: np.ndarray,
     config: FitConfig = FitConfig(),
     holdout: np.ndarray | None = None,
+    gpi_fit: FitResult | None = None,
 ) -> FitResult:
     """Fit one model kind with data-driven, seeded multi-start (docs/fit.md).
+
+    EGPI nests GPI (``a5 = a3, a6 = a4, kappa = 1``, any ``v_f``: same output), so
+    one EGPI start is the GPI fit mapped into EGPI (:func:`nested_gpi_start`); the
+    EGPI result is never worse than it (fit_model keeps the best start as a floor).
 
     Parameters
     ----------
@@ -73,6 +78,9 @@ def fit_kind(
         Measured angle (deg), NaN allowed.
     holdout : ndarray of bool, shape (n,), optional
         Held-out samples; default from :func:`split_masks`.
+    gpi_fit : FitResult, optional
+        GPI fit on the same samples and holdout (``kind="egpi"`` only); fitted here
+        when not given.
     """
     s = signals if isinstance(signals, Signals) else Signals(v=np.asarray(signals, dtype=float))
     v = np.asarray(s.v, dtype=float)
@@ -89,6 +97,10 @@ def fit_kind(
         if fit_sel.sum() > 2
         else None
     )
+    if starts is not None and kind == "egpi":
+        if gpi_fit is None:
+            gpi_fit = fit_kind("gpi", s, theta, config, holdout)
+        starts.append(nested_gpi_start(model, gpi_fit.params, starts[0]))
     if starts is not None:
         starts = [_keep_fixed(model, x) for x in starts]
     return fit_model(
@@ -102,6 +114,18 @@ def fit_kind(
         loss=config.loss,
         f_scale_deg=config.f_scale_deg,
     )
+
+
+def nested_gpi_start(
+    model: ParametricModel, gpi_params: dict[str, float], start: np.ndarray
+) -> np.ndarray:
+    """EGPI start vector, shape (p,), giving exactly the GPI output of ``gpi_params``:
+    ``a5 = a3``, ``a6 = a4``, ``kappa = 1`` (both families equal, so the flag point
+    ``v_f``, taken from ``start``, does not matter)."""
+    vals = dict(zip(model.names, np.asarray(start, dtype=float), strict=True))
+    vals |= {k: float(x) for k, x in gpi_params.items() if k in vals}
+    vals |= {"a5": vals["a3"], "a6": vals["a4"], "kappa": 1.0}
+    return model.vector(vals)
 
 
 def _keep_fixed(model: ParametricModel, x: np.ndarray) -> np.ndarray:
@@ -122,7 +146,10 @@ def fit_all(
     """``{kind: FitResult}`` on one dataset with one shared held-out split."""
     v = np.asarray(signals.v if isinstance(signals, Signals) else signals, dtype=float)
     holdout = split_masks(v, config)[1]
-    return {k: fit_kind(k, signals, theta_deg, config, holdout) for k in kinds}
+    out: dict[str, FitResult] = {}
+    for k in kinds:
+        out[k] = fit_kind(k, signals, theta_deg, config, holdout, gpi_fit=out.get("gpi"))
+    return out
 
 
 @dataclass(frozen=True)

@@ -206,7 +206,9 @@ def fit_datasets(
                 if kind == "diagnosed":
                     results[kind] = fit_saved(saved, sig, d.theta_deg, holdout, fit_config)
                 else:
-                    results[kind] = fit_kind(kind, sig, d.theta_deg, fit_config, holdout)
+                    results[kind] = fit_kind(
+                        kind, sig, d.theta_deg, fit_config, holdout, gpi_fit=results.get("gpi")
+                    )
             except CalibError as exc:
                 raise CalibError(f"{d.source} [{d.name}] {kind}: {exc}") from None
         out.append((d, holdout, results))

@@ -204,7 +204,9 @@ def test_rendered_ci_session_event_is_honest_and_auto_refines(tmp_path, capsys):
     refines it with the model to <= 5 ms (the issue-4 no-event bound; ~0.5 ms measured)."""
     from i2ris_calib.simulation.presets import PRESETS
 
-    keys = PRESETS["ci"] | {"cycles": 3, "cycle_fractions": (1.0, 0.7, 1.0)}
+    # the simulator's former sync defaults, pinned: coarse events that auto must refine
+    old_sync = {"exposure_s": 0.01, "encoder_rate_hz": 100.0, "n_flashes": 2, "flash_gain": 0.35}
+    keys = PRESETS["ci"] | {"cycles": 3, "cycle_fractions": (1.0, 0.7, 1.0)} | old_sync
     sim = tmp_path / "sim.toml"
     sim.write_text("[simulate]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in keys.items()))
     s = tmp_path / "s"

@@ -118,15 +118,22 @@ def sync(
 def fit(
     data: list[Path] = typer.Argument(..., help="Synced CSV file(s) (docs/formats.md)."),
     axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
-    model: str = typer.Option("all", "--model", help="gpi, egpi or all."),
+    model: str = typer.Option("all", "--model", help="gpi, egpi, egpi_c (continuous EGPI) or all."),
     out: Path = typer.Option(Path("fit_out"), "--out", "-o", help="Output folder."),
     config: Path | None = ConfigOpt,
     model_file: Path | None = typer.Option(
         None, "--model-file", help="Also refit a final_model.json written by 'diagnose'."
     ),
+    signed: bool = typer.Option(
+        False, "--signed", help="One model on the whole signed input (loops that cross zero)."
+    ),
 ) -> None:
     """Fit GPI and EGPI hysteresis models (Levenberg-Marquardt) per motion direction."""
     cfg = _config(config)
+    if signed:
+        from dataclasses import replace
+
+        cfg = replace(cfg, fit=replace(cfg.fit, signed=True))
     from i2ris_calib.io.fit import fit_files
 
     fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)

@@ -13,7 +13,6 @@ from i2ris_calib.fitting.fit import fit_model
 from i2ris_calib.fitting.initial import flag_point
 from i2ris_calib.fitting.pipeline import (
     build_model,
-    direction_blocks,
     fit_all,
     fit_kind,
     model_from_params,
@@ -111,25 +110,6 @@ def test_not_converged_is_flagged(egpi_data):
     assert not res.converged and res.message
 
 
-def test_direction_blocks():
-    enc = np.r_[
-        np.zeros(10),
-        np.arange(1, 101),
-        np.zeros(30),
-        -np.arange(1, 81),
-        np.zeros(5),
-        np.arange(1, 61),
-    ]
-    blocks = {
-        b.direction: b
-        for b in direction_blocks(enc, FitConfig(zero_band_counts=0.0, min_block_samples=50))
-    }
-    assert set(blocks) == {"+", "-"}
-    assert blocks["+"].index.size == 160 and np.all(enc[blocks["+"].index] > 0)
-    assert blocks["-"].index.size == 80 and np.all(enc[blocks["-"].index] < 0)
-    assert direction_blocks(enc, FitConfig(min_block_samples=500)) == []
-
-
 def test_config_fixes_parameters(egpi_data):
     _, v, theta = egpi_data
     cfg = FitConfig(fixed_egpi=("lam", "kappa"), fit_flag_point=False, n_starts=1)
@@ -137,7 +117,7 @@ def test_config_fixes_parameters(egpi_data):
     assert {p.name for p in m.parameters if p.fixed} == {"lam", "kappa", "v_f"}
     res = fit_kind("egpi", v, theta, cfg)
     assert res.params["kappa"] == m.value_dict()["kappa"]
-    rebuilt = model_from_params("egpi", res.params, deadband_counts=cfg.deadband_counts)
+    rebuilt = model_from_params("egpi", res.params, deadband_counts=res.model.deadband_counts)
     np.testing.assert_allclose(rebuilt(v), res.predict(v))
     with pytest.raises(ValueError, match="unknown"):
         FitConfig(fixed_gpi=("kappa",)).validate()

@@ -27,9 +27,10 @@ class FitConfig:
     n_operators : int
         n, the number of non-zero thresholds (n + 1 play operators, Eq14).
     deadband_counts : float
-        Dead band of ``v'`` (counts) for the EGPI output switch; negative = automatic
-        (1 % of the input range). Small by default: encoder counts are exact, and a
-        wide band delays the switch back to loading at the turning points.
+        Dead band of ``v'`` (input unit, counts for an encoder) for the EGPI output
+        switch; negative (default) = derived from the input: max(3 x input noise sd,
+        0.03 % of the input range), 1.8 counts over a 6000-count range. Small: a wide
+        band delays the switch back to loading at the turning points.
     fixed_gpi, fixed_egpi : tuple of str
         Parameters held at their start value. ``lam`` by default: lam and the
         envelope scale are exactly redundant (docs/models.md).
@@ -39,9 +40,15 @@ class FitConfig:
     holdout_fraction : float
         Fraction of loading cycles held out for validation (0 = none).
     zero_band_counts : float
-        |input| at or below this belongs to no motion-direction dataset.
+        |input| at or below this (input unit) is "at rest near zero": such samples
+        belong to the direction of the excursion before them (no sample is dropped).
+        Negative (default) = derived from the input: max(3 x input noise sd, 0.5 % of
+        max |input|).
     min_block_samples : int
-        Motion-direction blocks with fewer samples are ignored.
+        A motion direction with fewer samples outside the zero band is not a dataset.
+    signed : bool
+        Fit one model per axis on the whole signed input (dataset ``"<axis>±"``)
+        instead of one per motion direction: for actuators whose loops cross zero.
     loss : str
         ``"linear"`` (Eq24, plain least squares), or the robust ``"soft_l1"`` /
         ``"huber"`` (need ``method = "trf"``) against tracking outliers.
@@ -55,13 +62,14 @@ class FitConfig:
     seed: int = 0
     max_nfev: int = 300
     n_operators: int = 30
-    deadband_counts: float = 2.0
+    deadband_counts: float = -1.0
     fixed_gpi: tuple[str, ...] = ("lam",)
     fixed_egpi: tuple[str, ...] = ("lam",)
     fit_flag_point: bool = True
     holdout_fraction: float = 0.25
-    zero_band_counts: float = 5.0
+    zero_band_counts: float = -1.0
     min_block_samples: int = 50
+    signed: bool = False
     loss: str = "linear"
     f_scale_deg: float = 0.5
 
@@ -83,8 +91,8 @@ class FitConfig:
             raise ValueError(f"loss '{self.loss}' needs method = \"trf\"")
         if self.f_scale_deg <= 0:
             raise ValueError("f_scale_deg must be > 0")
-        if self.zero_band_counts < 0:
-            raise ValueError("zero_band_counts must be >= 0")
+        if self.min_block_samples < 1:
+            raise ValueError("min_block_samples must be >= 1")
         known_gpi = {"a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn"}
         known_egpi = known_gpi | {"a5", "a6", "kappa", "v_f"}
         for key, names, known in (

@@ -317,14 +317,24 @@ def fit_model(
         (counter.cost(np.asarray(x0, dtype=float)), np.asarray(x0, dtype=float)) for x0 in starts
     ]
     if loss != "linear":
-        # robust fits start from the plain least-squares fit (outliers also bias the
-        # data-driven starts), then refine with the robust loss
+        # robust fits start from the converged plain least-squares fit (LM, the
+        # fitter's own path; outliers also bias the data-driven starts), then refine
+        # with the robust loss by trf. The plain fit's end point joins the points the
+        # result may not be worse than, so a start that scores better in the robust
+        # cost is refined too and the lower end wins (never a bare restart from it).
         plain = fit_model(
             model, s, theta, fit_mask=fit_mask, holdout_mask=holdout_mask, starts=starts,
-            method=method, max_nfev=max_nfev, screen_nfev=screen_nfev, ftol=ftol,
+            method="lm", max_nfev=max_nfev, screen_nfev=screen_nfev, ftol=ftol,
         )  # fmt: skip
         counter.n += plain.nfev
-        best = run(np.array([p.value for p in plain.model.parameters]), max_nfev, polish)
+        x_plain = np.array([p.value for p in plain.model.parameters], dtype=float)
+        known.append((counter.cost(x_plain), x_plain))
+        best = run(x_plain, max_nfev, polish)
+        inside = [(c, x) for c, x in known if not _outside(x, lsq_free, lower, upper)]
+        floor0 = min(inside, key=lambda c: c[0]) if inside else None
+        if floor0 is not None and not best[0] <= floor0[0]:
+            other = run(floor0[1], max_nfev, polish)
+            best = min((best, other), key=lambda c: c[0])
     elif len(starts) > 1:
         screened = [run(x0, screen_nfev, first) for x0 in starts]
         known += [(c, x) for c, x, _ in screened]

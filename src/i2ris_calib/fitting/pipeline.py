@@ -1,40 +1,69 @@
 """Fit GPI and EGPI to one motion-direction dataset: build, start, split, fit.
 
-Also splits a session's samples into motion-direction datasets by the sign of the
-axis input (``direction_blocks``).
+A dataset (:class:`i2ris_calib.data.Dataset`) is the whole recording with the
+direction's input and a loss mask: every model runs over every sample in time order.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.cycles import cycle_index, default_deadband, holdout_mask
+from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
 from i2ris_calib.fitting.fit import FitResult, fit_model
 from i2ris_calib.fitting.initial import start_values
 from i2ris_calib.hysteresis.model import Signals
-from i2ris_calib.hysteresis.models import ParametricModel, gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.models import (
+    ParametricModel,
+    continuous_egpi_model,
+    gpi_model,
+    i2ris_egpi_model,
+)
 
-MODEL_KINDS = ("gpi", "egpi")
+if TYPE_CHECKING:
+    from i2ris_calib.data.dataset import Dataset
+
+MODEL_KINDS = ("gpi", "egpi", "egpi_c")
+"""Model kinds ``fit`` knows: GPI (Eq3), the paper's EGPI (Eq16-23) and the
+continuous EGPI (docs/models.md). ``"all"`` on the command line means all three."""
+
+_FACTORIES = {
+    "gpi": lambda n, db, params: gpi_model(n=n, **params),
+    "egpi": lambda n, db, params: i2ris_egpi_model(n=n, deadband_counts=db, **params),
+    "egpi_c": lambda n, db, params: continuous_egpi_model(n=n, deadband_counts=db, **params),
+}
+
+
+def _unknown_kind(kind: str) -> CalibError:
+    return CalibError(f"unknown model '{kind}'; use {', '.join(MODEL_KINDS)} or all")
 
 
 def deadband_for(v: np.ndarray, config: FitConfig) -> float:
-    """The ``v'`` dead band (counts): configured, or 1 % of the input range."""
-    return default_deadband(v) if config.deadband_counts < 0 else float(config.deadband_counts)
+    """The ``v'`` dead band (input unit): configured, or derived from the input
+    (:func:`i2ris_calib.data.dataset.input_bands`)."""
+    from i2ris_calib.data.dataset import input_bands
+
+    if config.deadband_counts >= 0:
+        return float(config.deadband_counts)
+    return input_bands(v).deadband
 
 
-def build_model(kind: str, v: np.ndarray, config: FitConfig = FitConfig()) -> ParametricModel:
-    """An unfitted ``"gpi"`` or ``"egpi"`` (I2RIS) model set up from ``config``."""
+def build_model(
+    kind: str, v: np.ndarray, config: FitConfig = FitConfig(), deadband: float | None = None
+) -> ParametricModel:
+    """An unfitted model of ``kind`` set up from ``config`` (``deadband``: the ``v'``
+    dead band in input units, default :func:`deadband_for`)."""
+    if kind not in _FACTORIES:
+        raise _unknown_kind(kind)
+    db = deadband_for(v, config) if deadband is None else float(deadband)
+    m = _FACTORIES[kind](config.n_operators, db, {})
     if kind == "gpi":
-        return gpi_model(n=config.n_operators).with_fixed(fixed=config.fixed_gpi)
-    if kind == "egpi":
-        m = i2ris_egpi_model(n=config.n_operators, deadband_counts=deadband_for(v, config))
-        free = ("v_f",) if config.fit_flag_point and "v_f" not in config.fixed_egpi else ()
-        return m.with_fixed(fixed=config.fixed_egpi, free=free)
-    raise CalibError(f"unknown model '{kind}'; use gpi, egpi or all")
+        return m.with_fixed(fixed=config.fixed_gpi)
+    free = ("v_f",) if config.fit_flag_point and "v_f" not in config.fixed_egpi else ()
+    return m.with_fixed(fixed=config.fixed_egpi, free=free)
 
 
 def model_from_params(
@@ -42,16 +71,15 @@ def model_from_params(
 ) -> ParametricModel:
     """A fitted model rebuilt from a fit.json record's ``params`` (and its
     ``n_operators`` / ``deadband_counts``)."""
-    if kind == "gpi":
-        return gpi_model(n=n_operators, **params)
-    if kind == "egpi":
-        return i2ris_egpi_model(n=n_operators, deadband_counts=deadband_counts, **params)
-    raise CalibError(f"unknown model '{kind}'; use gpi or egpi")
+    if kind not in _FACTORIES:
+        raise _unknown_kind(kind)
+    return _FACTORIES[kind](n_operators, deadband_counts, params)
 
 
 def split_masks(v: np.ndarray, config: FitConfig = FitConfig()) -> tuple[np.ndarray, np.ndarray]:
-    """(cycle index (n,), held-out mask (n,)) for ``v`` (see fitting.cycles)."""
-    cyc = cycle_index(v, deadband_for(v, config))
+    """(cycle index (n,), held-out mask (n,)) for ``v``: the one held-out rule
+    (:func:`i2ris_calib.fitting.cycles.holdout_mask`, cycles with a 1 % dead band)."""
+    cyc = cycle_index(v)
     return cyc, holdout_mask(cyc, config.holdout_fraction, v)
 
 
@@ -62,45 +90,55 @@ def fit_kind(
     config: FitConfig = FitConfig(),
     holdout: np.ndarray | None = None,
     gpi_fit: FitResult | None = None,
+    *,
+    deadband: float | None = None,
+    related: tuple[FitResult, ...] = (),
 ) -> FitResult:
     """Fit one model kind with data-driven, seeded multi-start (docs/fit.md).
 
     EGPI nests GPI (``a5 = a3, a6 = a4, kappa = 1``, any ``v_f``: same output), so
     one EGPI start is the GPI fit mapped into EGPI (:func:`nested_gpi_start`); the
     EGPI result is never worse than it (fit_model keeps the best start as a floor).
+    The same holds for the continuous EGPI, which also starts from the EGPI fit
+    (``related``).
 
     Parameters
     ----------
-    kind : {"gpi", "egpi"}
+    kind : {"gpi", "egpi", "egpi_c"}
     signals : Signals or ndarray, shape (n,)
-        Input (counts, |counts| for a negative dataset).
+        Input of the whole recording in time order (a direction dataset's input).
     theta_deg : ndarray, shape (n,)
-        Measured angle (deg), NaN allowed.
+        Measured angle (deg); NaN leaves the loss (not measured, or another
+        direction's sample) while the model still runs over the sample.
     holdout : ndarray of bool, shape (n,), optional
         Held-out samples; default from :func:`split_masks`.
     gpi_fit : FitResult, optional
-        GPI fit on the same samples and holdout (``kind="egpi"`` only); fitted here
+        GPI fit on the same samples and holdout (EGPI kinds only); fitted here
         when not given.
+    deadband : float, optional
+        ``v'`` dead band (input unit); default :func:`deadband_for`.
+    related : tuple of FitResult
+        Fits of models with the same parameter names, tried as further starts.
     """
     s = signals if isinstance(signals, Signals) else Signals(v=np.asarray(signals, dtype=float))
     v = np.asarray(s.v, dtype=float)
     theta = np.asarray(theta_deg, dtype=float)
     if holdout is None:
         holdout = split_masks(v, config)[1]
-    model = build_model(kind, v, config)
-    n_starts = config.n_starts if kind == "egpi" else config.n_starts_gpi
+    db = deadband_for(v, config) if deadband is None else float(deadband)
+    model = build_model(kind, v, config, db)
+    n_starts = config.n_starts if kind != "gpi" else config.n_starts_gpi
     rng = np.random.default_rng(config.seed)
     fit_sel = np.isfinite(theta) & ~holdout
     theta_fit = np.where(fit_sel, theta, np.nan)
-    starts = (
-        start_values(model, v, theta_fit, n_starts, rng, deadband_for(v, config))
-        if fit_sel.sum() > 2
-        else None
-    )
-    if starts is not None and kind == "egpi":
+    starts = start_values(model, v, theta_fit, n_starts, rng, db) if fit_sel.sum() > 2 else None
+    if starts is not None and kind != "gpi":
         if gpi_fit is None:
-            gpi_fit = fit_kind("gpi", s, theta, config, holdout)
+            gpi_fit = fit_kind("gpi", s, theta, config, holdout, deadband=db)
         starts.append(nested_gpi_start(model, gpi_fit.params, starts[0]))
+        for other in related:
+            if set(other.params) == set(model.names):
+                starts.append(model.vector(other.params))
     if starts is not None:
         starts = [_keep_fixed(model, x) for x in starts]
     return fit_model(
@@ -114,6 +152,24 @@ def fit_kind(
         loss=config.loss,
         f_scale_deg=config.f_scale_deg,
     )
+
+
+def fit_dataset(
+    kind: str,
+    data: Dataset,
+    config: FitConfig = FitConfig(),
+    earlier: dict[str, FitResult] | None = None,
+) -> FitResult:
+    """Fit one model kind to a direction dataset (whole history, its loss mask and
+    held-out cycles). ``earlier``: fits of other kinds on the same dataset, used as
+    starts (GPI nested in EGPI, EGPI for the continuous EGPI)."""
+    earlier = earlier or {}
+    db = data.bands.deadband if config.deadband_counts < 0 else float(config.deadband_counts)
+    related = tuple(r for k, r in earlier.items() if k not in ("gpi", kind))
+    return fit_kind(
+        kind, data.signals, data.theta_deg, config, data.holdout, earlier.get("gpi"),
+        deadband=db, related=related,
+    )  # fmt: skip
 
 
 def nested_gpi_start(
@@ -143,47 +199,25 @@ def fit_all(
     config: FitConfig = FitConfig(),
     kinds: tuple[str, ...] = MODEL_KINDS,
 ) -> dict[str, FitResult]:
-    """``{kind: FitResult}`` on one dataset with one shared held-out split."""
+    """``{kind: FitResult}`` on one input/angle pair with one shared held-out split."""
     v = np.asarray(signals.v if isinstance(signals, Signals) else signals, dtype=float)
     holdout = split_masks(v, config)[1]
     out: dict[str, FitResult] = {}
     for k in kinds:
-        out[k] = fit_kind(k, signals, theta_deg, config, holdout, gpi_fit=out.get("gpi"))
+        related = tuple(r for kk, r in out.items() if kk != "gpi")
+        out[k] = fit_kind(
+            k, signals, theta_deg, config, holdout, gpi_fit=out.get("gpi"), related=related
+        )
     return out
 
 
-@dataclass(frozen=True)
-class DirectionBlock:
-    """Samples of one motion direction of one axis.
-
-    Attributes
-    ----------
-    direction : str
-        ``"+"`` or ``"-"``.
-    index : ndarray of int
-        Row indices (into the session arrays) of the samples, in time order; the
-        blocks of one direction are concatenated.
-    """
-
-    direction: str
-    index: np.ndarray
-
-
-def direction_blocks(
-    enc_counts: np.ndarray, config: FitConfig = FitConfig()
-) -> list[DirectionBlock]:
-    """Split samples into motion-direction datasets by the sign of the axis input.
-
-    A sample with ``enc > zero_band_counts`` belongs to "+", one with
-    ``enc < -zero_band_counts`` to "-", the rest (the axis at rest, e.g. while the
-    other motor moves) to none. The excursions of one sign are concatenated in time
-    order (the operators are rate independent; the input is continuous across the
-    cut because both ends lie near the zero band). Datasets with fewer than
-    ``min_block_samples`` samples are dropped.
-    """
-    e = np.asarray(enc_counts, dtype=float)
-    out = []
-    for label, keep in (("+", e > config.zero_band_counts), ("-", e < -config.zero_band_counts)):
-        if keep.sum() >= config.min_block_samples:
-            out.append(DirectionBlock(label, np.flatnonzero(keep)))
-    return out
+def fit_dataset_all(
+    data: Dataset, config: FitConfig = FitConfig(), kinds: tuple[str, ...] = MODEL_KINDS
+) -> dict[str, FitResult]:
+    """``{kind: FitResult}`` for every kind on one direction dataset (GPI first: the
+    EGPI kinds start from it)."""
+    out: dict[str, FitResult] = {}
+    order = sorted(kinds, key=lambda k: MODEL_KINDS.index(k) if k in MODEL_KINDS else 99)
+    for k in order:
+        out[k] = fit_dataset(k, data, config, out)
+    return {k: out[k] for k in kinds}

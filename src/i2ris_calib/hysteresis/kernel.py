@@ -217,3 +217,59 @@ def family_outputs_numpy(v, gl, gr, rl, rr, p):
             w = np.minimum(gr[:, k : k + 1] + rr, w)
         out[:, k] = w @ p
     return out
+
+
+@njit(cache=True, fastmath=True)
+def continuous_egpi_output(v, x, n):  # pragma: no cover - compiled
+    """Continuous I2RIS EGPI output, shape (n_samples,); x as :func:`i2ris_egpi_output`.
+
+    One family of play operators whose *unloading* boundary is piecewise in the input:
+    ``gamma_r1(v) + r`` above the flag point v_f, ``gamma_r2(v) + kappa r`` at or
+    below it; loading is ``gamma_l(v) - r`` throughout (Eq16-17's envelopes and
+    thresholds). The stage-2 operators thus take over the stage-1 state where the
+    input crosses v_f instead of running from the start with a state of their own,
+    so the output never steps at v_f: while the stage-2 boundary lies above the
+    state the operators hold (the S3 dead zone), then follow ``gamma_r2 + kappa r``.
+    """
+    r, p = thresholds_and_weights(x[8], x[9], n, x[6], x[7])
+    m = p.size
+    a1, a2, a3, a4, a5, a6, kappa, vf = x[0], x[1], x[2], x[3], x[4], x[5], x[10], x[11]
+    ns = v.size
+    out = np.empty(ns)
+    w = np.empty(m)
+    if ns == 0:
+        return out
+    gl = a1 * v[0] + a2
+    if v[0] > vf:
+        g, kr = a3 * v[0] + a4, 1.0
+    else:
+        g, kr = a5 * v[0] + a6, kappa
+    acc = 0.0
+    for i in range(m):
+        wi = min(max(0.0, gl - r[i]), g + kr * r[i])
+        w[i] = wi
+        acc += p[i] * wi
+    out[0] = acc
+    for k in range(1, ns):
+        if v[k] > v[k - 1]:
+            g = a1 * v[k] + a2
+            acc = 0.0
+            for i in range(m):
+                wi = max(g - r[i], w[i])
+                w[i] = wi
+                acc += p[i] * wi
+            out[k] = acc
+        elif v[k] < v[k - 1]:
+            if v[k] > vf:
+                g, kr = a3 * v[k] + a4, 1.0
+            else:
+                g, kr = a5 * v[k] + a6, kappa
+            acc = 0.0
+            for i in range(m):
+                wi = min(g + kr * r[i], w[i])
+                w[i] = wi
+                acc += p[i] * wi
+            out[k] = acc
+        else:
+            out[k] = out[k - 1]
+    return out

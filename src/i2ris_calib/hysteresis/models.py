@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from i2ris_calib.hysteresis.kernel import (
+    continuous_egpi_output,
     family_outputs,
     gpi_output,
     i2ris_egpi_output,
@@ -262,6 +263,41 @@ def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float)
         ),
     )
     model = I2RISEGPIModel("egpi", params, n=n, deadband_counts=deadband_counts)
+    return model.with_values(values)
+
+
+@dataclass(frozen=True)
+class ContinuousEGPIModel(I2RISEGPIModel):
+    """Continuous I2RIS EGPI (``"egpi_c"``): the parameters of :class:`I2RISEGPIModel`,
+    but the stage-2 operators take over the stage-1 state at the flag point.
+
+    One operator family: loading ``gamma_l - r``; unloading ``gamma_r1 + r`` above
+    ``v_f`` and ``gamma_r2 + kappa r`` at or below it
+    (:func:`~.kernel.continuous_egpi_output`). The paper's EGPI runs both families
+    from the start and switches the *output* at v_f, so the angle steps there by
+    ``y2 - y1``; a bending angle cannot jump, so here the stage-2 family starts from
+    the stage-1 state where the input crosses v_f. The dead zone S3 appears as a
+    hold while ``gamma_r2 + kappa r`` lies above the state. No ``v'`` dead band is
+    needed: the unloading update only acts on a falling input. ``deadband_counts``
+    is kept for the interface and unused.
+    """
+
+    def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """Output angle (deg), shape (n_samples,)."""
+        x = np.ascontiguousarray(values, dtype=float)
+        if x.size != 12:
+            raise ValueError(f"egpi_c: expected 12 values, got {x.size}")
+        return continuous_egpi_output(_input(signals), x, int(self.n))
+
+
+def continuous_egpi_model(
+    n: int = 30, deadband_counts: float = 2.0, **values: float
+) -> ContinuousEGPIModel:
+    """A continuous I2RIS EGPI (:class:`ContinuousEGPIModel`) with default values."""
+    base = i2ris_egpi_model(n=n, deadband_counts=deadband_counts)
+    model = ContinuousEGPIModel(
+        "egpi_c", base.parameters, n=n, deadband_counts=deadband_counts
+    )
     return model.with_values(values)
 
 

@@ -1,0 +1,347 @@
+"""One data layer: a synced recording's axis -> motion-direction datasets.
+
+A hysteresis model carries state (its play operators), so it must see the whole
+input history in time order. A motion-direction dataset is therefore *never* a
+subset of the samples: it is the whole recording, with
+
+* the **input that direction sees** (``v = max(enc, 0)`` for ``"+"``,
+  ``v = max(-enc, 0)`` for ``"-"``: while the motor is on the other side of zero the
+  direction's input rests at 0; ``v = enc`` for the signed dataset ``"±"``), and
+* the **loss mask**: the samples that belong to the direction. Only those enter the
+  fit's loss and the metrics; every other sample still drives the model.
+
+Sign convention (the paper fits |counts| -> |deg| for a negative-input dataset): in
+a ``"-"`` dataset the angle is ``-theta``, which equals |theta| on the direction's
+samples. Predictions of a ``"-"`` model are in the same convention; multiply by -1
+for the robot's signed angle.
+
+Attribution of a sample to a direction: ``enc > zero_band`` -> "+", ``enc <
+-zero_band`` -> "-", and a sample inside the zero band (the axis at rest near zero)
+belongs to the excursion that came before it (its angle is that excursion's residual
+deflection); rest samples before the first excursion belong to the first one. No
+sample is dropped.
+
+Bands (``zero_band``, ``deadband``) are in the input's own unit. Negative settings
+mean "derive from the input" (:func:`input_bands`), so nothing depends on whether
+the input is in encoder counts or volts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
+from i2ris_calib.hysteresis.model import Signals
+
+DIRECTIONS = ("+", "-", "±")
+AXES = ("yaw", "pitch")
+
+
+def other_axis(axis: str) -> str:
+    """The other bending axis: ``"pitch"`` for ``"yaw"`` and vice versa."""
+    return "pitch" if axis == "yaw" else "yaw"
+
+
+@dataclass(frozen=True)
+class Bands:
+    """Input bands (unit of the input) and how they were chosen.
+
+    Attributes
+    ----------
+    noise : float
+        Robust input noise sd (from second differences), input unit.
+    zero_band : float
+        ``|input| <= zero_band`` is "at rest near zero" (direction attribution only).
+    deadband : float
+        Dead band of ``v'`` (EGPI output switch, cycle turns), input unit.
+    derived : tuple of str
+        Names of the bands derived from the input (not configured).
+    """
+
+    noise: float
+    zero_band: float
+    deadband: float
+    derived: tuple[str, ...] = ()
+
+
+def input_noise(v: np.ndarray) -> float:
+    """Robust sd of the input's sample-to-sample noise (input unit), >= 0.
+
+    ``1.4826 * MAD(diff2) / sqrt(6)``: white noise of sd s has second differences of
+    sd ``s sqrt(6)``; smooth motion contributes almost nothing to the median.
+    """
+    v = np.asarray(v, dtype=float)
+    v = v[np.isfinite(v)]
+    if v.size < 4:
+        return 0.0
+    d2 = np.diff(v, 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+
+
+def input_bands(enc: np.ndarray, zero_band: float = -1.0, deadband: float = -1.0) -> Bands:
+    """Bands for input ``enc`` (any unit); a negative setting is derived from the input.
+
+    * ``deadband`` = max(3 x input noise sd, 3e-4 x max |input|): above the jitter,
+      and as small as the data allow (a wide band delays the EGPI switch back to
+      loading at a turning point). Encoder counts up to 6000 counts: 1.8 counts.
+    * ``zero_band`` = max(3 x input noise sd, 0.5 % of max |input|).
+    """
+    e = np.asarray(enc, dtype=float)
+    e = e[np.isfinite(e)]
+    noise = input_noise(e)
+    span = float(np.ptp(e)) if e.size else 0.0
+    peak = float(np.max(np.abs(e))) if e.size else 0.0
+    derived = []
+    if deadband < 0:
+        deadband = max(3.0 * noise, 3e-4 * (peak if peak > 0 else span))
+        derived.append("deadband")
+    if zero_band < 0:
+        zero_band = max(3.0 * noise, 5e-3 * peak)
+        derived.append("zero_band")
+    return Bands(noise, float(zero_band), float(deadband), tuple(derived))
+
+
+def direction_of_samples(enc: np.ndarray, zero_band: float) -> np.ndarray:
+    """Direction each sample belongs to: int8 (n,), +1 ("+"), -1 ("-"), 0 (no excursion).
+
+    Outside the zero band the sign of ``enc``; inside it, the direction of the last
+    excursion (the first excursion's for rest samples before it). 0 only when the
+    input never leaves the band.
+    """
+    e = np.asarray(enc, dtype=float)
+    d = np.where(e > zero_band, 1, np.where(e < -zero_band, -1, 0)).astype(np.int8)
+    moving = np.flatnonzero(d != 0)
+    if moving.size == 0:
+        return d
+    idx = np.zeros(d.size, dtype=int)
+    idx[moving] = moving
+    idx = np.maximum.accumulate(idx)
+    idx[: moving[0]] = moving[0]
+    return d[idx]
+
+
+def direction_input(enc: np.ndarray, direction: str) -> np.ndarray:
+    """The input a direction's model sees (input unit), shape (n,).
+
+    ``"+"``: ``max(enc, 0)``; ``"-"``: ``max(-enc, 0)``; ``"±"``: ``enc``.
+    """
+    e = np.asarray(enc, dtype=float)
+    if direction == "+":
+        return np.maximum(e, 0.0)
+    if direction == "-":
+        return np.maximum(-e, 0.0)
+    if direction == "±":
+        return e.copy()
+    raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+
+
+def direction_sign(direction: str) -> float:
+    """-1 for a ``"-"`` dataset (angle sign flipped, the paper's |deg|), else +1."""
+    return -1.0 if direction == "-" else 1.0
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """One axis and motion direction of a recording, over its whole history.
+
+    Attributes
+    ----------
+    name : str
+        ``"<axis><direction>"``, e.g. ``"yaw+"``, ``"pitch-"``, ``"yaw±"``.
+    axis : str
+        ``"yaw"`` or ``"pitch"``.
+    direction : str
+        ``"+"``, ``"-"`` or ``"±"`` (the signed input, one model across zero).
+    signals : Signals
+        Every sample in time order: ``v`` = the direction's input (input unit, see
+        :func:`direction_input`), ``t_s`` (s), ``v_other`` (the other axis's signed
+        input) and ``theta_other_deg`` when known.
+    theta_deg : ndarray, shape (n,)
+        Angle in the direction's convention (``-theta`` for ``"-"``), NaN where not
+        measured *or* not in this direction: the loss and the metrics see exactly the
+        finite samples.
+    theta_measured_deg : ndarray, shape (n,)
+        Angle in the direction's convention on every measured sample (for figures).
+    in_direction : ndarray of bool, shape (n,)
+        Samples that belong to this direction (:func:`direction_of_samples`).
+    holdout : ndarray of bool, shape (n,)
+        Held-out samples (whole loading cycles of this direction, metrics only).
+    enc : ndarray, shape (n,)
+        The axis's signed input as recorded.
+    bands : Bands
+        Zero band and ``v'`` dead band used (input unit).
+    source : str
+        Where the samples came from (file path), for messages.
+    rows : dict
+        Row accounting: ``total``, ``in_direction``, ``angle_missing`` (in direction,
+        angle not measured), ``holdout``, ``fitted``.
+    """
+
+    name: str
+    axis: str
+    direction: str
+    signals: Signals
+    theta_deg: np.ndarray
+    theta_measured_deg: np.ndarray
+    in_direction: np.ndarray
+    holdout: np.ndarray
+    enc: np.ndarray
+    bands: Bands
+    source: str = ""
+    rows: dict = field(default_factory=dict)
+
+    @property
+    def v(self) -> np.ndarray:
+        """The direction's input, shape (n,)."""
+        return self.signals.v
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Sample times (s), shape (n,)."""
+        return self.signals.t_s
+
+    @property
+    def sign(self) -> float:
+        """-1 for a ``"-"`` dataset, else +1 (angle convention)."""
+        return direction_sign(self.direction)
+
+    @property
+    def abs_fitted(self) -> bool:
+        """True for a ``"-"`` dataset (|input| -> |angle|, the paper's convention)."""
+        return self.direction == "-"
+
+    @property
+    def fit_mask(self) -> np.ndarray:
+        """Samples in the loss: in direction, angle measured, not held out, shape (n,)."""
+        return np.isfinite(self.theta_deg) & ~self.holdout
+
+    @property
+    def n_samples(self) -> int:
+        """Samples in the recording (every one drives the model)."""
+        return int(self.v.size)
+
+
+def make_dataset(
+    axis: str,
+    direction: str,
+    time_s: np.ndarray,
+    enc: np.ndarray,
+    theta_deg: np.ndarray,
+    *,
+    enc_other: np.ndarray | None = None,
+    theta_other_deg: np.ndarray | None = None,
+    bands: Bands | None = None,
+    holdout_fraction: float = 0.25,
+    source: str = "",
+) -> Dataset:
+    """The ``direction`` dataset of ``axis`` (see the module docstring).
+
+    Parameters
+    ----------
+    axis : {"yaw", "pitch"}
+    direction : {"+", "-", "±"}
+    time_s, enc, theta_deg : ndarray, shape (n,)
+        Sample times (s, increasing), the axis's signed input, its measured angle
+        (deg, NaN where not measured).
+    enc_other, theta_other_deg : ndarray, shape (n,), optional
+        The other axis's signed input and angle (coupling effects).
+    bands : Bands, optional
+        Default: derived from ``enc`` (:func:`input_bands`).
+    holdout_fraction : float
+        Fraction of this direction's loading cycles held out (0 = none).
+    """
+    enc = np.asarray(enc, dtype=float)
+    theta = np.asarray(theta_deg, dtype=float)
+    bands = input_bands(enc) if bands is None else bands
+    sign = direction_sign(direction)
+    v = direction_input(enc, direction)
+    if direction == "±":
+        mine = np.ones(enc.size, dtype=bool)
+    else:
+        mine = direction_of_samples(enc, bands.zero_band) == (1 if direction == "+" else -1)
+    measured = sign * theta
+    masked = np.where(mine, measured, np.nan)
+    cyc = cycle_index(v, None)
+    hold = holdout_mask(cyc, holdout_fraction, v) & mine if mine.any() else np.zeros_like(mine)
+    sig = Signals(
+        v=v,
+        t_s=np.asarray(time_s, dtype=float),
+        v_other=None if enc_other is None else np.asarray(enc_other, dtype=float),
+        theta_other_deg=None if theta_other_deg is None else np.asarray(theta_other_deg, float),
+    )
+    fitted = np.isfinite(masked) & ~hold
+    rows = {
+        "total": int(enc.size),
+        "in_direction": int(mine.sum()),
+        "angle_missing": int((mine & ~np.isfinite(theta)).sum()),
+        "holdout": int((hold & np.isfinite(masked)).sum()),
+        "fitted": int(fitted.sum()),
+    }
+    return Dataset(
+        name=f"{axis}{direction}",
+        axis=axis,
+        direction=direction,
+        signals=sig,
+        theta_deg=masked,
+        theta_measured_deg=measured,
+        in_direction=mine,
+        holdout=hold,
+        enc=enc,
+        bands=bands,
+        source=source,
+        rows=rows,
+    )
+
+
+def direction_datasets(
+    axis: str,
+    time_s: np.ndarray,
+    enc: np.ndarray,
+    theta_deg: np.ndarray,
+    *,
+    enc_other: np.ndarray | None = None,
+    theta_other_deg: np.ndarray | None = None,
+    bands: Bands | None = None,
+    holdout_fraction: float = 0.25,
+    min_samples: int = 50,
+    signed: bool = False,
+    directions: tuple[str, ...] | None = None,
+    source: str = "",
+) -> list[Dataset]:
+    """Every motion-direction dataset of ``axis`` with >= ``min_samples`` samples.
+
+    ``signed``: one ``"±"`` dataset (the whole signed input) instead of ``"+"`` and
+    ``"-"``. ``directions`` restricts to the named ones. The count of a direction is
+    its samples outside the zero band (an axis at rest is not a dataset).
+    """
+    enc = np.asarray(enc, dtype=float)
+    bands = input_bands(enc) if bands is None else bands
+    wanted = ("±",) if signed else ("+", "-")
+    if directions is not None:
+        wanted = tuple(d for d in wanted if d in directions)
+    out = []
+    for d in wanted:
+        outside = (
+            np.abs(enc) > bands.zero_band
+            if d == "±"
+            else (enc > bands.zero_band if d == "+" else enc < -bands.zero_band)
+        )
+        if outside.sum() < min_samples:
+            continue
+        out.append(
+            make_dataset(
+                axis,
+                d,
+                time_s,
+                enc,
+                theta_deg,
+                enc_other=enc_other,
+                theta_other_deg=theta_other_deg,
+                bands=bands,
+                holdout_fraction=holdout_fraction,
+                source=source,
+            )  # fmt: skip
+        )
+    return out

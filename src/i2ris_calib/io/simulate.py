@@ -23,7 +23,7 @@ from i2ris_calib.io.provenance import provenance
 from i2ris_calib.simulation import trajectory as tj
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.simulation.scene import CameraModel, make_cameras, make_cube, true_marker_corners
-from i2ris_calib.simulation.truth import Truth, session_truth
+from i2ris_calib.simulation.truth import Truth, session_truth, truth_at
 from i2ris_calib.tracking.geometry import tip_rotation
 
 
@@ -145,8 +145,7 @@ def _exposure_rotations(cfg, truth: Truth, t_cam: np.ndarray, t0_ctrl: float):
     offs = (np.arange(m) + 0.5) / m - 0.5 if m > 1 else np.zeros(1)
     tt = t_cam[:, None] + offs[None, :] * cfg.exposure_s
     tau = tj.ctrl_from_cam(cfg, tt) - t0_ctrl
-    yaw = np.interp(tau, truth.t_s, truth.yaw_deg)
-    pitch = np.interp(tau, truth.t_s, truth.pitch_deg)
+    yaw, pitch = truth_at(cfg, truth, tau)  # exact at these times (whole_history truth)
     rot = np.array(
         [
             [tip_rotation(y, p) for y, p in zip(ry, rp, strict=True)]
@@ -154,11 +153,7 @@ def _exposure_rotations(cfg, truth: Truth, t_cam: np.ndarray, t0_ctrl: float):
         ]
     )
     tau_mid = tj.ctrl_from_cam(cfg, t_cam) - t0_ctrl
-    return (
-        rot,
-        np.interp(tau_mid, truth.t_s, truth.yaw_deg),
-        np.interp(tau_mid, truth.t_s, truth.pitch_deg),
-    )
+    return (rot, *truth_at(cfg, truth, tau_mid))
 
 
 def _marker_inside(cfg, cam: CameraModel, rotations: np.ndarray) -> np.ndarray:
@@ -240,8 +235,7 @@ def _write_encoders(folder: Path, cfg, truth: Truth, t0_ctrl: float, flashes: np
         enc["sync_flash"] = tj.interval_overlap(t_ctrl, t_ctrl + 1e-9, on).round().astype(int)
     write_csv(folder / "encoders.csv", enc, "%.6f")
     tc = enc[["time_s", "enc_yaw", "enc_pitch"]].copy()
-    tc["yaw_deg"] = np.interp(tau, truth.t_s, truth.yaw_deg)
-    tc["pitch_deg"] = np.interp(tau, truth.t_s, truth.pitch_deg)
+    tc["yaw_deg"], tc["pitch_deg"] = truth_at(cfg, truth, tau)
     names = np.array([b.name for b in tj.session_blocks(cfg)] + [""])
     tc["dataset"] = names[truth.block[idx]]
     write_csv(folder / "truth" / "truth_controller.csv", tc, "%.6f")

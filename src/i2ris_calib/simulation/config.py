@@ -54,6 +54,19 @@ class SimulationConfig:
     settle_s: float = 1.0  # end-of-dataset residual angle relaxed to 0 over this time
     encoder_rate_hz: float = 1000.0
     models: dict = field(default_factory=dict)  # per-dataset parameter overrides
+    # --- motion: alternative random excursions (motion = "excursions") -----------
+    motion: Literal["fig5", "excursions"] = "fig5"  # fig5 = the datasets one after another
+    excursions: int = 4  # excursions per axis and direction (of `datasets`); >= 2
+    excursion_fractions: tuple[float, float] = (0.4, 1.0)  # peak range / amplitude
+    speed_factors: tuple[float, float] = (0.5, 1.6)  # ramp speed / (amplitude / ramp_s)
+    hold_s: tuple[float, float] = (0.3, 1.5)  # hold at zero between excursions (range)
+    compound_fraction: float = 0.3  # chance an excursion runs together with the next one
+    minor_loop_fraction: float = 0.25  # chance an excursion turns back up on its way down
+    # --- truth ------------------------------------------------------------------
+    # blocks = per dataset block, faded in/out (the Fig-5 sample); whole_history = the data
+    # layer's assumption exactly: per axis and direction one EGPI over the whole history
+    truth: Literal["blocks", "whole_history"] = "blocks"
+    zero_start: bool = True  # whole_history: shift a4, a6 so the model starts at 0 deg
     # --- clocks and events ------------------------------------------------------
     offset_s: float = 12.5  # t_ctrl = offset_s + (1 + drift_ppm 1e-6) t_cam
     drift_ppm: float = 80.0
@@ -98,5 +111,21 @@ class SimulationConfig:
             raise ValueError("noise_sigma, blur_sigma_px >= 0 and motion_blur_samples >= 1")
         if len(set(self.marker_ids)) != 2:
             raise ValueError("marker_ids must be two different ids")
+        if self.motion not in ("fig5", "excursions"):
+            raise ValueError(f"motion must be 'fig5' or 'excursions', got {self.motion!r}")
+        if self.truth not in ("blocks", "whole_history"):
+            raise ValueError(f"truth must be 'blocks' or 'whole_history', got {self.truth!r}")
+        if self.excursions < 2:
+            raise ValueError("excursions must be >= 2 (two full-scale excursions per direction)")
+        lo, hi = self.excursion_fractions
+        s_lo, s_hi = self.speed_factors
+        h_lo, h_hi = self.hold_s
+        if not (0 < lo <= hi <= 1 and 0 < s_lo <= s_hi and 0 <= h_lo <= h_hi):
+            raise ValueError(
+                "need 0 < excursion_fractions[0] <= [1] <= 1, 0 < speed_factors[0] <= [1], "
+                "0 <= hold_s[0] <= [1]"
+            )
+        if not (0 <= self.compound_fraction <= 1 and 0 <= self.minor_loop_fraction <= 1):
+            raise ValueError("compound_fraction and minor_loop_fraction must be in [0, 1]")
         if not -0.99 < self.illumination_falloff < 0.99:
             raise ValueError("illumination_falloff must be in (-0.99, 0.99)")

@@ -25,6 +25,17 @@ PRESETS: dict[str, dict] = {
                       blur_sigma_px=1.2, misalignment_deg=3.0, focal_px=50000.0, ramp_s=7.0,
                       cycles=2, cycle_fractions=(0.6, 1.0), pause_s=1.0, rest_s=1.5,
                       settle_s=1.0, occlusions=3, occlusion_s=0.4),
+    # Exact EGPI truth (the data layer's assumption, docs/simulation.md): random
+    # excursions of all four directions with holds at zero, varied speeds, minor loops
+    # and compound moves; 640x512 mp4, ~105 s. The model-stage benchmark's session.
+    "exact": dict(width_px=640, height_px=512, marker_size_px=110.0, video_format="mp4",
+                  motion="excursions", truth="whole_history", excursions=4, ramp_s=2.5,
+                  pause_s=0.5, rest_s=1.5, settle_s=1.0),
+    # The same at CI size (320x256), three excursions per direction, faster ramps (~50 s).
+    "exact_ci": dict(width_px=320, height_px=256, marker_size_px=80.0, focal_px=20000.0,
+                     blur_sigma_px=1.0, amplitude_counts=(4500.0, 4500.0), pivot_mm=0.8,
+                     motion="excursions", truth="whole_history", excursions=3, ramp_s=1.5,
+                     pause_s=0.4, rest_s=1.5, settle_s=0.6, hold_s=(0.3, 1.0)),
 }  # fmt: skip
 
 

@@ -1,8 +1,18 @@
-"""Encoder input trajectories (Fig-5-like), clocks, frame times and scripted events.
+"""Encoder input trajectories, clocks, frame times and scripted events.
 
-The session runs the datasets one after another; in each, one motor ramps out and
-back (with pauses at the peaks and after each return) while the other motor holds
-zero. Times here are seconds from the start of the motion, on the controller clock.
+Two motions (config ``motion``):
+
+* ``"fig5"`` (default): the datasets run one after another; in each, one motor ramps
+  out and back (with pauses at the peaks and after each return) while the other motor
+  holds zero.
+* ``"excursions"``: random excursions of every axis and direction of ``datasets`` in a
+  shuffled order, each out to its own peak at its own speeds (up and down differ),
+  a pause at every turning point, some with a minor loop on the way down, holds at
+  zero of random length between excursions, and some run on both axes at once
+  (compound moves). Two excursions per direction reach full amplitude (the first and
+  the last), so a held-out cycle lies inside the fitted range.
+
+Times here are seconds from the start of the motion, on the controller clock.
 """
 
 from __future__ import annotations
@@ -50,7 +60,13 @@ def dataset_knots(cfg: SimulationConfig, amplitude: float) -> tuple[np.ndarray, 
 
 
 def session_blocks(cfg: SimulationConfig) -> list[Block]:
-    """The datasets laid end to end (controller seconds from the motion start)."""
+    """The datasets laid end to end (controller seconds from the motion start).
+
+    With ``motion = "excursions"``: one block per excursion (sorted by start; the
+    blocks of a compound move overlap in time; ``settle_start_s = t1_s``).
+    """
+    if cfg.motion == "excursions":
+        return [e.block for e in excursion_schedule(cfg)]
     blocks, t = [], 0.0
     for name in cfg.datasets:
         axis, sign = name[:-1], (1 if name[-1] == "+" else -1)
@@ -63,6 +79,13 @@ def session_blocks(cfg: SimulationConfig) -> list[Block]:
 
 def session_inputs(cfg: SimulationConfig, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Integer encoder counts (yaw, pitch), each shape (n,), at motion times ``t_s``."""
+    t_s = np.asarray(t_s, dtype=float)
+    if cfg.motion == "excursions":
+        out = {}
+        for axis in ("yaw", "pitch"):
+            kt, kv = axis_knots(excursion_schedule(cfg), axis)
+            out[axis] = np.interp(t_s, kt, kv, left=0.0, right=0.0) if kt.size else 0.0 * t_s
+        return np.rint(out["yaw"]).astype(np.int64), np.rint(out["pitch"]).astype(np.int64)
     out = {"yaw": np.zeros(t_s.shape), "pitch": np.zeros(t_s.shape)}
     for b in session_blocks(cfg):
         amp = cfg.amplitude_counts[0 if b.axis == "yaw" else 1]
@@ -74,7 +97,116 @@ def session_inputs(cfg: SimulationConfig, t_s: np.ndarray) -> tuple[np.ndarray, 
 
 def motion_duration_s(cfg: SimulationConfig) -> float:
     """Controller seconds from motion start to motion end."""
+    if cfg.motion == "excursions":
+        return max(b.t1_s for b in session_blocks(cfg)) + cfg.settle_s
     return session_blocks(cfg)[-1].t1_s
+
+
+@dataclass(frozen=True)
+class Excursion:
+    """One excursion of ``motion = "excursions"``.
+
+    ``block`` names it and gives its span (s from the motion start); ``knots_t``
+    (s, from ``block.t0_s``) and ``knots_v`` (|input|, counts) are its piecewise-linear
+    profile, shape (k,) each, starting and ending at 0.
+    """
+
+    block: Block
+    knots_t: np.ndarray
+    knots_v: np.ndarray
+
+
+def excursion_profile(
+    rng: np.random.Generator,
+    peak: float,
+    base_speed: float,
+    speed_factors: tuple[float, float],
+    pause_s: float,
+    minor_loop: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Knots (times s from 0, |input| counts), shape (k,) each, of one excursion.
+
+    Out to ``peak`` and back to 0; every ramp at its own speed ``base_speed x
+    U(speed_factors)`` (counts/s); a pause of ``pause_s x U(0.5, 1.5)`` (at least
+    0.15 s, so every frame-rate sampling sees the turning point) at each turn. With
+    ``minor_loop``: on the way down, turn back up at 30-60 % of the peak to 60-90 %
+    of the way back to it, then down to 0.
+    """
+    levels = [peak]
+    if minor_loop:
+        low = peak * rng.uniform(0.3, 0.6)
+        levels += [low, low + (peak - low) * rng.uniform(0.6, 0.9)]
+    levels.append(0.0)
+    t, v = [0.0], [0.0]
+    for i, target in enumerate(levels):
+        speed = base_speed * rng.uniform(*speed_factors)
+        t.append(t[-1] + abs(target - v[-1]) / speed)
+        v.append(target)
+        if i < len(levels) - 1:
+            t.append(t[-1] + max(0.15, pause_s * rng.uniform(0.5, 1.5)))
+            v.append(target)
+    return np.asarray(t), np.asarray(v)
+
+
+def excursion_schedule(cfg: SimulationConfig) -> list[Excursion]:
+    """The excursions of ``motion = "excursions"``, sorted by start time.
+
+    ``excursions`` per axis and direction named in ``datasets``, shuffled; peaks
+    ``U(excursion_fractions) x amplitude`` except the first and last of each direction
+    (full amplitude). With probability ``compound_fraction`` an excursion starts
+    together with the next one when that one moves the other axis (the later one
+    lagging by up to 40 % of the first's duration). ``rest_s`` at zero before the
+    first, ``U(hold_s)`` at zero after every group. Deterministic in ``cfg.seed``
+    (its own random stream: the other draws of the session do not change).
+    """
+    rng = np.random.default_rng(np.random.SeedSequence([int(cfg.seed), 8]))
+    items = [(name[:-1], 1 if name[-1] == "+" else -1) for name in cfg.datasets]
+    order = [it for it in items for _ in range(cfg.excursions)]
+    order = [order[i] for i in rng.permutation(len(order))]
+    seen: dict[tuple[str, int], int] = {}
+    fracs = []
+    lo, hi = cfg.excursion_fractions
+    for it in order:
+        seen[it] = seen.get(it, 0) + 1
+        last = seen[it] == cfg.excursions
+        fracs.append(1.0 if seen[it] == 1 or last else float(rng.uniform(lo, hi)))
+    out, t, i = [], cfg.rest_s, 0
+    while i < len(order):
+        group = [i]
+        if (
+            i + 1 < len(order)
+            and order[i + 1][0] != order[i][0]
+            and rng.random() < cfg.compound_fraction
+        ):
+            group.append(i + 1)
+        end, lag = t, 0.0
+        for j in group:
+            axis, sign = order[j]
+            amp = cfg.amplitude_counts[0 if axis == "yaw" else 1]
+            kt, kv = excursion_profile(
+                rng, fracs[j] * amp, amp / cfg.ramp_s, cfg.speed_factors, cfg.pause_s,
+                bool(rng.random() < cfg.minor_loop_fraction),
+            )  # fmt: skip
+            t0 = t + lag
+            name = f"{axis}{'+' if sign > 0 else '-'}"
+            out.append(Excursion(Block(name, axis, sign, t0, t0 + kt[-1], t0 + kt[-1]), kt, kv))
+            end = max(end, t0 + kt[-1])
+            lag = float(rng.uniform(0.0, 0.4)) * kt[-1]
+        t = end + float(rng.uniform(*cfg.hold_s))
+        i += len(group)
+    return sorted(out, key=lambda e: e.block.t0_s)
+
+
+def axis_knots(schedule: list[Excursion], axis: str) -> tuple[np.ndarray, np.ndarray]:
+    """Signed input knots (times s from the motion start, counts) of one axis, (k,) each."""
+    ts, vs = [], []
+    for e in schedule:
+        if e.block.axis == axis:
+            ts.append(e.block.t0_s + e.knots_t)
+            vs.append(e.block.sign * e.knots_v)
+    if not ts:
+        return np.zeros(0), np.zeros(0)
+    return np.concatenate(ts), np.concatenate(vs)
 
 
 def ctrl_from_cam(cfg: SimulationConfig, t_cam: np.ndarray) -> np.ndarray:

@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.effects import CATALOGUE  # noqa: E402
-from i2ris_calib.diagnosis.synthetic import STRENGTHS, make_case  # noqa: E402
+from i2ris_calib.diagnosis.synthetic import STRENGTHS, case_dataset, make_case  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model  # noqa: E402
 
 
@@ -56,8 +56,9 @@ def run_case(effect, params, noise, seed, config=None) -> dict:
     """Diagnose one case; the row of the results table."""
     case = make_case(seed, effect, params, noise_deg=noise)
     t0 = time.perf_counter()
-    start = fit_start_model("egpi", case.signals, case.theta_deg, config)
-    diag = diagnose(start, case.signals, case.theta_deg, config)
+    data = case_dataset(case)  # the "+" Dataset fit and diagnose build from its CSV
+    start = fit_start_model("egpi", data)
+    diag = diagnose(start, data, config)
     dt = time.perf_counter() - t0
     named = diag.named_effects
     shrink = 1.0 - diag.final.holdout_rmse_deg / diag.baseline.holdout_rmse_deg

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from i2ris_calib.diagnosis.cycles import holdout_units, reversal_indices, segment
+from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
 from i2ris_calib.diagnosis.workflow import autocovariance, sse_reduction_z
 from i2ris_calib.hysteresis.model import Signals
@@ -46,32 +46,44 @@ def test_z_test_detects_a_real_improvement():
     assert z > 3 and p < 1e-3
 
 
-def test_reversals_and_segments_of_a_zigzag():
+def test_units_are_the_held_out_cycles_of_the_one_segmentation():
+    """Units come from fitting.cycles (the cycles the held-out mask was drawn from):
+    2 held-out cycles of 6 are 2 units, halved until there are at least 6."""
+    from i2ris_calib.data.dataset import make_dataset
+    from i2ris_calib.fitting.cycles import cycle_index
+
+    t = np.arange(0, 60, 0.05)
+    v = np.round(3000 * (1 - np.cos(2 * np.pi * t / 10)))
+    data = make_dataset("yaw", "+", t, v, 0.005 * v, holdout_fraction=0.34)
+    cyc = dataset_cycles(data.v)
+    np.testing.assert_array_equal(cyc, cycle_index(data.v))
+    assert cyc.max() == 5
+    held = np.unique(cyc[data.holdout])
+    assert held.size == 2 and 0 not in held
+    assert np.unique(holdout_units(cyc, data.holdout, min_units=2)).tolist() == [-1, *held]
+    units = holdout_units(cyc, data.holdout, min_units=6)
+    assert np.unique(units[units >= 0]).size == 8
+    assert (units >= 0).sum() == data.holdout.sum()  # every held-out sample in a unit
+    for u in np.unique(units[units >= 0]):  # a unit never spans two cycles
+        assert np.unique(cyc[units == u]).size == 1
+
+
+def test_loading_mask_is_the_models_v_prime():
     v = np.concatenate([np.linspace(0, 10, 11), np.linspace(9, 2, 8), np.linspace(3, 12, 10)])
-    rev = reversal_indices(v, 1.5)
-    np.testing.assert_array_equal(rev, [10, 18])
-    seg = segment(v)
-    assert seg.stroke.max() == 2 and seg.cycle.max() == 1
-    assert seg.rising[:11].all() and not seg.rising[11:19].any() and seg.rising[19:].all()
-
-
-def test_holdout_units_split_until_enough():
-    v = np.concatenate([np.linspace(0, 10, 50), np.linspace(10, 0, 50)])
-    seg = segment(v)
-    units = holdout_units(seg, np.ones(v.size, bool), min_units=6)
-    assert np.unique(units).size >= 6
+    up = loading_mask(v, 0.5)
+    assert up[:11].all() and not up[11:19].any() and up[19:].all()
 
 
 def test_residual_analysis_locates_branch_rate_and_lag():
     t = np.arange(0, 60, 0.02)
     v = 1000 * (1 - np.cos(2 * np.pi * t / 10))
     rate = np.gradient(v, t)
-    seg = segment(v)
+    loading = loading_mask(v, 1.0)
     # residual only on the unloading branch, proportional to the rate 0.5 s earlier
     lagged = np.interp(t - 0.5, t, rate)
     res = np.where(rate < 0, 1e-3 * lagged, 0.0)
     sig = Signals(v=v, t_s=t, v_other=np.zeros_like(t), theta_other_deg=np.sin(t))
-    a = residual_analysis(res, sig, seg, max_lag_s=1.0)
+    a = residual_analysis(res, sig, loading, max_lag_s=1.0)
     assert a["by_branch"]["unloading"]["sse_share"] > 0.9
     assert abs(a["xcorr_input"]["peak_rate_lag_s"] - 0.5) <= 0.1
     text = " ".join(concentration_sentences(a))

@@ -14,19 +14,21 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from i2ris_calib.data.dataset import make_dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.synthetic import STRENGTHS, make_case
-from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model
+from i2ris_calib.diagnosis.synthetic import STRENGTHS, case_dataset, make_case
+from i2ris_calib.diagnosis.workflow import check_dataset, diagnose, fit_start_model
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Signals
 
 
 def _run(seed, effect, params=None, noise=0.2, signals=None, **cfg):
     case = make_case(seed, effect, params, noise_deg=noise)
-    sig = signals(case.signals) if signals else case.signals
+    data = case_dataset(case)
+    if signals:
+        data = replace(data, signals=signals(data.signals))
     config = DiagnosisConfig(**cfg)
-    start = fit_start_model("egpi", sig, case.theta_deg, config)
-    return case, diagnose(start, sig, case.theta_deg, config)
+    start = fit_start_model("egpi", data)
+    return case, diagnose(start, data, config)
 
 
 def test_hidden_delay_is_named_recovered_and_gap_closes():
@@ -96,7 +98,50 @@ def test_clean_data_names_nothing_slow(seed):
     assert d.named_effects == []
 
 
-def test_too_little_data_is_a_calib_error(egpi):
-    t = np.arange(0, 2, 0.1)
-    with pytest.raises(CalibError, match="too few"):
-        diagnose(egpi, Signals(v=100 * t, t_s=t), np.zeros(t.size))
+def _cycles(amplitudes, rate_hz=30.0, ramp_s=4.0, pause_s=1.0):
+    """Input (counts) of triangular loading cycles of the given amplitudes, with pauses."""
+    kt, kv = [0.0], [0.0]
+    for a in amplitudes:
+        for dt, val in ((pause_s, 0.0), (ramp_s, a), (pause_s, a), (ramp_s, 0.0)):
+            kt.append(kt[-1] + dt)
+            kv.append(val)
+    t = np.arange(0.0, kt[-1], 1.0 / rate_hz)
+    return t, np.round(np.interp(t, kt, kv))
+
+
+def _dataset(amplitudes, **kw):
+    t, v = _cycles(amplitudes, **kw)
+    return make_dataset("yaw", "+", t, v, 0.005 * v)
+
+
+def test_one_loading_cycle_is_refused_with_the_real_minimum(egpi):
+    data = _dataset([6000.0])
+    with pytest.raises(CalibError, match="only 1 loading cycle.*at least 2 loading cycles"):
+        check_dataset(data)
+    with pytest.raises(CalibError, match="at least 2 loading cycles"):
+        diagnose(egpi, data)
+
+
+def test_two_loading_cycles_are_enough():
+    """The minimum is what the held-out rule needs: 2 cycles, the second inside the
+    first's input range (held out); nothing more."""
+    data = _dataset([6000.0, 5000.0])
+    # the second cycle (t >= 10 s) is held out, the first is fitted
+    assert data.holdout[data.time_s > 11].all() and not data.holdout[data.time_s < 9].any()
+    check_dataset(data)  # does not raise
+    start = fit_start_model("gpi", data)
+    d = diagnose(start, data, DiagnosisConfig(max_steps=1, candidates=("time_delay",)))
+    assert np.isfinite(d.baseline.holdout_rmse_deg) and d.holdout.sum() == data.holdout.sum()
+
+
+def test_a_second_cycle_beyond_the_first_cannot_be_held_out():
+    with pytest.raises(CalibError, match="2 loading cycles, but every cycle after the first"):
+        check_dataset(_dataset([4000.0, 6000.0]))
+
+
+def test_too_few_samples_state_the_sample_minimum():
+    # 2 short cycles at 2 Hz: a held-out cycle, but fewer than 20 held-out samples
+    data = _dataset([6000.0, 5000.0], rate_hz=2.0, ramp_s=2.0, pause_s=0.5)
+    assert data.holdout.any()
+    with pytest.raises(CalibError, match="at least 50 fitted and 20 held-out"):
+        check_dataset(data)

@@ -69,15 +69,18 @@ def test_outputs_are_complete_and_name_the_delay(diagnosed):
 def test_final_model_file_rebuilds_the_fitted_model(diagnosed):
     from i2ris_calib.diagnosis.effects import model_values
     from i2ris_calib.diagnosis.serialize import model_from_dict
-    from i2ris_calib.io.diagnose import read_synced
+    from i2ris_calib.fitting.config import FitConfig
+    from i2ris_calib.io.diagnose import diagnosis_dataset
 
     _, out, _, csv = diagnosed
     obj = json.loads((out / "final_model.json").read_text())
     model = model_from_dict(obj)
     assert [e["name"] for e in obj["effects"]] == ["time_delay"]
     assert [p.name for p in model.parameters] == list(obj["params"])
-    sig, theta, _ = read_synced(csv, "yaw")
-    y = model.evaluate(sig, model_values(model))
+    data = diagnosis_dataset(csv, "yaw", "auto", FitConfig())
+    assert obj["dataset"] == data.name == "yaw+" and obj["direction"] == "+"
+    theta = data.theta_deg
+    y = model.evaluate(data.signals, model_values(model))
     ok = np.isfinite(theta)
     rmse = float(np.sqrt(np.mean((y[ok] - theta[ok]) ** 2)))
     assert rmse < 0.25  # noise 0.15 deg
@@ -93,12 +96,12 @@ def _run_error(capsys, args):
     "mutate, needle",
     [
         (lambda df: df.drop(columns=["yaw_deg"]), "missing column(s) yaw_deg"),
-        (lambda df: df.iloc[::-1], "must increase"),
+        (lambda df: df.iloc[::-1], "strictly increasing"),
         (
             lambda df: df.assign(enc_yaw=df["enc_yaw"].astype(object).where(df.index != 5, "x")),
-            "non-numeric",
+            "not numeric at line 7",
         ),
-        (lambda df: df.iloc[:5], "only 5 rows"),
+        (lambda df: df.iloc[:5], "fewer than 50 samples leave the zero band"),
     ],
 )
 def test_bad_csv_is_a_one_line_error(tmp_path, capsys, mutate, needle):
@@ -152,8 +155,12 @@ def test_bad_model_file_is_a_calib_error():
         )
 
 
-def test_read_synced_selects_one_direction(tmp_path):
-    from i2ris_calib.io.diagnose import read_synced
+def test_direction_dataset_is_the_whole_history(tmp_path):
+    """--direction picks one Dataset of the one reader: every row in time order, the
+    direction's input, the angle in its convention (-theta = |theta| for "-") only on
+    its own samples; auto = the direction with more in-direction samples."""
+    from i2ris_calib.fitting.config import FitConfig
+    from i2ris_calib.io.diagnose import diagnosis_dataset
 
     t = np.arange(0, 30, 0.1)
     enc = np.where(t < 10, 300 * t, np.where(t < 20, -200 * (t - 10), 0.0))  # +, -, rest
@@ -161,12 +168,23 @@ def test_read_synced_selects_one_direction(tmp_path):
     pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": 0.01 * enc, "status": "measured"}).to_csv(
         csv, index=False
     )
-    sig, theta, neg = read_synced(csv, "yaw", "-")
-    assert neg and np.all(sig.v >= 0) and np.all(theta[np.isfinite(theta)] >= 0)
-    assert sig.v.size == int((enc < 5).sum())  # negative excursion and the rests
-    np.testing.assert_allclose(theta, 0.01 * sig.v)
-    sig, _, neg = read_synced(csv, "yaw", "auto")
-    assert not neg and sig.v.max() == enc.max()  # more samples on the + side
+    minus = diagnosis_dataset(csv, "yaw", "-", FitConfig())
+    assert minus.name == "yaw-" and minus.abs_fitted and minus.n_samples == t.size
+    np.testing.assert_array_equal(minus.v, np.maximum(-enc, 0.0))
+    mine = minus.in_direction
+    assert mine[(enc < -10)].all() and not mine[enc > 10].any()
+    assert mine[t >= 20].all()  # the rest after the "-" excursion belongs to it
+    np.testing.assert_allclose(minus.theta_deg[mine], np.abs(0.01 * enc[mine]))
+    assert np.isnan(minus.theta_deg[~mine]).all()
+    plus = diagnosis_dataset(csv, "yaw", "+", FitConfig())
+    assert plus.name == "yaw+" and plus.n_samples == t.size and plus.v.max() == enc.max()
+    np.testing.assert_array_equal(plus.in_direction, ~minus.in_direction)
+    # "+": t < 10 s and the sample at 10 s (enc = 0, after the + excursion); "-" the
+    # rest, with the final rest: auto takes the larger one
+    assert (plus.rows["in_direction"], minus.rows["in_direction"]) == (101, 199)
+    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw-"
+    pd.DataFrame({"time_s": t, "enc_yaw": -enc, "yaw_deg": -0.01 * enc}).to_csv(csv, index=False)
+    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw+"
 
 
 def test_bad_direction_is_a_one_line_error(tmp_path, capsys):
@@ -175,3 +193,92 @@ def test_bad_direction_is_a_one_line_error(tmp_path, capsys):
     pd.DataFrame({"time_s": t, "enc_yaw": 100 * t, "yaw_deg": t}).to_csv(csv, index=False)
     rc, err = _run_error(capsys, [str(csv), "--axis", "yaw", "--direction", "up"])
     assert rc == 2 and "--direction must be" in err
+
+
+def _two_direction_csv(path, seed=4, tau_s=0.15, noise_deg=0.1):
+    """A yaw recording with + then - loading cycles (paper-like EGPI per direction,
+    driven by the direction's input over the whole history, a hidden delay)."""
+    from i2ris_calib.data.dataset import direction_of_samples
+    from i2ris_calib.diagnosis.effects import build_model, model_values
+    from i2ris_calib.diagnosis.synthetic import excitation
+    from i2ris_calib.hysteresis.model import Signals
+    from i2ris_calib.hysteresis.models import i2ris_egpi_model
+    from i2ris_calib.hysteresis.presets import paper_like_params
+
+    rng = np.random.default_rng(seed)
+    t, v = excitation(rng, n_cycles=4)
+    dt = t[1] - t[0]
+    time = np.concatenate([t, t[-1] + dt + t])
+    enc = np.concatenate([v, -v])
+    angle = {}
+    for d, sign in (("+", 1.0), ("-", -1.0)):
+        truth = build_model(
+            i2ris_egpi_model(**paper_like_params(f"yaw{d}")), {"time_delay": {"tau_s": tau_s}}
+        )
+        sig = Signals(v=np.maximum(sign * enc, 0.0), t_s=time)
+        angle[d] = sign * truth.evaluate(sig, model_values(truth))
+    side = direction_of_samples(enc, 30.0)
+    theta = np.where(side > 0, angle["+"], angle["-"]) + rng.normal(0, noise_deg, enc.size)
+    pd.DataFrame({"time_s": time, "enc_yaw": enc, "yaw_deg": theta}).to_csv(path, index=False)
+
+
+def test_fit_model_file_refits_on_exactly_the_diagnosed_samples(tmp_path):
+    """diagnose and fit build the same Dataset: the "-" dataset diagnosed over the
+    whole history is the one `fit --model-file` refits the final model on (same rows,
+    same loss mask, same held-out cycles), and the refit keeps the diagnosed fit."""
+    from i2ris_calib.config import PipelineConfig
+    from i2ris_calib.io.diagnose import diagnosis_dataset
+    from i2ris_calib.io.synced import load_datasets
+
+    csv = tmp_path / "synced.csv"
+    _two_direction_csv(csv)
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text('[diagnose]\nmax_steps = 1\ncandidates = ["time_delay", "dead_zone"]\n')
+    dout = tmp_path / "diag"
+    args = [str(csv), "--axis", "yaw", "--direction", "-", "--config", str(cfg)]
+    assert main(["diagnose", *args, "--out", str(dout)]) == 0
+    rec = json.loads((dout / "diagnosis.json").read_text())
+    assert rec["dataset"] == "yaw-" and rec["direction"] == "-" and rec["abs_input"]
+    assert rec["named_effects"] == ["time_delay"]
+
+    fout = tmp_path / "fit"
+    model_file = str(dout / "final_model.json")
+    fit_args = [str(csv), "--axis", "yaw", "--model", "gpi", "--config", str(cfg)]
+    assert main(["fit", *fit_args, "--model-file", model_file, "--out", str(fout)]) == 0
+    doc = json.loads((fout / "fit.json").read_text())
+    ds = {d["name"]: d for d in doc["datasets"]}
+    assert set(ds) == {"yaw+", "yaw-"}
+    minus = ds["yaw-"]
+    # the same rows, loss mask and held-out cycles as the diagnosis
+    assert minus["n_samples"] == rec["n_samples"] and minus["rows"] == rec["rows"]
+    assert minus["bands"] == rec["bands"]
+    refit = minus["models"]["diagnosed"]
+    assert refit["n_samples"] == rec["rows"]["fitted"]
+    assert refit["n_holdout"] == rec["rows"]["holdout"] > 0
+    pred = pd.read_csv(fout / "predictions.csv")
+    pm = pred[pred["dataset"] == "yaw-"]
+    assert len(pm) == rec["n_samples"]
+    assert (pm["split"] == "holdout").sum() >= rec["rows"]["holdout"]
+    # array level: diagnose's dataset is fit's dataset
+    pc = PipelineConfig()
+    mine = diagnosis_dataset(csv, "yaw", "-", pc.fit)
+    theirs = {d.name: d for d in load_datasets([csv], "yaw", pc.fit)}["yaw-"]
+    np.testing.assert_array_equal(mine.v, theirs.v)
+    np.testing.assert_array_equal(mine.theta_deg, theirs.theta_deg)
+    np.testing.assert_array_equal(mine.holdout, theirs.holdout)
+    np.testing.assert_array_equal(mine.fit_mask, theirs.fit_mask)
+    np.testing.assert_array_equal(pm["split"].to_numpy() == "holdout", theirs.holdout)
+    # refitting from the diagnosed values keeps the delay and the held-out error
+    assert abs(refit["params"]["time_delay.tau_s"] - 0.15) < 0.03
+    assert refit["holdout_metrics"]["rmse_deg"] < 1.5 * 0.1
+
+
+def test_one_cycle_is_refused_stating_the_real_minimum(tmp_path, capsys):
+    csv = tmp_path / "s.csv"
+    t = np.arange(0, 20, 0.05)
+    enc = np.round(3000 * (1 - np.cos(2 * np.pi * t / 20)))  # one loading cycle
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": 0.005 * enc}).to_csv(csv, index=False)
+    rc, err = _run_error(capsys, [str(csv), "--axis", "yaw", "--out", str(tmp_path / "o")])
+    assert rc == 2 and "\n" not in err
+    assert "only 1 loading cycle" in err and "at least 2 loading cycles" in err
+    assert not (tmp_path / "o").exists()

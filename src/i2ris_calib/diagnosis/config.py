@@ -15,11 +15,9 @@ class DiagnosisConfig:
         Effects to try (catalogue names); empty = the whole catalogue.
     max_steps : int
         Most effects added.
-    holdout_fraction : float
-        Fraction of the loading cycles held out (whole cycles, evenly spread,
-        never the first; the fitting stage's rule).
     alpha : float
-        Significance level of the one-sided paired test over held-out strokes.
+        Significance level of the one-sided held-out z-test. The held-out cycles
+        are the dataset's (``[fit] holdout_fraction``, the fitting stage's one rule).
     min_rel_improvement : float
         Smallest relative decrease of the held-out RMSE that can name an effect.
     min_delta_bic : float
@@ -56,7 +54,6 @@ class DiagnosisConfig:
 
     candidates: tuple[str, ...] = ()
     max_steps: int = 3
-    holdout_fraction: float = 0.3
     alpha: float = 0.01
     min_rel_improvement: float = 0.05
     min_delta_bic: float = 10.0
@@ -82,8 +79,6 @@ class DiagnosisConfig:
             raise ValueError(f"candidates: unknown effect(s) {bad}; valid: {', '.join(CATALOGUE)}")
         if self.max_steps < 0:
             raise ValueError("max_steps must be >= 0")
-        if not 0 < self.holdout_fraction < 1:
-            raise ValueError("holdout_fraction must be in (0, 1)")
         if not 0 < self.alpha < 1:
             raise ValueError("alpha must be in (0, 1)")
         if not 0 <= self.min_rel_improvement < 1:

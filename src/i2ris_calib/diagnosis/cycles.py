@@ -1,114 +1,51 @@
-"""Strokes and loading cycles, and the held-out units of the paired evidence.
+"""Held-out units of the paired evidence and loading branches, from the one segmentation.
 
-A *stroke* is a monotone run of the input between two reversals; a *loading
-cycle* is a rising stroke followed by the falling stroke after it (minimum to
-minimum). Reversals are found with a zig-zag rule: a new extremum is confirmed
-once the input has moved ``min_travel`` away from it, so encoder jitter and
-holds do not create spurious strokes.
+The diagnosis has no segmentation of its own. Loading cycles are the fitting
+stage's (:func:`i2ris_calib.fitting.cycles.cycle_index`, the same call that chose
+the dataset's held-out cycles in :func:`i2ris_calib.data.dataset.make_dataset`),
+and the loading/unloading branch of a sample is the model's own ``v'``
+(:func:`i2ris_calib.hysteresis.kernel.motion_direction` with the dataset's dead band).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from i2ris_calib.fitting.cycles import cycle_index
+from i2ris_calib.hysteresis.kernel import motion_direction
 
-def reversal_indices(v: np.ndarray, min_travel: float) -> np.ndarray:
-    """Indices of confirmed extrema of ``v`` (zig-zag with threshold ``min_travel``).
+
+def dataset_cycles(v: np.ndarray) -> np.ndarray:
+    """Loading-cycle number of every sample of a dataset's input ``v``, int (n,).
+
+    Exactly the cycles its held-out mask was drawn from
+    (:func:`~i2ris_calib.fitting.cycles.cycle_index` with its default dead band).
+    """
+    return cycle_index(np.asarray(v, dtype=float), None)
+
+
+def loading_mask(v: np.ndarray, deadband: float) -> np.ndarray:
+    """True where the input is loading (``v' > 0`` with dead band ``deadband``, input
+    unit), bool (n,): the branch the hysteresis model itself sees."""
+    v = np.ascontiguousarray(v, dtype=float)
+    return np.asarray(motion_direction(v, float(deadband))) > 0
+
+
+def holdout_units(cycles: np.ndarray, holdout: np.ndarray, min_units: int = 6) -> np.ndarray:
+    """Unit label of each held-out sample for the per-unit count (-1 elsewhere), int (n,).
+
+    Units are the held-out loading cycles (``cycles``, restricted to ``holdout``);
+    while there are fewer than ``min_units`` units, every unit is cut into two
+    halves (by sample order), at most 4 times.
 
     Parameters
     ----------
-    v : ndarray, shape (n,)
-        Input (counts).
-    min_travel : float
-        Travel (counts) away from an extremum needed to confirm it.
-
-    Returns
-    -------
-    ndarray of int, shape (m,)
-        Sample index of each confirmed extremum, increasing.
+    cycles : ndarray of int, shape (n,)
+        Loading-cycle number of every sample (:func:`dataset_cycles`).
+    holdout : ndarray of bool, shape (n,)
+        Held-out samples that count (in direction, angle measured).
     """
-    v = np.asarray(v, float)
-    out: list[int] = []
-    direction, hi, lo, ext = 0, 0, 0, 0
-    for k in range(1, v.size):
-        if direction == 0:
-            hi = k if v[k] > v[hi] else hi
-            lo = k if v[k] < v[lo] else lo
-            if v[hi] - v[lo] >= min_travel:
-                first, direction, ext = (lo, 1, hi) if hi > lo else (hi, -1, lo)
-                if first > 0:
-                    out.append(first)
-        elif direction > 0:
-            if v[k] >= v[ext]:
-                ext = k
-            elif v[ext] - v[k] >= min_travel:
-                out.append(ext)
-                direction, ext = -1, k
-        else:
-            if v[k] <= v[ext]:
-                ext = k
-            elif v[k] - v[ext] >= min_travel:
-                out.append(ext)
-                direction, ext = 1, k
-    return np.array(out, dtype=int)
-
-
-@dataclass(frozen=True)
-class Segmentation:
-    """Per-sample stroke and cycle labels.
-
-    Attributes
-    ----------
-    stroke : ndarray of int, shape (n,)
-        Stroke number of each sample (0-based, increasing with time).
-    cycle : ndarray of int, shape (n,)
-        Loading-cycle number (a new cycle starts at every input minimum).
-    rising : ndarray of bool, shape (n,)
-        True on rising strokes.
-    """
-
-    stroke: np.ndarray
-    cycle: np.ndarray
-    rising: np.ndarray
-
-
-def segment(v: np.ndarray, min_travel_frac: float = 0.05) -> Segmentation:
-    """Label strokes and loading cycles of input ``v`` (shape (n,), counts).
-
-    ``min_travel_frac`` is the zig-zag threshold as a fraction of the input span.
-    """
-    v = np.asarray(v, float)
-    span = float(np.ptp(v)) if v.size else 0.0
-    rev = reversal_indices(v, max(min_travel_frac * span, 1e-12))
-    stroke = np.zeros(v.size, dtype=int)
-    for r in rev:
-        stroke[r + 1 :] += 1
-    bounds = np.concatenate([[0], rev + 1, [v.size]])
-    rising = np.zeros(v.size, dtype=bool)
-    for s in range(bounds.size - 1):
-        a, b = bounds[s], bounds[s + 1]
-        if b > a:
-            rising[a:b] = v[b - 1] >= v[a] if b - a > 1 else (s > 0 and v[a] >= v[a - 1])
-    # a cycle starts at each rising stroke (after a minimum)
-    starts = np.zeros(v.size, dtype=bool)
-    starts[1:] = rising[1:] & ~rising[:-1]
-    cycle = np.cumsum(starts)
-    return Segmentation(stroke=stroke, cycle=cycle, rising=rising)
-
-
-def holdout_units(seg: Segmentation, holdout: np.ndarray, min_units: int = 6) -> np.ndarray:
-    """Unit label of each held-out sample for the paired test (-1 elsewhere).
-
-    Units are the held-out strokes; while there are fewer than ``min_units``
-    units, every unit is cut into two contiguous halves.
-
-    Returns
-    -------
-    ndarray of int, shape (n,)
-    """
-    units = np.where(holdout, seg.stroke, -1)
+    units = np.where(np.asarray(holdout, dtype=bool), np.asarray(cycles, dtype=int), -1)
     for _ in range(4):
         labels = np.unique(units[units >= 0])
         if labels.size >= min_units:

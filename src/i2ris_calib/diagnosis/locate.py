@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from i2ris_calib.diagnosis.cycles import Segmentation
 from i2ris_calib.hysteresis.model import Signals
 
 
@@ -35,15 +34,16 @@ def _cell(res: np.ndarray, sel: np.ndarray, total_sse: float) -> dict:
     }
 
 
-def branch_labels(seg: Segmentation, rate: np.ndarray, hold_frac: float = 0.05) -> np.ndarray:
+def branch_labels(loading: np.ndarray, rate: np.ndarray, hold_frac: float = 0.05) -> np.ndarray:
     """``"loading"``, ``"unloading"`` or ``"hold"`` per sample, shape (n,).
 
-    A sample is a hold when its input speed is below ``hold_frac`` of the 95th
-    percentile speed.
+    ``loading`` (bool, (n,)) is the model's ``v' > 0``
+    (:func:`i2ris_calib.diagnosis.cycles.loading_mask`). A sample is a hold when its
+    input speed is below ``hold_frac`` of the 95th percentile speed.
     """
     speed = np.abs(rate)
     ref = float(np.quantile(speed, 0.95)) if speed.size else 0.0
-    lab = np.where(seg.rising, "loading", "unloading").astype(object)
+    lab = np.where(np.asarray(loading, bool), "loading", "unloading").astype(object)
     lab[speed < hold_frac * ref] = "hold"
     return lab
 
@@ -51,7 +51,7 @@ def branch_labels(seg: Segmentation, rate: np.ndarray, hold_frac: float = 0.05) 
 def residual_analysis(
     res: np.ndarray,
     signals: Signals,
-    seg: Segmentation,
+    loading: np.ndarray,
     n_bins: int = 8,
     max_lag_s: float = 1.0,
 ) -> dict:
@@ -64,8 +64,8 @@ def residual_analysis(
     signals : Signals
         Inputs of the model, shape (n,); ``t_s`` is needed for rate, time and lag
         analyses (sample index is used when it is missing).
-    seg : Segmentation
-        Strokes and cycles of ``signals.v``.
+    loading : ndarray of bool, shape (n,)
+        Loading branch of ``signals.v`` (:func:`i2ris_calib.diagnosis.cycles.loading_mask`).
     n_bins : int
         Input bins (quantiles) per branch and time windows.
     max_lag_s : float
@@ -88,7 +88,7 @@ def residual_analysis(
     r0 = np.where(ok, res, 0.0)
     total = float(np.dot(r0, r0))
     rate = np.gradient(v, t) if n > 1 else np.zeros(n)
-    lab = branch_labels(seg, rate)
+    lab = branch_labels(loading, rate)
     out: dict = {"rmse_deg": float(np.sqrt(total / max(ok.sum(), 1))), "n": int(ok.sum())}
     out["by_branch"] = {
         b: _cell(res[ok], lab[ok] == b, total) for b in ("loading", "unloading", "hold")
@@ -134,10 +134,13 @@ def residual_analysis(
     }
     dt = float(np.median(np.diff(t))) if n > 1 else 1.0
     lags = {"1": 1, "5": 5, "20": 20, "1s": max(1, round(1.0 / dt))}
+    # pairs with an unmeasured sample (dropouts, the other direction's samples) are
+    # left out rather than zero-filled
     out["autocorr"] = {
-        f"lag_{k}": _corr(r0[m:], r0[:-m]) if 0 < m < n else None for k, m in lags.items()
+        f"lag_{k}": _corr(res[m:], res[:-m]) if 0 < m < n else None for k, m in lags.items()
     }
-    d = np.diff(r0)
+    d = np.diff(res)
+    d = d[np.isfinite(d)]
     out["autocorr"]["durbin_watson"] = float(np.dot(d, d) / total) if total > 0 else None
     out["xcorr_input"] = _xcorr_input(res, v, rate, dt, max_lag_s)
     return out

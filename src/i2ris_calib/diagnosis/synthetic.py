@@ -136,3 +136,29 @@ def make_case(
     sig = Signals(v=v, t_s=t, v_other=v_other, theta_other_deg=th_other)
     theta = truth.evaluate(sig, model_values(truth)) + rng.normal(0.0, noise_deg, t.size)
     return Case(sig, theta, truth, effect, noise_deg)
+
+
+def case_dataset(case: Case, fit_config=None, axis: str = "yaw"):
+    """The case as the ``"+"`` :class:`~i2ris_calib.data.Dataset` that ``diagnose``
+    and ``fit`` would build from its synced CSV (bands derived from the input unless
+    ``fit_config`` sets them, its held-out cycles from ``fit_config.holdout_fraction``).
+
+    The case's input never goes negative, so every sample is in the ``"+"`` direction.
+    """
+    from i2ris_calib.data.dataset import input_bands, make_dataset
+    from i2ris_calib.fitting.config import FitConfig
+
+    cfg = fit_config or FitConfig()
+    s = case.signals
+    return make_dataset(
+        axis,
+        "+",
+        s.t_s,
+        s.v,
+        case.theta_deg,
+        enc_other=s.v_other,
+        theta_other_deg=s.theta_other_deg,
+        bands=input_bands(s.v, cfg.zero_band_counts, cfg.deadband_counts),
+        holdout_fraction=cfg.holdout_fraction,
+        source=f"synthetic case ({case.effect or 'clean'})",
+    )

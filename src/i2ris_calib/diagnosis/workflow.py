@@ -10,11 +10,10 @@
 
    - it lowers the RMSE on held-out loading cycles by at least
      ``min_rel_improvement`` (relative);
-   - a one-sided paired t-test over held-out units (strokes of the held-out
-     cycles) on ``d_j = ln(MSE_before_j / MSE_after_j)`` rejects "no improvement"
-     at level ``alpha``: each unit is fitted by neither model, so noise alone
-     makes ``d_j`` scatter around zero (slightly below, as extra parameters fit
-     noise);
+   - a one-sided z-test of the held-out SSE reduction (:func:`sse_reduction_z`,
+     noise autocovariance from the fitted samples) rejects "no improvement" at
+     level ``alpha``: the held-out cycles are fitted by neither model, so noise
+     alone cannot make the reduction large;
    - BIC on the fitted samples falls by at least ``min_delta_bic`` (10 is "very
      strong" evidence on the Kass-Raftery scale).
 
@@ -25,6 +24,12 @@
    with what was only a better optimum of the base model). Among significant
    finalists the lowest held-out RMSE wins, BIC breaking near-ties.
 3. *Add and repeat* until no candidate is significant or ``max_steps`` is reached.
+
+The data are one :class:`~i2ris_calib.data.Dataset` (one axis and motion direction
+over the whole recording): every model runs over every sample in time order; the
+fitted samples are the dataset's loss mask (``fit_mask``), the held-out samples its
+held-out cycles (the fitting stage's one rule). See :func:`check_dataset` for the
+least data the workflow can work with.
 """
 
 from __future__ import annotations
@@ -34,8 +39,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import stats
 
+from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.cycles import Segmentation, holdout_units, segment
+from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.diagnosis.effects import (
     CATALOGUE,
     Effect,
@@ -94,7 +100,8 @@ class Comparison:
     p_value : float
         One-sided normal p-value of ``z``.
     units_improved, n_units : int
-        Held-out strokes whose mean squared error fell, out of all.
+        Held-out units (loading cycles, halved until there are at least 6) whose
+        mean squared error fell, out of all: descriptive, not the test.
     delta_bic : float
         BIC(after) - BIC(before) on the fitted samples (negative = better).
     significant : bool
@@ -171,7 +178,8 @@ class Diagnosis:
     analysis_final : dict
         Residual analysis of the final model; ``sentences_final`` its summary.
     holdout : ndarray of bool, shape (n,)
-        Held-out samples of the full signal.
+        Held-out samples of the full signal that count (the dataset's held-out
+        cycles, in direction, angle measured).
     decimation : int
         Step between the samples used in the search.
     """
@@ -196,14 +204,15 @@ class Diagnosis:
 
 @dataclass(frozen=True)
 class _Data:
-    """Search data: decimated signals, angle, masks and held-out units."""
+    """Search data: decimated signals, angle (0 where not counted), the fitted and
+    held-out masks, held-out units and the loading branch."""
 
     signals: Signals
     theta: np.ndarray
     fit: np.ndarray
     hold: np.ndarray
     units: np.ndarray
-    seg: Segmentation
+    loading: np.ndarray
 
 
 def metrics_of(model: Model, values: np.ndarray, d: _Data, n_free: int) -> Metrics:
@@ -463,64 +472,105 @@ def _polished(c: Candidate, d: _Data, cfg: DiagnosisConfig) -> Candidate:
     )
 
 
-def holdout_for(v: np.ndarray, cfg: DiagnosisConfig | None = None) -> np.ndarray:
-    """Held-out samples, shape (n,): whole loading cycles, as the fitting stage
-    chooses them (:func:`i2ris_calib.fitting.cycles.holdout_mask`, fraction
-    ``holdout_fraction``, never the first cycle)."""
-    from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
-
-    cfg = cfg or DiagnosisConfig()
-    return holdout_mask(cycle_index(np.asarray(v, float)), cfg.holdout_fraction)
-
-
-def fit_start_model(
-    kind: str,
-    signals: Signals,
-    theta_deg: np.ndarray,
-    config: DiagnosisConfig | None = None,
-    fit_config=None,
-) -> Model:
+def fit_start_model(kind: str, data: Dataset, fit_config=None) -> Model:
     """Starting model ``"gpi"`` or ``"egpi"`` fitted by the fitting stage
-    (:func:`i2ris_calib.fitting.pipeline.fit_kind`, multi-start LM) on the samples
-    that the diagnosis does not hold out."""
+    (:func:`i2ris_calib.fitting.pipeline.fit_dataset`, multi-start) on the dataset's
+    loss mask: exactly what ``fit`` fits on the same dataset."""
     from i2ris_calib.fitting.config import FitConfig
-    from i2ris_calib.fitting.pipeline import fit_kind
+    from i2ris_calib.fitting.pipeline import fit_dataset
 
     if kind not in ("gpi", "egpi"):
         raise CalibError(f"starting model must be gpi or egpi, got '{kind}'")
-    hold = holdout_for(signals.v, config)
     with single_threaded_blas():
-        return fit_kind(kind, signals, theta_deg, fit_config or FitConfig(), holdout=hold).model
+        return fit_dataset(kind, data, fit_config or FitConfig()).model
 
 
-def _search_data(
-    signals: Signals, theta: np.ndarray, cfg: DiagnosisConfig
-) -> tuple[_Data, np.ndarray, int]:
-    """Decimated search data, the full held-out mask and the decimation step."""
-    n = theta.size
-    seg_full = segment(np.asarray(signals.v, float))
-    hold_full = holdout_for(signals.v, cfg)
-    step = max(1, int(np.ceil(n / cfg.max_samples)))
-    idx = np.arange(0, n, step)
-    sig = signals.take(idx)
-    th = np.asarray(theta, float)[idx]
-    ok = np.isfinite(th)
-    hold = hold_full[idx] & ok
-    fit = ~hold_full[idx] & ok
-    seg = Segmentation(seg_full.stroke[idx], seg_full.cycle[idx], seg_full.rising[idx])
-    units = np.where(ok, holdout_units(seg, hold), -1)
-    if fit.sum() < 50 or hold.sum() < 20:
-        raise CalibError(
-            f"too few usable samples for diagnosis ({int(fit.sum())} fitted, {int(hold.sum())} "
-            "held out): record at least 6 loading cycles with the angle measured"
+#: Least fitted / held-out samples (angle measured, on the search signal) the
+#: workflow accepts: the refits need many more residuals than parameters (a start
+#: EGPI has 11 free, each effect adds up to 2), and the held-out test needs more
+#: than a handful of held-out samples.
+MIN_FITTED_SAMPLES = 50
+MIN_HOLDOUT_SAMPLES = 20
+
+
+def decimation_step(n: int, cfg: DiagnosisConfig) -> int:
+    """Step k of the search signal (every k-th sample, at most ``max_samples``)."""
+    return max(1, int(np.ceil(n / cfg.max_samples)))
+
+
+def check_dataset(data: Dataset, config: DiagnosisConfig | None = None) -> None:
+    """Raise a one-line CalibError unless the workflow can work with ``data``.
+
+    The minimum (checked in this order):
+
+    1. at least one held-out loading cycle. With the held-out rule
+       (:func:`i2ris_calib.fitting.cycles.holdout_mask`) that means at least 2
+       loading cycles, and one of them other than the first lying inside the input
+       range of the others (a held-out cycle tests interpolation); the first cycle
+       is never held out. Two such cycles are enough.
+    2. at least :data:`MIN_FITTED_SAMPLES` fitted and :data:`MIN_HOLDOUT_SAMPLES`
+       held-out samples with the angle measured on the search signal (every k-th
+       sample, see :func:`decimation_step`).
+    """
+    cfg = config or DiagnosisConfig()
+    where = f"{data.source} [{data.name}]" if data.source else data.name
+    ok = np.isfinite(data.theta_deg)
+    hold = data.holdout & ok
+    if not hold.any():
+        cyc = dataset_cycles(data.v)
+        n_cyc = int(np.unique(cyc[data.in_direction]).size) if data.in_direction.any() else 0
+        why = (
+            "only 1 loading cycle"
+            if n_cyc == 1
+            else f"{n_cyc} loading cycles"
+            + (
+                ", but every cycle after the first leaves the input range of the others"
+                if n_cyc >= 2
+                else ""
+            )
         )
-    return _Data(sig, np.where(ok, th, 0.0), fit, hold, units, seg), hold_full, step
+        raise CalibError(
+            f"{where}: {why}; diagnosis needs a held-out loading cycle, i.e. at least 2 "
+            "loading cycles with the angle measured, one of them (not the first) inside "
+            "the input range of the others: record more cycles (or check [fit] "
+            "holdout_fraction > 0)"
+        )
+    step = decimation_step(data.n_samples, cfg)
+    n_fit = int((data.fit_mask[::step]).sum())
+    n_hold = int(hold[::step].sum())
+    if n_fit < MIN_FITTED_SAMPLES or n_hold < MIN_HOLDOUT_SAMPLES:
+        raise CalibError(
+            f"{where}: {n_fit} fitted and {n_hold} held-out samples with the angle measured"
+            + (f" (every {step}th sample)" if step > 1 else "")
+            + f"; diagnosis needs at least {MIN_FITTED_SAMPLES} fitted and "
+            f"{MIN_HOLDOUT_SAMPLES} held-out: record longer cycles or at a higher rate"
+            + (" (or raise [diagnose] max_samples)" if step > 1 else "")
+        )
+
+
+def _search_data(data: Dataset, cfg: DiagnosisConfig) -> tuple[_Data, np.ndarray, int]:
+    """Decimated search data, the full held-out mask and the decimation step."""
+    check_dataset(data, cfg)
+    theta_full = np.asarray(data.theta_deg, float)
+    ok_full = np.isfinite(theta_full)
+    hold_full = data.holdout & ok_full
+    step = decimation_step(data.n_samples, cfg)
+    idx = np.arange(0, data.n_samples, step)
+    sig = data.signals.take(idx)
+    th = theta_full[idx]
+    ok = ok_full[idx]
+    hold = hold_full[idx]
+    fit = data.fit_mask[idx]
+    units = holdout_units(dataset_cycles(data.v)[idx], hold)
+    loading = loading_mask(data.v, data.bands.deadband)[idx]
+    d = _Data(sig, np.where(ok, th, 0.0), fit, hold, units, loading)
+    return d, hold_full, step
 
 
 def _analysis(model: Model, d: _Data) -> tuple[dict, tuple[str, ...]]:
     res = d.theta - model.evaluate(d.signals, model_values(model))
     res = np.where(d.fit | d.hold, res, np.nan)
-    a = residual_analysis(res, d.signals, d.seg)
+    a = residual_analysis(res, d.signals, d.loading)
     return a, tuple(concentration_sentences(a))
 
 
@@ -607,8 +657,7 @@ def single_threaded_blas():
 
 def diagnose(
     start: Model,
-    signals: Signals,
-    theta_deg: np.ndarray,
+    data: Dataset,
     config: DiagnosisConfig | None = None,
     progress=None,
 ) -> Diagnosis:
@@ -618,13 +667,14 @@ def diagnose(
     ----------
     start : Model
         Starting model with fitted (or at least sensible) values, e.g. a GPI or
-        EGPI fitted by :mod:`i2ris_calib.fitting`; it is polished on the fitted
-        cycles first.
-    signals : Signals
-        Inputs, shape (n,) each, in time order (``t_s`` needed by the
-        time-dependent effects; ``v_other``/``theta_other_deg`` by coupling).
-    theta_deg : ndarray, shape (n,)
-        Measured angle (deg); NaN where not measured.
+        EGPI from :func:`fit_start_model`; it is polished on the fitted samples first.
+    data : Dataset
+        One axis and motion direction over the whole recording: ``signals`` (shape
+        (n,) each, time order; ``t_s`` needed by the time-dependent effects,
+        ``v_other``/``theta_other_deg`` by coupling), ``theta_deg`` (deg, the
+        direction's convention, NaN where not measured or not in the direction),
+        ``fit_mask`` and ``holdout`` (whole loading cycles). Every model runs over
+        every sample; only the direction's measured samples are compared.
     config : DiagnosisConfig, optional
     progress : callable, optional
         ``progress(text)`` called before each candidate fit (for a progress bar).
@@ -634,14 +684,11 @@ def diagnose(
     Diagnosis
     """
     with single_threaded_blas():
-        return _diagnose(start, signals, theta_deg, config or DiagnosisConfig(), progress)
+        return _diagnose(start, data, config or DiagnosisConfig(), progress)
 
 
-def _diagnose(start, signals, theta_deg, cfg, progress) -> Diagnosis:
-    theta_deg = np.asarray(theta_deg, float)
-    if theta_deg.shape != np.asarray(signals.v).shape:
-        raise CalibError("diagnose: angle and input have different lengths")
-    d, hold_full, step = _search_data(signals, theta_deg, cfg)
+def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
+    d, hold_full, step = _search_data(data, cfg)
     names = list(cfg.candidates or CATALOGUE)
     pol = refit(start, d.signals, d.theta, d.fit, model_values(start), max_nfev=cfg.start_max_nfev)
     current = start.with_values(pol.values)

@@ -137,6 +137,21 @@ def _one_line_error(args, capsys) -> str:
             "dataset,time_s,v,theta_deg,split\na,1,2,3,fit\n",
             "neither gpi_deg nor egpi_deg",
         ),
+        (
+            "fit/pitch/predictions.csv",
+            "dataset,time_s,v,theta_deg,egpi_c_deg,split\na,1,2,3,4,fit\na,2,2,3,4,train\n",
+            "column 'split' has value 'train' (row 3); expected one of fit, holdout, other",
+        ),
+        (
+            "fit/yaw/fit.json",
+            '{"datasets": [{"name": "yaw+", "rows": {"fitted": "many"}, "models": {}}]}',
+            "datasets[0].rows.fitted = 'many' is not a number",
+        ),
+        (
+            "fit/yaw/fit.json",
+            '{"datasets": [{"name": "yaw+", "models": {"gpi": {"converged": "no"}}}]}',
+            "datasets[0].models.gpi.converged = 'no' is not true/false",
+        ),
         ("diagnose/yaw/diagnosis.json", "{nope}", "malformed JSON"),
     ],
 )
@@ -218,3 +233,14 @@ def test_folder_in_place_of_a_file_counts_as_missing(run_dir):
     (run_dir / "sync" / "sync.json").mkdir()  # a folder where a file is expected
     run, _ = load_run(run_dir)
     assert run.sync is None and run.absent["sync/sync.json"] == "not found"
+
+
+def test_predictions_with_only_egpi_c_and_other_rows_are_read(run_dir):
+    """The fit stage's current predictions.csv (every sample, split other) loads as is."""
+    pred_path = run_dir / "fit" / "yaw" / "predictions.csv"
+    text = pred_path.read_text()
+    assert ",other\n" in text and "egpi_c_deg" in text.splitlines()[0]
+    run, _ = load_run(run_dir)
+    pred = run.fits[0].predictions
+    assert set(pred["split"]) == {"fit", "holdout", "other"}
+    assert pred["egpi_c_deg"].dtype.kind == "f"

@@ -156,13 +156,43 @@ GPI_PARAMS = ("a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn")
 EGPI_PARAMS = ("a1", "a2", "a3", "a4", "a5", "a6", "lam", "sigma", "r1", "rn", "kappa", "v_f")
 
 
-def _dataset(axis: str, direction: str, t: np.ndarray, scale: float):
-    """One dataset: v >= 0 (|input| for '-'), theta with backlash, GPI and EGPI with known errors."""
-    v = 1000 * (1 - np.cos(2 * np.pi * t / 10)) / 2 * (1 - 0.02 * t)
-    theta = scale * (0.03 * v + 1.5 * np.sign(np.gradient(v)))
-    gpi = theta + 1.2 * np.sin(2 * np.pi * t / 3)
-    egpi = theta + 0.2 * np.sin(2 * np.pi * t / 3 + 1)
-    split = np.where(t < 0.7 * t[-1], "fit", "holdout")
+UNMEASURED_S = (12.0, 12.3)  # own "+" samples with no angle (tracking lost)
+GAP_S = (16.0, 16.5)  # rows missing from the recording (a "-" excursion)
+HOLDOUT_FROM_S = 20.0  # own samples from here on are held out
+
+
+def recording(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Known signed input and angle of one axis: (t, enc, angle), rows in GAP_S removed.
+
+    ``enc`` alternates "+" and "-" excursions of 5 s (period 10 s); the angle is linear
+    with a +-1.5 deg backlash, 1.2x steeper on the "-" side; NaN during UNMEASURED_S.
+    """
+    t = t[~((t >= GAP_S[0]) & (t < GAP_S[1]))]
+    enc = 1000 * np.sin(2 * np.pi * t / 10) * (1 - 0.02 * t)
+    side = np.where(enc >= 0, 1.0, 1.2)
+    angle = side * (0.03 * enc + 1.5 * np.sign(enc) * np.sign(np.gradient(np.abs(enc))))
+    angle[(t >= UNMEASURED_S[0]) & (t < UNMEASURED_S[1])] = np.nan
+    return t, enc, angle
+
+
+def _dataset(axis: str, direction: str, t: np.ndarray, scale: float = 1.0):
+    """One dataset over the whole recording, in the fit stage's conventions.
+
+    ``v = max(enc, 0)`` ("+") or ``max(-enc, 0)`` ("-"); ``theta_deg`` = angle ("+") or
+    -angle ("-") on every measured sample; split: "other" outside the direction, else
+    "holdout" from HOLDOUT_FROM_S on, else "fit". Models = theta + known errors (GPI
+    1.2 sin, EGPI 0.2 sin, EGPI_C 0.4 sin, period 2.5 s); metrics over own measured samples.
+    """
+    t, enc, angle = recording(t)
+    sign = -1.0 if direction == "-" else 1.0
+    v = np.maximum(sign * enc, 0.0)
+    theta = scale * sign * angle
+    own = enc >= 0 if direction == "+" else enc < 0
+    phase = 2 * np.pi * t / 2.5
+    gpi = theta + 1.2 * np.sin(phase)
+    egpi = theta + 0.2 * np.sin(phase + 1)
+    egpi_c = theta + 0.4 * np.sin(phase + 2)
+    split = np.where(~own, "other", np.where(t >= HOLDOUT_FROM_S, "holdout", "fit"))
     name = f"{axis}{direction}"
     pred = pd.DataFrame(
         {
@@ -172,10 +202,12 @@ def _dataset(axis: str, direction: str, t: np.ndarray, scale: float):
             "theta_deg": theta,
             "gpi_deg": gpi,
             "egpi_deg": egpi,
+            "egpi_c_deg": egpi_c,
             "split": split,
         }
     )
-    fit_m, hold_m = split == "fit", split == "holdout"
+    measured = np.isfinite(theta)
+    fit_m, hold_m = (split == "fit") & measured, (split == "holdout") & measured
 
     def record(y: np.ndarray, names: tuple[str, ...], seed: int) -> dict:
         rng = np.random.default_rng(seed)
@@ -204,16 +236,33 @@ def _dataset(axis: str, direction: str, t: np.ndarray, scale: float):
         "abs_fitted": direction == "-",
         "source": f"sync/synced_{name}.csv",
         "n_samples": len(t),
-        "models": {"gpi": record(gpi, GPI_PARAMS, 1), "egpi": record(egpi, EGPI_PARAMS, 2)},
+        "rows": {
+            "total": len(t),
+            "in_direction": int(own.sum()),
+            "angle_missing": int((own & ~measured).sum()),
+            "holdout": int(hold_m.sum()),
+            "fitted": int(fit_m.sum()),
+        },
+        "bands": {
+            "zero_band": 5.0,
+            "deadband": 1.8,
+            "input_noise": 0.6,
+            "derived": ["deadband"],
+        },
+        "models": {
+            "gpi": record(gpi, GPI_PARAMS, 1),
+            "egpi": record(egpi, EGPI_PARAMS, 2),
+            "egpi_c": record(egpi_c, EGPI_PARAMS, 3),
+        },
     }
     return ds, pred
 
 
 def write_fit(root: Path, axis: str, predictions: bool = True) -> dict:
     """fit/<axis>/fit.json (+ predictions.csv) with a '+' and a '-' dataset."""
-    t = np.arange(0, 30, 0.02)
+    t = np.round(np.arange(0, 30, 0.02), 6)
     dsp, pp = _dataset(axis, "+", t, 1.0)
-    dsm, pm = _dataset(axis, "-", t, 1.2)
+    dsm, pm = _dataset(axis, "-", t, 1.0)
     fit = {
         "schema": "i2ris-calib.fit/1",
         "axis": axis,

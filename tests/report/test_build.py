@@ -72,8 +72,18 @@ def test_complete_run_has_every_section_and_figure(run_data):
     units = {r[0]: r[1] for r in params.subsections[0].blocks[0].rows}
     assert units["a1"] == "deg/count" and units["kappa"] == "1"  # from the model declarations
     acc = _blocks(doc, "accuracy", Table)
-    assert [t.caption.split(":")[0] for t in acc] == ["yaw", "yaw", "pitch", "pitch"]
-    assert [t.rows[0][1] for t in acc] == ["fitted", "paper", "fitted", "paper"]
+    assert [t.caption.split(":")[0] for t in acc] == ["yaw"] * 3 + ["pitch"] * 3
+    # per axis: our metrics, the samples accounting, the paper's values
+    assert [t.rows[0][1] for t in acc[:3]] == [
+        "fitted",
+        str(truth["fit"]["yaw"]["datasets"][0]["rows"]["total"]),
+        "paper",
+    ]
+    assert [r[0] for r in acc[0].rows] == ["EGPI_C"] * 2 + ["EGPI"] * 2 + ["GPI"] * 2
+    fig6 = [f for f in doc.figures() if f.name == "fig6_yaw_yaw_pos"][0]
+    rows = truth["fit"]["yaw"]["datasets"][0]["rows"]
+    assert f"({rows['holdout']} measured samples; {rows['fitted']} fitted; " in fig6.caption
+    assert f"{rows['angle_missing']} own samples not measured" in fig6.caption
 
 
 def test_progress_is_called_once_per_section(run_data):
@@ -91,10 +101,33 @@ def test_headline_ratio_from_fit_json(run_data):
     run, truth = run_data
     doc = build_document(run, CFG)
     headline = _blocks(doc, "overview", Table)[1]
+    assert headline.header == (
+        "dataset",
+        "EGPI_C held-out RMSE (deg)",
+        "EGPI held-out RMSE (deg)",
+        "GPI held-out RMSE (deg)",
+        "GPI / EGPI",
+    )
     d = truth["fit"]["yaw"]["datasets"][0]
-    e = d["models"]["egpi"]["holdout_metrics"]["rmse_deg"]
-    g = d["models"]["gpi"]["holdout_metrics"]["rmse_deg"]
-    assert headline.rows[0] == ("yaw+", f"{e:.3f}", f"{g:.3f}", f"{g / e:.2f}")
+    c, e, g = (d["models"][k]["holdout_metrics"]["rmse_deg"] for k in ("egpi_c", "egpi", "gpi"))
+    assert headline.rows[0] == ("yaw+", f"{c:.3f}", f"{e:.3f}", f"{g:.3f}", f"{g / e:.2f}")
+    assert "not converged" not in headline.caption
+    # a failed fit is starred in its own cell only (model x dataset)
+    run.fits[0].fit["datasets"][1]["models"]["gpi"]["converged"] = False
+    headline = _blocks(build_document(run, CFG), "overview", Table)[1]
+    assert [r[3].endswith("*") for r in headline.rows] == [False, True, False, False]
+    assert not any(c.endswith("*") for r in headline.rows for c in (*r[1:3], r[4]))
+    assert "* = not converged" in headline.caption
+
+
+def test_signed_dataset_gets_its_own_figure_name(run_data):
+    run, _ = run_data
+    fit = run.fits[0].fit
+    d = {**fit["datasets"][0], "name": "yaw±", "direction": "±", "abs_fitted": False}
+    pred = run.fits[0].predictions.assign(dataset="yaw±", split="fit")
+    fd = replace(run.fits[0], fit={**fit, "datasets": [d]}, predictions=pred)
+    doc = build_document(replace(run, fits=(fd,)), CFG)
+    assert [f.name for f in doc.figures() if f.name.startswith("fig6_")] == ["fig6_yaw_yaw_signed"]
 
 
 def test_empty_run_states_every_missing_output():

@@ -38,7 +38,9 @@ PREDICTION_COLUMNS = {
     "theta_deg": True,
     "split": False,
 }
-OPTIONAL_NUMERIC = ("reproj_err_px", "gpi_deg", "egpi_deg", "diagnosed_deg")
+MODEL_COLUMNS = ("gpi_deg", "egpi_deg", "egpi_c_deg", "diagnosed_deg")
+OPTIONAL_NUMERIC = ("reproj_err_px", *MODEL_COLUMNS)
+SPLITS = ("fit", "holdout", "other")
 
 
 class _Reader:
@@ -140,6 +142,8 @@ def check_fit_json(fit: Mapping[str, Any], path: Path) -> None:
         models = d.get("models")
         if not isinstance(models, dict):
             raise CalibError(f"{path}: datasets[{i}] has no 'models' object; re-run 'fit'")
+        _check_numbers(d.get("rows"), f"datasets[{i}].rows", path)
+        _check_numbers(d.get("bands"), f"datasets[{i}].bands", path, skip=("derived",))
         for key, rec in models.items():
             if rec is None:
                 continue
@@ -148,18 +152,40 @@ def check_fit_json(fit: Mapping[str, Any], path: Path) -> None:
                     f"{path}: datasets[{i}].models.{key} is not an object; re-run 'fit'"
                 )
             for part in ("params", "stderr", "metrics", "holdout_metrics"):
-                if rec.get(part) is not None and not isinstance(rec[part], dict):
-                    raise CalibError(
-                        f"{path}: datasets[{i}].models.{key}.{part} is not an object; re-run 'fit'"
-                    )
-                for name, val in (rec.get(part) or {}).items():
-                    if val is not None and (
-                        isinstance(val, bool) or not isinstance(val, (int, float))
-                    ):
-                        raise CalibError(
-                            f"{path}: datasets[{i}].models.{key}.{part}.{name} = {val!r} is not "
-                            "a number; re-run 'fit'"
-                        )
+                _check_numbers(rec.get(part), f"datasets[{i}].models.{key}.{part}", path)
+            if rec.get("converged") is not None and not isinstance(rec["converged"], bool):
+                raise CalibError(
+                    f"{path}: datasets[{i}].models.{key}.converged = {rec['converged']!r} is "
+                    "not true/false; re-run 'fit'"
+                )
+
+
+def check_predictions(pred: pd.DataFrame, path: Path) -> None:
+    """A predictions.csv has a model column and only known ``split`` values; CalibError else."""
+    if not set(MODEL_COLUMNS) & set(pred.columns):
+        raise CalibError(
+            f"{path}: no model column (neither gpi_deg nor egpi_deg nor egpi_c_deg); re-run 'fit'"
+        )
+    split = pred["split"]
+    bad = split[~split.isin(SPLITS)]
+    if len(bad):
+        raise CalibError(
+            f"{path}: column 'split' has value {bad.iloc[0]!r} (row {int(bad.index[0]) + 2}); "
+            f"expected one of {', '.join(SPLITS)}; re-run 'fit'"
+        )
+
+
+def _check_numbers(obj: Any, where: str, path: Path, skip: tuple[str, ...] = ()) -> None:
+    """``obj`` (if present) is an object whose values are numbers or null."""
+    if obj is None:
+        return
+    if not isinstance(obj, dict):
+        raise CalibError(f"{path}: {where} is not an object; re-run 'fit'")
+    for name, val in obj.items():
+        if name in skip:
+            continue
+        if val is not None and (isinstance(val, bool) or not isinstance(val, (int, float))):
+            raise CalibError(f"{path}: {where}.{name} = {val!r} is not a number; re-run 'fit'")
 
 
 def png_paths(obj: Any) -> list[str]:
@@ -196,11 +222,8 @@ def _load_fits(r: _Reader) -> tuple[FitData, ...]:
             continue
         check_fit_json(fit, r.root / label)
         pred = r.csv(f"fit/{axis}/predictions.csv", PREDICTION_COLUMNS)
-        if pred is not None and not ({"gpi_deg", "egpi_deg"} & set(pred.columns)):
-            raise CalibError(
-                f"{r.root / f'fit/{axis}/predictions.csv'}: neither gpi_deg nor egpi_deg column; "
-                "re-run 'fit'"
-            )
+        if pred is not None:
+            check_predictions(pred, r.root / f"fit/{axis}/predictions.csv")
         fits.append(FitData(axis=axis, fit=fit, predictions=pred))
     return tuple(fits)
 

@@ -120,37 +120,46 @@ def overview_section(run: RunData) -> Section:
     blocks: list = [
         Table(("stage", "output", "status"), tuple(rows), "Stage outputs read from the run folder.")
     ]
-    headline = _headline_rows(run.fits)
-    if headline:
-        blocks.append(
-            Table(
-                ("dataset", "EGPI held-out RMSE (deg)", "GPI held-out RMSE (deg)", "GPI / EGPI"),
-                tuple(headline),
-                "Headline: held-out RMSE per dataset (the paper reports GPI 4-7x worse than EGPI).",
-            )
-        )
+    headline = _headline(run.fits)
+    if headline is not None:
+        blocks.append(headline)
     return Section("overview", "Overview", tuple(blocks))
 
 
-def _headline_rows(fits: tuple[FitData, ...]) -> list[tuple[str, ...]]:
+def _headline(fits: tuple[FitData, ...]) -> Table | None:
+    """Held-out RMSE per dataset and model (``*`` = not converged), and GPI / EGPI."""
+    records = [(fd.axis, d) for fd in fits for d in tables.fit_datasets(fd.fit)]
+    if not records:
+        return None
+    models = [
+        (k, lab)
+        for k, lab in tables.FIT_MODELS
+        if any(k in d.get("models", {}) for _, d in records)
+    ]
     rows = []
-    for fd in fits:
-        for d in tables.fit_datasets(fd.fit):
-            models = d.get("models", {})
-
-            def rmse(key: str, m: Mapping[str, Any] = models) -> Any:
-                return ((m.get(key) or {}).get("holdout_metrics") or {}).get("rmse_deg")
-
-            ratio = tables.gpi_egpi_ratio(d)
-            rows.append(
-                (
-                    str(d.get("name", fd.axis)),
-                    tables.fmt(rmse("egpi"), 3),
-                    tables.fmt(rmse("gpi"), 3),
-                    tables.fmt(ratio, 2) if ratio is not None else tables.DASH,
-                )
+    starred = False
+    for axis, d in records:
+        cells = []
+        for key, _ in models:
+            rec = d.get("models", {}).get(key) or {}
+            value = (rec.get("holdout_metrics") or {}).get("rmse_deg")
+            star = tables.not_converged(d, key)
+            starred |= star
+            cells.append(tables.metric_cell(value, 3, star))
+        ratio = tables.gpi_egpi_ratio(d)
+        rows.append(
+            (
+                str(d.get("name", axis)),
+                *cells,
+                tables.fmt(ratio, 2) if ratio is not None else tables.DASH,
             )
-    return rows
+        )
+    return Table(
+        ("dataset", *(f"{lab} held-out RMSE (deg)" for _, lab in models), "GPI / EGPI"),
+        tuple(rows),
+        "Headline: held-out RMSE per dataset (the paper reports GPI 4-7x worse than EGPI)."
+        + (f" {tables.NOT_CONVERGED} = not converged." if starred else ""),
+    )
 
 
 def _no_fit_note(run: RunData) -> Note:
@@ -193,6 +202,9 @@ def accuracy_section(run: RunData) -> Section:
             if ds
             else Note(f"fit/{fd.axis}/fit.json has no datasets.")
         )
+        samples = tables.samples_table(fd.axis, ds, _predictions_by_dataset(fd)) if ds else None
+        if samples is not None:
+            blocks.append(samples)
         if fd.axis in tables.PAPER_RESULTS:
             blocks.append(tables.paper_table(fd.axis))
     return Section("accuracy", "Model accuracy (paper Tables 1-2)", tuple(blocks))
@@ -200,6 +212,20 @@ def accuracy_section(run: RunData) -> Section:
 
 def _dataset_rows(pred: pd.DataFrame, name: str) -> pd.DataFrame:
     return pred[pred["dataset"].astype(str) == name]
+
+
+def _predictions_by_dataset(fd: FitData) -> dict[str, pd.DataFrame]:
+    if fd.predictions is None:
+        return {}
+    return {str(k): g for k, g in fd.predictions.groupby("dataset", sort=False)}
+
+
+def _direction(d: Mapping[str, Any]) -> str:
+    """``"+"``, ``"-"`` or ``"±"`` of a fit.json dataset (older files: from abs_fitted)."""
+    direction = str(d.get("direction", ""))
+    if direction in ("+", "-", "±"):
+        return direction
+    return "-" if d.get("abs_fitted") else "+"
 
 
 def fit_figures_section(run: RunData, cfg: ReportConfig) -> Section:
@@ -225,23 +251,38 @@ def fit_figures_section(run: RunData, cfg: ReportConfig) -> Section:
                     rows,
                     name,
                     fd.axis,
-                    bool(d.get("abs_fitted", False)),
+                    _direction(d),
                     dpi=cfg.figure_dpi,
                     max_points=cfg.max_plot_points,
                 )
-                blocks.append(
-                    Figure(f"fig6_{_slug(fd.axis)}_{_slug(name)}", png, _fig6_caption(name, rows))
-                )
+                caption = _fig6_caption(name, _direction(d), rows)
+                blocks.append(Figure(f"fig6_{_slug(fd.axis)}_{_slug(name)}", png, caption))
         subs.append(Section(f"fig6-{_slug(fd.axis)}", fd.axis, tuple(blocks)))
     return Section("fig6", title, (), tuple(subs))
 
 
-def _fig6_caption(name: str, rows: pd.DataFrame) -> str:
-    n_hold = int((rows["split"] == "holdout").sum())
+def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
+    c = tables.rows_from_predictions(rows)
+    models = [lab for col, lab, _ in figures.MODEL_CURVES if col in rows]
+    sign = (
+        " Sign convention of a '-' dataset: input max(-enc, 0), angle -theta (= |angle| on "
+        "its own samples)."
+        if direction == "-"
+        else ""
+    )
+    other = (
+        f" The {c['other']} samples of the other direction (grey bands) drive the models "
+        "but are not part of this dataset and are not drawn."
+        if c["other"]
+        else ""
+    )
     return (
-        f"{name}: measured angle (grey dots), GPI and EGPI predictions; left: angle vs encoder "
-        f"input, middle: angle vs time, right: model minus measured vs time. Shaded: held-out "
-        f"samples ({n_hold} of {len(rows)})."
+        f"{name}: measured angle (grey dots) and {', '.join(models) or 'no model'} "
+        "predictions on the dataset's own samples; left: angle vs input, middle: angle vs "
+        "time, right: model minus measured vs time. Yellow: held-out cycles "
+        f"({c['holdout']} measured samples; {c['fitted']} fitted; {c['angle_missing']} own "
+        f"samples not measured).{other} Lines are broken wherever samples are missing "
+        "(other direction, unmeasured frames, time gaps): no line bridges a gap." + sign
     )
 
 
@@ -457,8 +498,10 @@ def _provenance_subsection(anchor: str, label: str, prov: Mapping[str, Any]) -> 
 
 
 def _slug(text: str) -> str:
-    """Lower-case ASCII identifier for anchors and file names (``yaw+`` -> ``yaw_pos``)."""
+    """Lower-case ASCII identifier for anchors and file names (``yaw+`` -> ``yaw_pos``,
+    ``yaw-`` -> ``yaw_neg``, ``yaw±`` -> ``yaw_signed``)."""
     text = str(text)
-    if text.endswith(("+", "-")):
-        text = text[:-1] + ("_pos" if text[-1] == "+" else "_neg")
+    suffix = {"+": "_pos", "-": "_neg", "±": "_signed"}
+    if text[-1:] in suffix:
+        text = text[:-1] + suffix[text[-1]]
     return re.sub(r"[^a-z0-9_]+", "_", text.lower()).strip("_") or "x"

@@ -24,8 +24,11 @@ class FitData:
     fit : dict
         Parsed ``fit.json`` (schema ``i2ris-calib.fit/1``).
     predictions : DataFrame or None
-        ``predictions.csv``: dataset, time_s (s), v (counts), theta_deg, gpi_deg,
-        egpi_deg (deg), split (fit|holdout); ``None`` when absent.
+        ``predictions.csv``: every sample of the recording once per dataset: dataset,
+        time_s (s), v (the dataset's input, counts), theta_deg (measured angle in the
+        dataset's convention, deg, NaN when not measured), gpi_deg, egpi_deg,
+        egpi_c_deg [, diagnosed_deg] (model outputs, deg), split (fit | holdout |
+        other: the other direction's samples); ``None`` when absent.
     """
 
     axis: str

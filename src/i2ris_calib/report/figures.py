@@ -8,6 +8,7 @@ timestamp is written into the PNG, so the same data give the same bytes.
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -15,8 +16,12 @@ import pandas as pd
 MEASURED_COLOR = "0.45"
 GPI_COLOR = "#D55E00"  # vermillion (Okabe-Ito, colour-blind safe)
 EGPI_COLOR = "#0072B2"  # blue
+EGPI_C_COLOR = "#CC79A7"  # reddish purple
 DIAGNOSED_COLOR = "#009E73"  # bluish green
 HOLDOUT_COLOR = "#F0E442"
+OTHER_COLOR = "0.6"
+GAP_FACTOR = 1.5
+"""A time step longer than this times the median step is a gap (no line across it)."""
 STATUS_COLORS = {"not_found": "#E69F00", "ambiguous": "#CC79A7", "rejected": "#D55E00"}
 
 
@@ -65,29 +70,193 @@ def holdout_spans(time_s: np.ndarray, is_holdout: np.ndarray) -> list[tuple[floa
     return spans
 
 
-def _shade_holdout(ax, spans: list[tuple[float, float]]) -> None:
+def _shade(ax, spans: list[tuple[float, float]], color: str, alpha: float, label: str) -> None:
     for i, (a, b) in enumerate(spans):
-        ax.axvspan(a, b, color=HOLDOUT_COLOR, alpha=0.3, lw=0, label="held out" if i == 0 else None)
+        ax.axvspan(a, b, color=color, alpha=alpha, lw=0, label=label if i == 0 else None)
+
+
+MODEL_CURVES = (
+    ("gpi_deg", "GPI", GPI_COLOR),
+    ("egpi_deg", "EGPI", EGPI_COLOR),
+    ("egpi_c_deg", "EGPI_C", EGPI_C_COLOR),
+    ("diagnosed_deg", "EGPI + effects", DIAGNOSED_COLOR),
+)
+"""(predictions.csv column, legend label, colour) of every model curve, drawing order."""
 
 
 def _model_columns(pred: pd.DataFrame) -> list[tuple[str, str, str]]:
     """(column, label, colour) for each model column present with finite values."""
-    out = []
-    for col, label, color in (
-        ("gpi_deg", "GPI", GPI_COLOR),
-        ("egpi_deg", "EGPI", EGPI_COLOR),
-        ("diagnosed_deg", "EGPI + effects", DIAGNOSED_COLOR),
-    ):
-        if col in pred and np.isfinite(pred[col].to_numpy(dtype=float)).any():
-            out.append((col, label, color))
+    return [
+        (col, label, color)
+        for col, label, color in MODEL_CURVES
+        if col in pred and np.isfinite(pred[col].to_numpy(dtype=float)).any()
+    ]
+
+
+def continuation(
+    time_s: np.ndarray, keep: np.ndarray, gap_factor: float = GAP_FACTOR
+) -> np.ndarray:
+    """True where sample i may be joined by a line to sample i-1, shape (n,).
+
+    A line may join two consecutive samples of the recording only when both are kept
+    and no sample is missing between them: the time step is at most ``gap_factor``
+    times the recording's median step (dropped frames, pauses, a spliced file), so a
+    line never bridges a stretch that is not drawn.
+
+    Parameters
+    ----------
+    time_s : ndarray, shape (n,)
+        Sample times of the whole recording, sorted ascending (s).
+    keep : ndarray of bool, shape (n,)
+        Samples that are drawn.
+    gap_factor : float
+        A step longer than ``gap_factor x median step`` is a gap.
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        ``False`` at index 0, at every dropped sample and after every gap or dropped sample.
+    """
+    t = np.asarray(time_s, dtype=float)
+    k = np.asarray(keep, dtype=bool)
+    out = np.zeros(t.size, dtype=bool)
+    if t.size < 2:
+        return out
+    dt = np.diff(t)
+    pos = dt[np.isfinite(dt) & (dt > 0)]
+    limit = gap_factor * float(np.median(pos)) if pos.size else np.inf
+    out[1:] = k[1:] & k[:-1] & (dt <= limit)
     return out
+
+
+def broken_series(
+    index: np.ndarray, cont: np.ndarray, *columns: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """The rows ``index`` of ``columns`` with a NaN row inserted at every break.
+
+    Parameters
+    ----------
+    index : ndarray of int, shape (m,)
+        Rows to draw (ascending; e.g. every k-th kept sample).
+    cont : ndarray of bool, shape (n,)
+        :func:`continuation` of the whole recording.
+    *columns : ndarray, shape (n,)
+        Values per sample (float).
+
+    Returns
+    -------
+    tuple of ndarray, each shape (m + number of breaks,)
+        Consecutive drawn rows ``a < b`` stay joined only when every sample in
+        ``a+1 .. b`` continues its predecessor (nothing missing in between);
+        otherwise a NaN separates them, so matplotlib does not draw a line there.
+    """
+    idx = np.asarray(index, dtype=int)
+    seg = np.cumsum(~np.asarray(cont, dtype=bool))  # segment id of every sample
+    breaks = np.flatnonzero(seg[idx[1:]] != seg[idx[:-1]]) + 1
+    return tuple(np.insert(np.asarray(c, dtype=float)[idx], breaks, np.nan) for c in columns)
+
+
+@dataclass(frozen=True)
+class Fig6Data:
+    """What a Fig-6 panel row draws, lines already broken (NaN) at every gap.
+
+    Attributes
+    ----------
+    time_s, v : ndarray, shape (m,)
+        Time (s) and model input (input unit) of the model curves; NaN at breaks.
+    models : dict
+        predictions.csv column (``gpi_deg`` ...) -> model output (deg), shape (m,).
+    meas_time_s, meas_v, theta_deg : ndarray, shape (k,)
+        The measured samples (deg, dataset convention); NaN at breaks.
+    errors : dict
+        Column -> model minus measured (deg), shape (k,), on the measured samples.
+    holdout_spans, other_spans : list of (float, float)
+        Time intervals (s) of held-out samples and of the other direction's samples.
+    counts : dict
+        ``fit``, ``holdout`` (own samples with a measured angle), ``not_measured``
+        (own samples without one), ``other`` (samples of the other direction).
+    """
+
+    time_s: np.ndarray
+    v: np.ndarray
+    models: dict[str, np.ndarray]
+    meas_time_s: np.ndarray
+    meas_v: np.ndarray
+    theta_deg: np.ndarray
+    errors: dict[str, np.ndarray]
+    holdout_spans: list[tuple[float, float]]
+    other_spans: list[tuple[float, float]]
+    counts: dict[str, int]
+
+
+def fig6_data(
+    pred: pd.DataFrame, max_points: int = 20000, gap_factor: float = GAP_FACTOR
+) -> Fig6Data:
+    """The curves of a Fig-6 panel row from one dataset's predictions.csv rows.
+
+    Only the dataset's own samples (``split`` != ``other``) are drawn. Model curves are
+    broken wherever the recording has no own sample (the other direction's stretches,
+    time gaps longer than ``gap_factor`` x the median step); the measured samples and
+    the errors are broken also at own samples without a measured angle. Series longer
+    than ``max_points`` are thinned by a fixed step, keeping the breaks.
+
+    Parameters
+    ----------
+    pred : DataFrame
+        Rows of one dataset: ``time_s`` (s), ``v`` (input unit), ``theta_deg`` (deg,
+        NaN when not measured), model columns (deg), ``split`` (fit|holdout|other).
+    max_points : int
+        Longest series drawn.
+    gap_factor : float
+        See :func:`continuation`.
+    """
+    p = pred.sort_values("time_s", kind="stable")
+    t = p["time_s"].to_numpy(dtype=float)
+    v = p["v"].to_numpy(dtype=float)
+    theta = p["theta_deg"].to_numpy(dtype=float)
+    split = p["split"].astype(str).to_numpy()
+    own = split != "other"
+    measured = own & np.isfinite(theta)
+    cont = continuation(t, own, gap_factor)
+    cont_m = continuation(t, measured, gap_factor)
+    models = _model_columns(p[own])
+    step = thinning_step(int(own.sum()), max_points)
+    cols = [p[c].to_numpy(dtype=float) for c, _, _ in models]
+    time_s, vv, *ys = broken_series(np.flatnonzero(own)[::step], cont, t, v, *cols)
+    mt, mv, mth, *ms = broken_series(np.flatnonzero(measured)[::step], cont_m, t, v, theta, *cols)
+    return Fig6Data(
+        time_s=time_s,
+        v=vv,
+        models={c: y for (c, _, _), y in zip(models, ys, strict=True)},
+        meas_time_s=mt,
+        meas_v=mv,
+        theta_deg=mth,
+        errors={c: y - mth for (c, _, _), y in zip(models, ms, strict=True)},
+        holdout_spans=holdout_spans(t, split == "holdout"),
+        other_spans=holdout_spans(t, ~own),
+        counts={
+            "fit": int((measured & (split == "fit")).sum()),
+            "holdout": int((measured & (split == "holdout")).sum()),
+            "not_measured": int((own & ~measured).sum()),
+            "other": int((~own).sum()),
+        },
+    )
+
+
+def fig6_labels(axis: str, direction: str) -> tuple[str, str]:
+    """(input label, angle label) of a dataset's panels in its sign convention."""
+    if direction == "-":
+        return "input max(−enc, 0) (counts)", f"−{axis} angle (deg) = |angle|"
+    if direction == "+":
+        return "input max(enc, 0) (counts)", f"{axis} angle (deg)"
+    return "encoder input (counts)", f"{axis} angle (deg)"
 
 
 def fit_figure_png(
     pred: pd.DataFrame,
     title: str,
     axis: str,
-    abs_fitted: bool,
+    direction: str,
     dpi: int = 100,
     max_points: int = 20000,
 ) -> bytes:
@@ -96,60 +265,57 @@ def fit_figure_png(
     Parameters
     ----------
     pred : DataFrame
-        This dataset's rows of predictions.csv: ``time_s`` (s), ``v`` (counts),
-        ``theta_deg`` (measured, deg), ``gpi_deg`` / ``egpi_deg`` (model, deg; either
-        may be absent or NaN), ``split`` (fit|holdout).
+        This dataset's rows of predictions.csv (see :func:`fig6_data`).
     title : str
         Figure title (dataset name).
     axis : str
         ``"yaw"`` or ``"pitch"``, used in axis labels.
-    abs_fitted : bool
-        True when the dataset was fitted as |input| -> |angle| (paper's negative sets).
+    direction : str
+        ``"+"``, ``"-"`` (input ``max(-enc, 0)``, angle ``-theta``) or ``"±"``.
     dpi, max_points : int
         PNG resolution; longest series drawn (thinned by a fixed step).
 
     Returns
     -------
     bytes
-        PNG image, 12 x 3.6 in.
+        PNG image, 12 x 3.6 in. Only the dataset's own samples are drawn and no line
+        crosses a gap (:func:`fig6_data`); held-out cycles are shaded yellow, the other
+        direction's stretches grey.
     """
-    pred = pred.sort_values("time_s", kind="stable")
-    step = thinning_step(len(pred), max_points)
-    p = pred.iloc[::step]
-    t = p["time_s"].to_numpy(dtype=float)
-    v = p["v"].to_numpy(dtype=float)
-    theta = p["theta_deg"].to_numpy(dtype=float)
-    spans = holdout_spans(
-        pred["time_s"].to_numpy(dtype=float), (pred["split"] == "holdout").to_numpy()
-    )
-    bars = "|" if abs_fitted else ""
-    angle_label = f"{bars}{axis} angle{bars} (deg)"
+    data = fig6_data(pred, max_points)
+    input_label, angle_label = fig6_labels(axis, direction)
     fig = _new_figure(12, 3.6)
     ax_v, ax_t, ax_e = fig.subplots(1, 3)
-    ax_v.plot(v, theta, ".", ms=3, color=MEASURED_COLOR, label="measured")
-    ax_t.plot(t, theta, ".", ms=3, color=MEASURED_COLOR, label="measured")
-    models = _model_columns(p)
-    for col, label, color in models:
-        y = p[col].to_numpy(dtype=float)
-        ax_v.plot(v, y, "-", lw=1, color=color, label=label)
-        ax_t.plot(t, y, "-", lw=1, color=color, label=label)
-        ax_e.plot(t, y - theta, "-", lw=0.8, color=color, label=f"{label} - measured")
-    _shade_holdout(ax_t, spans)
-    _shade_holdout(ax_e, spans)
+    ax_v.plot(data.meas_v, data.theta_deg, ".", ms=3, color=MEASURED_COLOR, label="measured")
+    ax_t.plot(data.meas_time_s, data.theta_deg, ".", ms=3, color=MEASURED_COLOR, label="measured")
+    labels = {c: (lab, color) for c, lab, color in MODEL_CURVES}
+    for col, y in data.models.items():
+        label, color = labels[col]
+        ax_v.plot(data.v, y, "-", lw=1, color=color, label=label)
+        ax_t.plot(data.time_s, y, "-", lw=1, color=color, label=label)
+        ax_e.plot(
+            data.meas_time_s,
+            data.errors[col],
+            "-",
+            lw=0.8,
+            color=color,
+            label=f"{label} - measured",
+        )
+    for ax in (ax_t, ax_e):
+        _shade(ax, data.holdout_spans, HOLDOUT_COLOR, 0.3, "held out")
+        _shade(ax, data.other_spans, OTHER_COLOR, 0.25, "other direction")
     ax_e.axhline(0.0, color="0.2", lw=0.6)
-    ax_v.set(
-        xlabel=f"{bars}encoder input{bars} (counts)", ylabel=angle_label, title="angle vs input"
-    )
+    ax_v.set(xlabel=input_label, ylabel=angle_label, title="angle vs input")
     ax_t.set(xlabel="time (s, controller clock)", ylabel=angle_label, title="angle vs time")
     ax_e.set(xlabel="time (s, controller clock)", ylabel="model error (deg)", title="error vs time")
-    if not models:
+    if not data.models:
         ax_e.text(
             0.5, 0.5, "no model predictions", ha="center", va="center", transform=ax_e.transAxes
         )
     for ax in (ax_v, ax_t, ax_e):
         ax.grid(True, lw=0.4, alpha=0.5)
         if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8, loc="best", markerscale=3)
+            ax.legend(fontsize=7, loc="best", markerscale=3)
     fig.suptitle(title)
     return figure_png(fig, dpi)
 

@@ -142,7 +142,7 @@ def _html_table(t: Table) -> str:
     )
 
 
-_NUMBER = re.compile(r"^[-+]?(\d[\d.,eE+-]*|—)( \(.*\))?$")
+_NUMBER = re.compile(r"^[-+]?(\d[\d.,eE+-]*|—)\*?( \(.*\))?$")  # "*" = not converged
 
 
 def column_alignment(t: Table) -> list[bool]:

@@ -16,9 +16,11 @@ import pandas as pd
 from i2ris_calib.report.document import Table
 
 DASH = "—"
-MODELS = (("egpi", "EGPI"), ("gpi", "GPI"))  # paper's row order
-# fitted models a fit.json may hold: the paper's two plus a model saved by `diagnose`
-FIT_MODELS = (("diagnosed", "EGPI + diagnosed effects"), *MODELS)
+NOT_CONVERGED = "*"
+MODELS = (("egpi", "EGPI"), ("gpi", "GPI"))  # the paper's two, in its row order
+# fitted models a fit.json may hold, in table order: a model saved by `diagnose`, the
+# continuous EGPI, then the paper's two
+FIT_MODELS = (("diagnosed", "EGPI + diagnosed effects"), ("egpi_c", "EGPI_C"), *MODELS)
 METRIC_COLUMNS = (
     ("rmse_deg", "RMSE (deg)", 3),
     ("nrmse_pct", "NRMSE (%)", 2),
@@ -60,11 +62,29 @@ def fit_datasets(fit: Mapping[str, Any]) -> list[dict[str, Any]]:
     return []
 
 
+def not_converged(dataset: Mapping[str, Any], key: str) -> bool:
+    """True when model ``key`` of this dataset is recorded as not converged.
+
+    A missing record or a missing ``converged`` field is not a failure.
+    """
+    rec = dataset.get("models", {}).get(key)
+    return isinstance(rec, Mapping) and rec.get("converged") is False
+
+
+def metric_cell(value: Any, digits: int, star: bool) -> str:
+    """A metric cell: :func:`fmt` with ``digits`` decimals, ``*`` appended when ``star``."""
+    text = fmt(value, digits)
+    return text + NOT_CONVERGED if star else text
+
+
 def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
     """Paper-shaped accuracy table for one axis (like Tables 1-2).
 
-    Rows: model (EGPI, GPI) x data split (fitted, held-out). Column groups: one per
-    dataset (motion direction), each with RMSE (deg), NRMSE (%), MAE (deg).
+    Rows: model (EGPI + diagnosed effects, EGPI_C, EGPI, GPI; those present) x data
+    split (fitted, held-out). Column groups: one per dataset (motion direction), each
+    with RMSE (deg), NRMSE (%), MAE (deg). A cell of model M and dataset D ends in
+    ``*`` when M's fit of D did not converge (``converged`` false in fit.json), and
+    only that cell group.
     """
     header = ["model", "data"]
     groups: list[tuple[str, int]] = [("", 2)]
@@ -72,6 +92,7 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
         header += [label for _, label, _ in METRIC_COLUMNS]
         groups.append((str(d.get("name", "dataset")), len(METRIC_COLUMNS)))
     rows = []
+    starred = False
     for key, label in FIT_MODELS:
         if not any(key in d.get("models", {}) for d in datasets):
             continue
@@ -79,15 +100,135 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
             row = [label, split_label]
             for d in datasets:
                 m = (d.get("models", {}).get(key) or {}).get(split_key) or {}
-                row += [fmt(m.get(k), digits) for k, _, digits in METRIC_COLUMNS]
+                star = not_converged(d, key)
+                starred |= star
+                row += [metric_cell(m.get(k), digits, star) for k, _, digits in METRIC_COLUMNS]
             rows.append(tuple(row))
+    star_note = (
+        f" {NOT_CONVERGED} = that model's fit of that dataset did not converge (see its "
+        "optimizer message under Fitted parameters)."
+        if starred
+        else ""
+    )
     return Table(
         header=tuple(header),
         rows=tuple(rows),
         group_header=tuple(groups),
         caption=f"{axis}: model accuracy per motion direction. MAE is the MAXIMUM absolute "
         "error, as in the paper (Eq27); NRMSE is RMSE over the measured angle range; "
-        "held-out = samples not used for fitting." + _abs_note(datasets),
+        "fitted = the dataset's own samples in the loss, held-out = its held-out loading "
+        "cycles (not used for fitting); EGPI_C = continuous EGPI (no output step at the "
+        "flag point)." + _abs_note(datasets) + star_note,
+    )
+
+
+ROW_COLUMNS = (
+    ("total", "samples in recording"),
+    ("in_direction", "own samples"),
+    ("fitted", "fitted"),
+    ("holdout", "held out"),
+    ("angle_missing", "not measured"),
+    ("other", "other direction"),
+)
+
+
+def rows_from_predictions(pred: pd.DataFrame) -> dict[str, int]:
+    """Row accounting of one dataset recomputed from its predictions.csv rows.
+
+    Same keys as fit.json ``rows`` plus ``other``: ``fitted`` / ``holdout`` count own
+    samples with a measured angle, ``angle_missing`` own samples without one.
+    """
+    split = pred["split"].astype(str).to_numpy()
+    measured = np.isfinite(pred["theta_deg"].to_numpy(dtype=float))
+    own = split != "other"
+    return {
+        "total": int(split.size),
+        "in_direction": int(own.sum()),
+        "fitted": int((measured & (split == "fit")).sum()),
+        "holdout": int((measured & (split == "holdout")).sum()),
+        "angle_missing": int((own & ~measured).sum()),
+        "other": int((~own).sum()),
+    }
+
+
+def dataset_rows(
+    dataset: Mapping[str, Any], pred: pd.DataFrame | None = None
+) -> dict[str, Any] | None:
+    """Row accounting of a dataset: fit.json ``rows`` (plus ``other`` = total - own), or
+    recomputed from its predictions.csv rows when fit.json has none; None without either."""
+    rows = dataset.get("rows")
+    if isinstance(rows, Mapping) and rows:
+        out = dict(rows)
+        try:
+            out.setdefault("other", int(rows["total"]) - int(rows["in_direction"]))
+        except (KeyError, TypeError, ValueError):
+            out.setdefault("other", None)
+        return out
+    if pred is not None and not pred.empty:
+        return rows_from_predictions(pred)
+    return None
+
+
+def _band(bands: Mapping[str, Any], key: str, name: str) -> str:
+    text = fmt(bands.get(key), 3)
+    derived = bands.get("derived") or ()
+    return f"{text} (derived)" if text != DASH and name in derived else text
+
+
+def samples_table(
+    axis: str,
+    datasets: list[dict[str, Any]],
+    predictions: Mapping[str, pd.DataFrame] | None = None,
+) -> Table | None:
+    """How many samples of each dataset were fitted, held out, not measured, other.
+
+    Parameters
+    ----------
+    axis : str
+        Axis name (caption).
+    datasets : list of mapping
+        fit.json dataset records (``rows``, ``bands`` used when present).
+    predictions : mapping, optional
+        Dataset name -> its predictions.csv rows, used when fit.json has no ``rows``.
+
+    Returns
+    -------
+    Table or None
+        None when no dataset has an accounting.
+    """
+    predictions = predictions or {}
+    body = []
+    for d in datasets:
+        name = str(d.get("name", "dataset"))
+        rows = dataset_rows(d, predictions.get(name))
+        if rows is None:
+            continue
+        bands = d.get("bands") if isinstance(d.get("bands"), Mapping) else {}
+        body.append(
+            (
+                name,
+                *(fmt(rows.get(k)) for k, _ in ROW_COLUMNS),
+                _band(bands, "zero_band", "zero_band"),
+                _band(bands, "deadband", "deadband"),
+            )
+        )
+    if not body:
+        return None
+    return Table(
+        header=(
+            "dataset",
+            *(label for _, label in ROW_COLUMNS),
+            "zero band (input unit)",
+            "v' dead band (input unit)",
+        ),
+        rows=tuple(body),
+        caption=f"{axis}: samples per dataset. Every sample of the recording drives each "
+        "model (its operators need the whole input history); only the dataset's own "
+        "samples (its motion direction) with a measured angle enter the loss (fitted) or "
+        "the held-out metrics (held out). not measured = own samples without an angle; "
+        "other direction = samples of the opposite direction (the model's input rests "
+        "at 0 there; not in loss or metrics). A sample inside the zero band belongs to "
+        "the excursion before it. Bands are in the input's unit (counts for encoders).",
     )
 
 
@@ -130,13 +271,18 @@ def paper_table(axis: str) -> Table:
 
 def _abs_note(datasets: list[dict[str, Any]]) -> str:
     names = [str(d.get("name")) for d in datasets if d.get("abs_fitted")]
-    return f" {', '.join(names)}: fitted as |input| -> |angle|." if names else ""
+    return (
+        f" {', '.join(names)}: input max(-enc, 0), angle -theta (= |input| -> |angle| on "
+        "its own samples, as in the paper)."
+        if names
+        else ""
+    )
 
 
 def _dataset_label(d: Mapping[str, Any]) -> str:
     label = str(d.get("name", "dataset"))
     if d.get("abs_fitted"):
-        label += " (|input| -> |angle|)"
+        label += " (input max(-enc, 0), angle -theta)"
     return label
 
 

@@ -159,6 +159,7 @@ def test_direction_dataset_is_the_whole_history(tmp_path):
     """--direction picks one Dataset of the one reader: every row in time order, the
     direction's input, the angle in its convention (-theta = |theta| for "-") only on
     its own samples; auto = the direction with more in-direction samples."""
+    from i2ris_calib.errors import CalibError
     from i2ris_calib.fitting.config import FitConfig
     from i2ris_calib.io.diagnose import diagnosis_dataset
 
@@ -185,6 +186,11 @@ def test_direction_dataset_is_the_whole_history(tmp_path):
     assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw-"
     pd.DataFrame({"time_s": t, "enc_yaw": -enc, "yaw_deg": -0.01 * enc}).to_csv(csv, index=False)
     assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw+"
+    # [fit] signed = true: one signed dataset, chosen by auto; + / - are refused
+    signed = FitConfig(signed=True)
+    assert diagnosis_dataset(csv, "yaw", "auto", signed).name == "yaw±"
+    with pytest.raises(CalibError, match="signed = true"):
+        diagnosis_dataset(csv, "yaw", "+", signed)
 
 
 def test_bad_direction_is_a_one_line_error(tmp_path, capsys):

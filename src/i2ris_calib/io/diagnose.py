@@ -47,7 +47,8 @@ def diagnosis_dataset(path: str | Path, axis: str, direction: str, fit_config) -
 
 
 def _figure(model: Model, data: Dataset, holdout: np.ndarray, title: str):
-    """Residual figure (2x2): vs time, vs input per branch, vs rate, loop.
+    """Residual figure (2x2): vs time (``holdout``, bool (n,), shaded), vs input per
+    branch, vs rate, loop.
 
     The model runs over the whole history; residuals and the model line are drawn
     on the dataset's own samples only (NaN elsewhere, so no line crosses a gap).
@@ -89,7 +90,9 @@ def _figure(model: Model, data: Dataset, holdout: np.ndarray, title: str):
     ax[0, 1].set(xlabel=unit, ylabel="residual (deg)", title="residual vs input")
     ax[0, 1].legend(fontsize=8, markerscale=4)
     ax[1, 0].scatter(rate, res, s=2, color="tab:green")
-    ax[1, 0].set(xlabel=f"{unit} rate (1/s)", ylabel="residual (deg)", title="residual vs rate")
+    ax[1, 0].set(
+        xlabel=f"{unit} rate (input unit/s)", ylabel="residual (deg)", title="residual vs rate"
+    )
     ax[1, 1].plot(v, theta, ".", ms=2, color="0.5", label="measured")
     ax[1, 1].plot(v, y_mine, lw=0.8, color="tab:red", label="model")
     ax[1, 1].set(xlabel=unit, ylabel="angle (deg)", title="angle vs input")
@@ -177,7 +180,7 @@ def diagnose_file(
     with atomic_dir(out) as tmp:
         for i, (m, name) in enumerate(zip(models, figures, strict=True)):
             title = f"{dset.name}: {' + '.join([start, *labels[1 : i + 1]])}"
-            _save(_figure(m, dset, diag.holdout, title), tmp / name)
+            _save(_figure(m, dset, dset.holdout, title), tmp / name)
         write_json(tmp / "diagnosis.json", record)
         final = model_to_dict(diag.final_model)
         final.update(

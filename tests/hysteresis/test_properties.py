@@ -7,7 +7,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from i2ris_calib.hysteresis.kernel import family_outputs
-from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.models import (
+    continuous_egpi_model,
+    density,
+    gpi_model,
+    i2ris_egpi_model,
+    thresholds,
+)
 from i2ris_calib.hysteresis.presets import random_i2ris_egpi_params
 
 inputs = st.lists(st.integers(0, 6000), min_size=2, max_size=60).map(
@@ -87,3 +93,44 @@ def test_monotone_on_a_monotone_branch(v, seed):
     down = np.concatenate((v, -np.sort(-np.random.default_rng(seed).uniform(-500, v[-1], 30))))
     y = model(down)[v.size - 1 :]
     assert np.all(np.diff(y) <= 1e-9)
+
+
+def _egpi_c(seed):
+    vals = random_i2ris_egpi_params(np.random.default_rng(seed))
+    return continuous_egpi_model(**vals)
+
+
+@SETTINGS
+@given(v=inputs, seed=seeds)
+def test_continuous_egpi_is_rate_independent(v, seed):
+    """Holds and monotone intermediate samples (also ones landing near the flag point)
+    leave the continuous EGPI's output at the original samples unchanged."""
+    rng = np.random.default_rng(seed)
+    fine, kept = _refine(v, rng)
+    model = _egpi_c(seed)
+    np.testing.assert_allclose(model(fine)[kept], model(v), atol=1e-9)
+
+
+@SETTINGS
+@given(v=inputs, seed=seeds)
+def test_continuous_egpi_nests_gpi(v, seed):
+    """a5 = a3, a6 = a4, kappa = 1: one unloading boundary on both sides of v_f -> GPI."""
+    vals = random_i2ris_egpi_params(np.random.default_rng(seed))
+    vals |= {"a5": vals["a3"], "a6": vals["a4"], "kappa": 1.0}
+    gpi = gpi_model(**{k: vals[k] for k in ("a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn")})
+    np.testing.assert_allclose(continuous_egpi_model(**vals)(v), gpi(v), atol=1e-9)
+
+
+@SETTINGS
+@given(seed=seeds)
+def test_continuous_egpi_has_no_step_at_the_flag_point(seed):
+    """A finely sampled unloading ramp through v_f: the paper's EGPI may step by
+    |y2 - y1| there; the continuous EGPI moves by at most what the boundaries allow for
+    one input step (sum of weights x steepest boundary slope x 2 counts)."""
+    vals = random_i2ris_egpi_params(np.random.default_rng(seed))
+    v = np.r_[np.linspace(0, 6000, 3001), np.linspace(6000, 0, 3001)]
+    y = continuous_egpi_model(**vals)(v)
+    k = int(np.flatnonzero((v[:-1] > vals["v_f"]) & (v[1:] <= vals["v_f"]))[-1]) + 1
+    p = density(thresholds(vals["r1"], vals["rn"], 30), vals["lam"], vals["sigma"])
+    bound = p.sum() * max(vals["a1"], vals["a3"], vals["a5"]) * 2.0
+    assert abs(y[k] - y[k - 1]) <= bound * (1 + 1e-9) + 1e-12

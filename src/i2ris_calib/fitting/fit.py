@@ -98,11 +98,6 @@ class _Counter:
         self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
 
-    def sq_cost(self, full: np.ndarray) -> float:
-        """Plain sum of squared residuals. The flag-point profile always uses it: a
-        robust loss would treat the residuals of a misplaced output step as outliers."""
-        return float(np.sum(self.residuals(full) ** 2))
-
     def cost(self, full: np.ndarray) -> float:
         """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
         z = (self.residuals(full) / self.f_scale) ** 2
@@ -171,11 +166,11 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
 
 def _profile(counter, full, idx, grid):
     """Best value of parameter ``idx`` on ``grid`` with the others held; returns (value, cost)."""
-    best = (full[idx], counter.sq_cost(full))
+    best = (full[idx], counter.cost(full))
     trial = full.copy()
     for g in grid:
         trial[idx] = g
-        c = counter.sq_cost(trial)
+        c = counter.cost(trial)
         if c < best[1]:
             best = (g, c)
     return best
@@ -207,7 +202,7 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
         trial = full.copy()
         for j, c in enumerate(cands):
             trial[idx] = c
-            costs[j] = counter.sq_cost(trial)
+            costs[j] = counter.cost(trial)
         tied = np.flatnonzero(costs <= costs.min() * (1 + 1e-12))
         run = tied[np.concatenate(([0], np.flatnonzero(np.diff(tied) > 1) + 1))[0] :]
         run = run[: np.argmax(np.diff(np.append(run, run[-1] + 2)) > 1) + 1]
@@ -329,12 +324,14 @@ def fit_model(
         counter.n += plain.nfev
         x_plain = np.array([p.value for p in plain.model.parameters], dtype=float)
         known.append((counter.cost(x_plain), x_plain))
-        best = run(x_plain, max_nfev, polish)
-        inside = [(c, x) for c, x in known if not _outside(x, lsq_free, lower, upper)]
-        floor0 = min(inside, key=lambda c: c[0]) if inside else None
-        if floor0 is not None and not best[0] <= floor0[0]:
-            other = run(floor0[1], max_nfev, polish)
-            best = min((best, other), key=lambda c: c[0])
+        # the flag point is profiled with the robust cost too, over the wide grid:
+        # outliers pull the least-squares profile's v_f
+        # (the plain fit can end in a minimum the outliers made: every start is also
+        # screened with the robust cost, and the best end is polished)
+        robust_steps = ("wide", "lm", "fine", "lm")
+        screened = [run(x0, screen_nfev, robust_steps) for x0 in (x_plain, *starts)]
+        known += [(c, x) for c, x, _ in screened]
+        best = run(min(screened, key=lambda c: c[0])[1], max_nfev, polish)
     elif len(starts) > 1:
         screened = [run(x0, screen_nfev, first) for x0 in starts]
         known += [(c, x) for c, x, _ in screened]

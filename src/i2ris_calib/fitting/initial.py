@@ -51,10 +51,20 @@ def reversal_distance(v: np.ndarray, direction: np.ndarray) -> np.ndarray:
 
 
 def _line(v: np.ndarray, theta: np.ndarray, sel: np.ndarray, min_samples: int = 5):
+    """(slope, intercept) of a straight line through the selected samples, or None.
+
+    Least squares, then once more without the samples beyond 3 robust sd (1.4826 MAD)
+    of the residuals: tracking outliers do not tilt the start.
+    """
     sel = sel & np.isfinite(theta)
     if sel.sum() < min_samples or np.ptp(v[sel]) <= 0:
         return None
     slope, intercept = np.polyfit(v[sel], theta[sel], 1)
+    res = theta[sel] - (slope * v[sel] + intercept)
+    scale = 1.4826 * np.median(np.abs(res - np.median(res)))
+    keep = np.abs(res) <= 3.0 * scale if scale > 0 else np.ones(res.size, bool)
+    if min_samples <= keep.sum() < res.size and np.ptp(v[sel][keep]) > 0:
+        slope, intercept = np.polyfit(v[sel][keep], theta[sel][keep], 1)
     return float(slope), float(intercept)
 
 
@@ -63,8 +73,8 @@ def flag_point(
 ) -> float | None:
     """Flag point v_f (counts) estimated from the unloading stretches, or None.
 
-    Per unloading stretch covering >= 30 % of the input range, theta is averaged in
-    input bins of 2 % of the range, and v_f is the first bin (walking down in v) where
+    Per unloading stretch covering >= 30 % of the input range, theta is reduced to its
+    median in input bins of 2 % of the range, and v_f is the first bin (walking down in v) where
     |d theta/d v| < 0.2 |loading slope| after it has exceeded 0.5 |loading slope|.
     The median over stretches is returned.
     """
@@ -90,7 +100,9 @@ def flag_point(
         counts = np.bincount(vb)
         keep = counts > 0
         centres = (np.arange(counts.size)[keep] + 0.5) * width + v.min()
-        means = np.bincount(vb, weights=theta[sel])[keep] / counts[keep]
+        th_sel = theta[sel]
+        # bin medians: a tracking outlier does not fake a slope change
+        means = np.array([np.median(th_sel[vb == b]) for b in np.flatnonzero(keep)])
         # walk from high v to low v
         c, m = centres[::-1], means[::-1]
         slope = np.abs(np.diff(m) / np.diff(c))

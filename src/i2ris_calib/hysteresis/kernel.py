@@ -264,9 +264,12 @@ def continuous_egpi_output(v, x, n):  # pragma: no cover - compiled
                 g, kr = a3 * v[k] + a4, 1.0
             else:
                 g, kr = a5 * v[k] + a6, kappa
+            # a step that crosses v_f passes the stage-1 boundary at v_f first (as a
+            # continuous input would): the output does not depend on the sampling
+            g1 = a3 * vf + a4 if v[k - 1] > vf >= v[k] else np.inf
             acc = 0.0
             for i in range(m):
-                wi = min(g + kr * r[i], w[i])
+                wi = min(g + kr * r[i], min(g1 + r[i], w[i]))
                 w[i] = wi
                 acc += p[i] * wi
             out[k] = acc

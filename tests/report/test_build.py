@@ -82,8 +82,11 @@ def test_complete_run_has_every_section_and_figure(run_data):
     assert [r[0] for r in acc[0].rows] == ["EGPI_C"] * 2 + ["EGPI"] * 2 + ["GPI"] * 2
     fig6 = [f for f in doc.figures() if f.name == "fig6_yaw_yaw_pos"][0]
     rows = truth["fit"]["yaw"]["datasets"][0]["rows"]
-    assert f"({rows['holdout']} measured samples; {rows['fitted']} fitted; " in fig6.caption
-    assert f"{rows['angle_missing']} own samples not measured" in fig6.caption
+    assert (
+        f"Own samples: {rows['fitted']} fitted, {rows['holdout']} held out (yellow: held-out "
+        f"cycles), {rows['angle_missing']} not measured. The "
+        f"{rows['total'] - rows['in_direction']} samples of the other direction" in fig6.caption
+    )
 
 
 def test_progress_is_called_once_per_section(run_data):

@@ -279,9 +279,9 @@ def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
     return (
         f"{name}: measured angle (grey dots) and {', '.join(models) or 'no model'} "
         "predictions on the dataset's own samples; left: angle vs input, middle: angle vs "
-        "time, right: model minus measured vs time. Yellow: held-out cycles "
-        f"({c['holdout']} measured samples; {c['fitted']} fitted; {c['angle_missing']} own "
-        f"samples not measured).{other} Lines are broken wherever samples are missing "
+        "time, right: model minus measured vs time. Own samples: "
+        f"{c['fitted']} fitted, {c['holdout']} held out (yellow: held-out cycles), "
+        f"{c['angle_missing']} not measured.{other} Lines are broken wherever samples are missing "
         "(other direction, unmeasured frames, time gaps): no line bridges a gap." + sign
     )
 

@@ -15,7 +15,7 @@ Conventions shared by every function here:
 * ``p`` : operator weights p(r_i), shape (m,) (Eq15).
 * Direction of an operator step: sign of ``v[k] - v[k-1]`` exactly as Eq1-2
   (a hold keeps the state).
-* Initial state (the paper is silent; our choice, MODEL.md): ``w[-1] = 0`` clamped
+* Initial state (the paper is silent; our choice, docs/models.md): ``w[-1] = 0`` clamped
   into ``[gl[0] - rl, gr[0] + rr]``, i.e. ``w = min(max(0, gl - rl), gr + rr)``.
 """
 

@@ -97,3 +97,20 @@ def test_select_stage_paper_rule():
     d = np.array([1, 1, -1, -1], np.int8)
     got = select_stage(z, v, d, np.array([1.5]), np.array([-0.3]))
     np.testing.assert_array_equal(got, [0, 1, 0, 1])
+
+
+def test_holds_are_evaluated_once_per_run(rng):
+    """Models evaluate a run of equal inputs once (exact for rate-independent models):
+    same output as the kernel on every sample."""
+    from i2ris_calib.hysteresis.kernel import continuous_egpi_output, gpi_output, i2ris_egpi_output
+    from i2ris_calib.hysteresis.models import continuous_egpi_model, gpi_model, i2ris_egpi_model
+
+    v = np.repeat(np.round(rng.uniform(0, 6000, 300)), rng.integers(1, 6, 300)).astype(float)
+    v[50:400] = 0.0  # a long rest at zero (the other direction's stretch)
+    for model, kernel, extra in (
+        (gpi_model(), gpi_output, ()),
+        (i2ris_egpi_model(deadband_counts=2.0), i2ris_egpi_output, (2.0,)),
+        (continuous_egpi_model(), continuous_egpi_output, ()),
+    ):
+        x = model.values
+        np.testing.assert_array_equal(model(v), kernel(v, x, 30, *extra))

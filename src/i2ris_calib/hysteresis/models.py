@@ -159,6 +159,36 @@ def _input(signals: Signals | np.ndarray) -> np.ndarray:
     return v
 
 
+def _held_runs(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """(input without repeated samples, run index of every sample), or None when less
+    than 10 % of the samples repeat the previous one.
+
+    Rate-independent models (GPI, EGPI: a hold keeps every operator state and the
+    motion direction) give the same output on every sample of a hold, so they are
+    evaluated once per run of equal inputs. A direction dataset's input rests at 0
+    while the motor is on the other side of zero: about half of a recording.
+    """
+    new = np.empty(v.size, dtype=bool)
+    if v.size == 0:
+        return None
+    new[0] = True
+    np.not_equal(v[1:], v[:-1], out=new[1:])
+    n_runs = int(new.sum())
+    if n_runs > 0.9 * v.size:
+        return None
+    return np.ascontiguousarray(v[new]), np.cumsum(new) - 1
+
+
+def _rate_independent(kernel, v: np.ndarray, *args) -> np.ndarray:
+    """``kernel(v, *args)`` evaluated once per run of equal inputs (exact, see
+    :func:`_held_runs`)."""
+    runs = _held_runs(v)
+    if runs is None:
+        return kernel(v, *args)
+    vc, idx = runs
+    return kernel(vc, *args)[idx]
+
+
 def _P(name, value, lower=-INF, upper=INF, unit="", doc="", fixed=False) -> Parameter:
     return Parameter(name, float(value), float(lower), float(upper), fixed, unit, doc)
 
@@ -193,7 +223,7 @@ class GPIModel(ParametricModel):
         x = np.ascontiguousarray(values, dtype=float)
         if x.size != 8:
             raise ValueError(f"gpi: expected 8 values, got {x.size}")
-        return gpi_output(_input(signals), x, int(self.n))
+        return _rate_independent(gpi_output, _input(signals), x, int(self.n))
 
 
 def gpi_model(n: int = 30, **values: float) -> GPIModel:
@@ -238,7 +268,9 @@ class I2RISEGPIModel(ParametricModel):
         x = np.ascontiguousarray(values, dtype=float)
         if x.size != 12:
             raise ValueError(f"egpi: expected 12 values, got {x.size}")
-        return i2ris_egpi_output(_input(signals), x, int(self.n), float(self.deadband_counts))
+        return _rate_independent(
+            i2ris_egpi_output, _input(signals), x, int(self.n), float(self.deadband_counts)
+        )
 
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:
@@ -287,7 +319,7 @@ class ContinuousEGPIModel(I2RISEGPIModel):
         x = np.ascontiguousarray(values, dtype=float)
         if x.size != 12:
             raise ValueError(f"egpi_c: expected 12 values, got {x.size}")
-        return continuous_egpi_output(_input(signals), x, int(self.n))
+        return _rate_independent(continuous_egpi_output, _input(signals), x, int(self.n))
 
 
 def continuous_egpi_model(
@@ -295,9 +327,7 @@ def continuous_egpi_model(
 ) -> ContinuousEGPIModel:
     """A continuous I2RIS EGPI (:class:`ContinuousEGPIModel`) with default values."""
     base = i2ris_egpi_model(n=n, deadband_counts=deadband_counts)
-    model = ContinuousEGPIModel(
-        "egpi_c", base.parameters, n=n, deadband_counts=deadband_counts
-    )
+    model = ContinuousEGPIModel("egpi_c", base.parameters, n=n, deadband_counts=deadband_counts)
     return model.with_values(values)
 
 

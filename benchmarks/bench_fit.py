@@ -9,6 +9,10 @@ Run: ``python benchmarks/bench_fit.py`` (``--quick``: 2 parameter sets, no speed
    Targets: EGPI held-out RMSE <= 1.05 sigma; GPI held-out RMSE >= 4x EGPI's.
 2. Speed: GPI + EGPI fitted to the four paper-like datasets (yaw+/-, pitch+/-),
    5000 samples each; target <= 5 s in total (one core, compiled kernels warm).
+
+One input of one sign here (the hysteresis core's view); the model stage on whole
+recordings with both directions, the continuous EGPI and its speed targets are
+``benchmarks/bench_model_stage.py``.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from i2ris_calib.data.dataset import input_bands  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
 from i2ris_calib.fitting.pipeline import fit_all, split_masks  # noqa: E402
 from i2ris_calib.hysteresis.models import i2ris_egpi_model  # noqa: E402
@@ -34,13 +39,17 @@ from i2ris_calib.hysteresis.presets import (  # noqa: E402
 
 NOISE_DEG = 0.1
 N_SAMPLES = 5000
+KINDS = ("gpi", "egpi")  # fit_all's default also fits egpi_c (bench_model_stage.py)
 
 
 def synthetic(rng: np.random.Generator, truth: dict, config: FitConfig, noise_free: bool = False):
     """(v counts, theta deg) from the EGPI with ``truth`` + N(0, 0.1 deg)
     (and the noise-free output when ``noise_free``)."""
     _, v = loading_trajectory(rng, n_cycles=5, n_samples=N_SAMPLES)
-    model = i2ris_egpi_model(n=config.n_operators, deadband_counts=config.deadband_counts)
+    # the truth's v' dead band is the one the fit derives from the input (FitConfig's
+    # deadband_counts = -1 means "derived", not a band of -1 count)
+    db = config.deadband_counts if config.deadband_counts >= 0 else input_bands(v).deadband
+    model = i2ris_egpi_model(n=config.n_operators, deadband_counts=db)
     y = model.evaluate_dict(v, truth)
     theta = y + rng.normal(0.0, NOISE_DEG, v.size)
     return (v, theta, y) if noise_free else (v, theta)
@@ -69,7 +78,7 @@ def recovery(n_sets: int, config: FitConfig) -> bool:
         truth = random_i2ris_egpi_params(rng)
         v, theta, y_true = synthetic(rng, truth, config, noise_free=True)
         t0 = time.perf_counter()
-        res = fit_all(v, theta, config)
+        res = fit_all(v, theta, config, KINDS)
         hold = split_masks(v, config)[1]
         floor = float(np.sqrt(np.mean((theta[hold] - y_true[hold]) ** 2)))
         dt = time.perf_counter() - t0
@@ -101,9 +110,9 @@ def recovery(n_sets: int, config: FitConfig) -> bool:
 def speed(config: FitConfig) -> bool:
     rng = np.random.default_rng(7)
     data = [synthetic(rng, paper_like_params(d), config) for d in DATASETS]
-    fit_all(data[0][0][:500], data[0][1][:500], config)  # compile / load kernels
+    fit_all(data[0][0][:500], data[0][1][:500], config, KINDS)  # compile / load kernels
     t0 = time.perf_counter()
-    results = [fit_all(v, theta, config) for v, theta in data]
+    results = [fit_all(v, theta, config, KINDS) for v, theta in data]
     dt = time.perf_counter() - t0
     print(f"== speed: GPI + EGPI on 4 datasets x {N_SAMPLES} samples: {dt:.2f} s (target <= 5 s)")
     for name, res in zip(DATASETS, results, strict=True):

@@ -31,7 +31,7 @@ def test_metrics_nan_and_mask():
     assert m.nrmse_pct == pytest.approx(math.sqrt(0.125) / 2 * 100)
     empty = metrics(theta, pred, mask=np.zeros(4, bool))
     assert empty.n_samples == 0 and math.isnan(empty.rmse_deg)
-    assert set(m.as_dict()) == {"rmse_deg", "nrmse_pct", "max_abs_err_deg"}
+    assert set(m.as_dict()) == {"rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance"}
 
 
 @pytest.mark.parametrize("n_cycles", [1, 3, 6])

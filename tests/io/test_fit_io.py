@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.data.dataset import direction_of_samples, input_bands
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import loading_trajectory, paper_like_params
 
@@ -16,31 +17,35 @@ NOISE = 0.1
 
 
 def synced_frame(directions=("yaw+", "yaw-"), n=1500, seed=3) -> pd.DataFrame:
-    """A session with yaw+ then yaw- blocks (pitch at rest), EGPI truth + noise."""
+    """A session with yaw+ then yaw- excursions (pitch at rest). Truth as the data layer
+    defines it: each direction's EGPI over the whole history of its input
+    (max(+-enc, 0)), the angle of a sample from the model of the direction it belongs to."""
     rng = np.random.default_rng(seed)
-    parts, t0 = [], 0.0
+    times, encs, t0 = [], [], 0.0
     for ds in directions:
         t, v = loading_trajectory(rng, n_cycles=4, n_samples=n, start_s=t0)
-        y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, paper_like_params(ds))
-        y = y + rng.normal(0, NOISE, v.size)
-        s = -1.0 if ds.endswith("-") else 1.0
-        axis = ds[:-1]
-        other = "pitch" if axis == "yaw" else "yaw"
-        parts.append(
-            pd.DataFrame(
-                {
-                    "time_s": t,
-                    f"enc_{axis}": s * v,
-                    f"enc_{other}": 0.0,
-                    f"{axis}_deg": s * y,
-                    f"{other}_deg": rng.normal(0, 0.05, v.size),
-                    "status": "measured",
-                    "frame": np.arange(v.size),
-                }
-            )
-        )
+        times.append(t)
+        encs.append((-1.0 if ds.endswith("-") else 1.0) * v)
         t0 = t[-1] + 1.0
-    return pd.concat(parts, ignore_index=True)
+    t, enc = np.concatenate(times), np.concatenate(encs)
+    axis = directions[0][:-1]
+    other = "pitch" if axis == "yaw" else "yaw"
+    model = i2ris_egpi_model(deadband_counts=2.0)
+    d = direction_of_samples(enc, input_bands(enc).zero_band)
+    y_pos = model.evaluate_dict(np.maximum(enc, 0), paper_like_params(f"{axis}+"))
+    y_neg = model.evaluate_dict(np.maximum(-enc, 0), paper_like_params(f"{axis}-"))
+    y = np.where(d >= 0, y_pos, -y_neg) + rng.normal(0, NOISE, enc.size)
+    return pd.DataFrame(
+        {
+            "time_s": t,
+            f"enc_{axis}": enc,
+            f"enc_{other}": 0.0,
+            f"{axis}_deg": y,
+            f"{other}_deg": rng.normal(0, 0.05, enc.size),
+            "status": "measured",
+            "frame": np.arange(enc.size),
+        }
+    )
 
 
 @pytest.fixture(scope="module")
@@ -64,12 +69,18 @@ def test_fit_json_contract(fitted):
     assert [d["abs_fitted"] for d in doc["datasets"]] == [False, True]
     assert "models" not in doc  # two datasets: no top-level shortcut
     for d in doc["datasets"]:
-        assert set(d["models"]) == {"gpi", "egpi"}
+        assert set(d["models"]) == {"gpi", "egpi", "egpi_c"}
+        rows = d["rows"]
+        assert rows["total"] == len(fitted[2])  # every sample drives every model
+        assert rows["fitted"] + rows["holdout"] + rows["angle_missing"] == rows["in_direction"]
         for kind, m in d["models"].items():
             for key in ("params", "stderr", "metrics", "holdout_metrics", "aic", "bic", "converged",
                         "message", "nfev", "n_samples", "v_f"):  # fmt: skip
                 assert key in m, (kind, key)
-            assert set(m["metrics"]) == {"rmse_deg", "nrmse_pct", "max_abs_err_deg"}
+            assert set(m["metrics"]) == {
+                "rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance"
+            }  # fmt: skip
+            assert isinstance(m["warnings"], list)
         eg = d["models"]["egpi"]
         # both directions recovered; 2x noise: at ~20 counts per sample one held-out sample
         # can fall between the fitted and the true flag point (the EGPI steps there)
@@ -82,24 +93,25 @@ def test_predictions_csv(fitted):
     _, out, df = fitted
     pred = pd.read_csv(out / "predictions.csv")
     assert list(pred.columns) == [
-        "dataset",
-        "time_s",
-        "v",
-        "theta_deg",
-        "gpi_deg",
-        "egpi_deg",
-        "split",
-    ]
-    assert set(pred["split"]) == {"fit", "holdout"}
+        "dataset", "time_s", "v", "theta_deg", "gpi_deg", "egpi_deg", "egpi_c_deg", "split"
+    ]  # fmt: skip
+    assert set(pred["split"]) == {"fit", "holdout", "other"}
+    for name in ("yaw+", "yaw-"):  # the whole recording, in time order, in every dataset
+        np.testing.assert_allclose(
+            pred.loc[pred["dataset"] == name, "time_s"], df["time_s"], rtol=1e-9
+        )
     neg = pred[pred["dataset"] == "yaw-"]
-    assert (neg["v"] > 0).all() and neg["theta_deg"].max() > 20  # |counts| -> |deg|
-    # angles of rows not 'measured' and NaN angles are NaN in the yaw+ dataset
-    in_pos = df["enc_yaw"] > 5
-    expected = ((df["status"] != "measured") | df["yaw_deg"].isna())[in_pos].sum()
+    np.testing.assert_allclose(neg["v"], np.maximum(-df["enc_yaw"], 0), rtol=1e-9)  # max(-enc, 0)
+    own = neg["split"] != "other"
     assert (
-        expected >= 10 and pred.loc[pred["dataset"] == "yaw+", "theta_deg"].isna().sum() == expected
+        neg.loc[own, "theta_deg"].max() > 20
+        and (neg.loc[own & (neg["v"] > 50), "theta_deg"] > 0).all()
     )
-    ok = pred["theta_deg"].notna()
+    # angles of rows not 'measured' and NaN angles are NaN
+    pos = pred[pred["dataset"] == "yaw+"]
+    expected = ((df["status"] != "measured") | df["yaw_deg"].isna()).sum()
+    assert expected >= 10 and pos["theta_deg"].isna().sum() == expected
+    ok = pred["theta_deg"].notna() & (pred["split"] != "other")
     err = (pred.loc[ok, "egpi_deg"] - pred.loc[ok, "theta_deg"]).to_numpy()
     assert np.sqrt(np.mean(err**2)) <= 1.2 * NOISE
 
@@ -185,3 +197,79 @@ def _cfg(tmp_path, line):
     p = tmp_path / "c.toml"
     p.write_text(f"[fit]\n{line}\n")
     return p
+
+
+def test_outputs_checked_before_fitting(tmp_path, capsys):
+    """Bad --out is refused at once (one line, exit 2), not after the fit."""
+    synced_frame(directions=("yaw+",), n=600).to_csv(tmp_path / "s.csv", index=False)
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "o2" / "fit.json").mkdir(parents=True)
+    for out, match in (
+        (tmp_path / "afile", "is a file"),
+        (tmp_path / "afile" / "sub", "is a file"),
+        (tmp_path / "o2", "fit.json is a folder"),
+    ):
+        capsys.readouterr()
+        rc = main(["fit", str(tmp_path / "s.csv"), "--axis", "yaw", "--out", str(out)])
+        err = capsys.readouterr().err
+        assert rc == 2 and match in err and err.count("\n") == 1, err
+    assert not (tmp_path / "o2" / "predictions.csv").exists()
+
+
+def test_angle_that_does_not_follow_its_input_is_flagged(tmp_path, capsys):
+    """A yaw_deg column of noise fits with a small RMSE; fit.json and the terminal say
+    the model explains nothing."""
+    df = synced_frame(directions=("yaw+",), n=800)
+    df["yaw_deg"] = np.random.default_rng(1).normal(0, 0.05, len(df))
+    df.to_csv(tmp_path / "s.csv", index=False)
+    rc = main(
+        [
+            "fit",
+            str(tmp_path / "s.csv"),
+            "--axis",
+            "yaw",
+            "--model",
+            "gpi",
+            "--out",
+            str(tmp_path / "o"),
+        ]
+    )
+    assert rc == 0
+    rec = json.loads((tmp_path / "o" / "fit.json").read_text())["models"]["gpi"]
+    assert rec["metrics"]["explained_variance"] < 0.9
+    assert any("explains only" in w for w in rec["warnings"])
+    assert "warning: yaw+ gpi: the model explains only" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("unit_per_count", [150.0 / 6000.0, 1e8])
+def test_same_fit_whatever_the_input_unit(tmp_path, unit_per_count):
+    """Volts or 1e12-scale inputs: same datasets, same held-out RMSE as counts."""
+    df = synced_frame(directions=("yaw+",), n=800)
+    scaled = df.copy()
+    scaled["enc_yaw"] = df["enc_yaw"] * unit_per_count
+    df.to_csv(tmp_path / "a.csv", index=False)
+    scaled.to_csv(tmp_path / "b.csv", index=False)
+    docs = []
+    for name in ("a", "b"):
+        out = tmp_path / f"o{name}"
+        assert (
+            main(
+                [
+                    "fit",
+                    str(tmp_path / f"{name}.csv"),
+                    "--axis",
+                    "yaw",
+                    "--model",
+                    "egpi",
+                    "--out",
+                    str(out),
+                ]
+            )
+            == 0
+        )
+        docs.append(json.loads((out / "fit.json").read_text()))
+    ra, rb = (d["datasets"][0] for d in docs)
+    assert ra["rows"] == rb["rows"]
+    ha, hb = (d["models"]["egpi"]["holdout_metrics"]["rmse_deg"] for d in (ra, rb))
+    # the same optimum up to the optimiser's tolerance (ftol 1e-7 on the cost)
+    assert hb == pytest.approx(ha, rel=0.02) and hb < 1.2 * NOISE

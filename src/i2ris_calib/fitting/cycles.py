@@ -8,9 +8,11 @@ from i2ris_calib.hysteresis.kernel import motion_direction
 
 
 def default_deadband(v: np.ndarray, fraction: float = 0.01) -> float:
-    """Dead band (counts) for ``v'``: ``fraction`` of the input range, at least 1 count."""
+    """Dead band (input unit) for ``v'`` in cycle detection: ``fraction`` of the input
+    range (unit free: the same cycles for counts and volts)."""
     v = np.asarray(v, dtype=float)
-    return max(1.0, fraction * float(np.ptp(v))) if v.size else 1.0
+    span = float(np.ptp(v)) if v.size else 0.0
+    return fraction * span if span > 0 else 1.0
 
 
 def cycle_index(v: np.ndarray, deadband: float | None = None) -> np.ndarray:

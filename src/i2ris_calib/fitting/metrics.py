@@ -21,15 +21,21 @@ class Metrics:
         MAXIMUM absolute error (deg); the paper calls it MAE, Eq27.
     n_samples : int
         Number of finite samples the metrics were computed on.
+    explained_variance : float
+        ``1 - sum(err^2) / sum((theta - mean theta)^2)``: the share of the angle's
+        variance the model explains (1 perfect, 0 no better than a constant, NaN when
+        the angle is constant). Not in the paper; a fit can have a small RMSE and
+        explain nothing (an angle column of noise around a constant).
     """
 
     rmse_deg: float
     nrmse_pct: float
     max_abs_err_deg: float
     n_samples: int = 0
+    explained_variance: float = float("nan")
 
     def as_dict(self) -> dict[str, float]:
-        """``{"rmse_deg", "nrmse_pct", "max_abs_err_deg"}`` (the fit.json record)."""
+        """``{"rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance"}`` (fit.json)."""
         d = asdict(self)
         d.pop("n_samples")
         return d
@@ -67,4 +73,6 @@ def metrics(
     rmse = float(np.sqrt(np.mean(err**2)))
     span = float(theta[ok].max() - theta[ok].min())
     nrmse = rmse / span * 100.0 if span > 0 else float("nan")
-    return Metrics(rmse, nrmse, float(np.max(np.abs(err))), int(ok.sum()))
+    tss = float(np.sum((theta[ok] - theta[ok].mean()) ** 2))
+    ev = 1.0 - float(np.sum(err**2)) / tss if tss > 0 else float("nan")
+    return Metrics(rmse, nrmse, float(np.max(np.abs(err))), int(ok.sum()), ev)

@@ -6,6 +6,7 @@ direction's input and a loss mask: every model runs over every sample in time or
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -126,6 +127,14 @@ def fit_kind(
     if holdout is None:
         holdout = split_masks(v, config)[1]
     db = deadband_for(v, config) if deadband is None else float(deadband)
+    scale = input_scale(v)
+    if scale != 1.0:
+        res = fit_kind(
+            kind, replace(s, v=v / scale), theta, config, holdout,
+            None if gpi_fit is None else _scaled_fit(gpi_fit, 1.0 / scale),
+            deadband=db / scale, related=tuple(_scaled_fit(r, 1.0 / scale) for r in related),
+        )  # fmt: skip
+        return _scaled_fit(res, scale, build_model(kind, v, config, db))
     model = build_model(kind, v, config, db)
     n_starts = config.n_starts if kind != "gpi" else config.n_starts_gpi
     rng = np.random.default_rng(config.seed)
@@ -151,6 +160,42 @@ def fit_kind(
         max_nfev=config.max_nfev,
         loss=config.loss,
         f_scale_deg=config.f_scale_deg,
+    )
+
+
+SLOPES = ("a1", "a3", "a5")
+
+
+def input_scale(v: np.ndarray) -> float:
+    """Factor the fit divides the input by: 1 for inputs up to 1e2-1e6 in magnitude
+    (encoder counts), else the power of ten that brings max |v| to about 1e4.
+
+    Parameter bounds and start recipes are set for such inputs; a fit in volts (max
+    150) or in units of 1e-12 would otherwise meet slope bounds of 1 deg per unit or
+    lose precision. The fitted parameters are returned in the input's own unit.
+    """
+    peak = float(np.max(np.abs(v))) if np.size(v) else 0.0
+    if peak == 0.0 or not np.isfinite(peak) or 1e2 <= peak <= 1e6:
+        return 1.0
+    return float(10.0 ** np.round(np.log10(peak / 1e4)))
+
+
+def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = None) -> FitResult:
+    """``res`` with its parameters expressed for the input ``v * scale`` (slopes divided
+    by ``scale``, the flag point multiplied by it); ``model``: the model to carry the
+    converted values (default: ``res.model``)."""
+    names = tuple(res.params)
+    d = np.array([1.0 / scale if k in SLOPES else scale if k == "v_f" else 1.0 for k in names])
+    params = {k: float(x * f) for (k, x), f in zip(res.params.items(), d, strict=True)}
+    stderr = {k: float(res.stderr[k] * f) for k, f in zip(names, d, strict=True)}
+    cov = (
+        res.covariance * d[:, None] * d[None, :]
+        if res.covariance.shape == (d.size, d.size)
+        else res.covariance
+    )
+    base = res.model if model is None else model
+    return replace(
+        res, params=params, stderr=stderr, covariance=cov, model=base.with_values(params)
     )
 
 
@@ -221,3 +266,38 @@ def fit_dataset_all(
     for k in order:
         out[k] = fit_dataset(k, data, config, out)
     return {k: out[k] for k in kinds}
+
+
+#: Below this explained variance on the fitted samples a fit is flagged (a good
+#: hysteresis fit explains > 99 % of the angle's variance).
+MIN_EXPLAINED_VARIANCE = 0.9
+
+
+def fit_warnings(res: FitResult, v: np.ndarray) -> tuple[str, ...]:
+    """Plain-language warnings about a fit that looks wrong though it "converged".
+
+    * the model explains < ``MIN_EXPLAINED_VARIANCE`` of the angle's variance (an angle
+      that does not follow this input: wrong column, axes swapped, lost tracking);
+    * the loading slope ``a1`` is ~0 (the angle does not grow with the input);
+    * the fit did not converge.
+    """
+    out = []
+    ev = res.metrics.explained_variance
+    if np.isfinite(ev) and ev < MIN_EXPLAINED_VARIANCE:
+        out.append(
+            f"the model explains only {100 * max(ev, 0.0):.0f} % of the angle's variance "
+            "(a constant does almost as well): the angle may not follow this input "
+            "(check the axis, the columns and the tracking)"
+        )
+    a1 = res.params.get("a1")
+    span_v = float(np.ptp(v)) if np.size(v) else 0.0
+    if a1 is not None and span_v > 0:
+        # deg over the whole input range: a slope that moves the angle < 0.01 deg
+        if abs(a1) * span_v < 0.01:
+            out.append(
+                f"loading slope a1 = {a1:.3g} deg per input unit: the angle does not grow "
+                "with the input"
+            )
+    if not res.converged:
+        out.append("not converged: " + res.message)
+    return tuple(out)

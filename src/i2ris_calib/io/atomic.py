@@ -15,6 +15,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from i2ris_calib.errors import CalibError
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
@@ -24,17 +26,65 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     a format by extension (OpenCV, matplotlib) still work.
     """
     final = Path(path)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.tmp-", suffix=final.suffix, dir=final.parent)
+    if final.is_dir():
+        raise CalibError(f"{final}: is a folder where a file is to be written; remove or rename it")
+    try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{final.stem}.tmp-", suffix=final.suffix, dir=final.parent
+        )
+    except OSError as exc:
+        raise _write_error(final, exc) from None
     os.close(fd)
     tmp_path = Path(tmp)
     os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp creates 0600; outputs get normal permissions
     try:
         yield tmp_path
         os.replace(tmp_path, final)
+    except OSError as exc:
+        tmp_path.unlink(missing_ok=True)
+        raise _write_error(final, exc) from None
     except BaseException:
         tmp_path.unlink(missing_ok=True)
         raise
+
+
+def _write_error(path: Path, exc: OSError) -> CalibError:
+    """One-line CalibError for a failed write of ``path`` (disk full, permission, ...)."""
+    why = exc.strerror or type(exc).__name__
+    return CalibError(
+        f"{path}: cannot write ({why}); choose another --out, free disk space or fix permissions"
+    )
+
+
+def check_output_dir(path: str | Path, files: tuple[str, ...] = ()) -> Path:
+    """Make sure folder ``path`` can take the output ``files`` before any work is done.
+
+    Creates the folder (and parents) when missing and writes and removes a probe file
+    in it. Raises a one-line CalibError when ``path`` or a parent is a file, when it
+    cannot be created or written (permissions, read-only, /proc), or when one of
+    ``files`` exists there as a folder.
+    """
+    out = Path(path)
+    for parent in (out, *out.parents):
+        if parent.exists() and not parent.is_dir():
+            raise CalibError(
+                f"--out {out}: {parent} is a file, not a folder; give a folder path for the outputs"
+            )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=out)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise CalibError(
+            f"--out {out}: cannot write there ({exc.strerror or type(exc).__name__}); "
+            "choose a folder you can write to"
+        ) from None
+    for name in files:
+        if (out / name).is_dir():
+            raise CalibError(f"--out {out}: {out / name} is a folder; remove or rename it")
+    return out
 
 
 def _umask() -> int:
@@ -70,8 +120,11 @@ def write_csv(path: str | Path, frame: Any, float_format: str = "%.10g") -> None
 def atomic_dir(path: str | Path) -> Iterator[Path]:
     """Yield a temporary directory; on success it replaces ``path`` as a whole."""
     final = Path(path)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    except OSError as exc:
+        raise _write_error(final, exc) from None
     os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp creates 0700
     try:
         yield tmp

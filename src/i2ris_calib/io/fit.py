@@ -33,8 +33,11 @@ def load_datasets(paths: Sequence[str | Path], axis: str, fit_config) -> list[Da
     return _load(paths, axis, fit_config)
 
 
-def model_record(res, kind: str, model) -> dict[str, Any]:
-    """The fit.json record M of one fitted model (docs/fit.md)."""
+def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str, Any]:
+    """The fit.json record M of one fitted model (docs/fit.md); ``v``: the dataset's
+    input, for the warnings (:func:`i2ris_calib.fitting.pipeline.fit_warnings`)."""
+    from i2ris_calib.fitting.pipeline import fit_warnings
+
     rec = {
         "params": res.params,
         "stderr": res.stderr,
@@ -52,6 +55,7 @@ def model_record(res, kind: str, model) -> dict[str, Any]:
         "n_holdout": res.holdout_metrics.n_samples,
         "n_operators": int(getattr(base_model(model), "n", 0)),
         "v_f": res.params.get("v_f"),
+        "warnings": list(fit_warnings(res, np.zeros(0) if v is None else v)),
     }
     if hasattr(base_model(model), "deadband_counts"):
         rec["deadband_counts"] = float(base_model(model).deadband_counts)
@@ -130,7 +134,7 @@ def fit_document(fitted, axis: str, kinds: Sequence[str], provenance: dict) -> d
                     "derived": list(d.bands.derived),
                 },
                 "input_range_counts": [float(d.v.min()), float(d.v.max())],
-                "models": {k: model_record(results[k], k, results[k].model) for k in kinds},
+                "models": {k: model_record(results[k], k, results[k].model, d.v) for k in kinds},
             }
         )
     doc: dict[str, Any] = {"schema": SCHEMA, "axis": axis, "datasets": datasets}
@@ -179,8 +183,11 @@ def results_table(fitted, kinds: Sequence[str], axis: str):
     absd = [d.name for d, _ in fitted if d.abs_fitted]
     table = Table(
         title=f"GPI and EGPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %",
-        caption=(f"{', '.join(absd)}: fitted on |counts| -> |deg|; " if absd else "")
-        + "* = not converged",
+        caption="; ".join(
+            [f"{', '.join(absd)}: fitted on |counts| -> |deg|"] * bool(absd)
+            + ["* = not converged"] * any(not r.converged for _, res in fitted for r in res.values())
+        )
+        or None,
     )
     table.add_column("model", no_wrap=True)
     for d, _ in fitted:
@@ -218,7 +225,7 @@ def fit_files(
     from rich.progress import Progress
 
     from i2ris_calib.fitting.pipeline import MODEL_KINDS
-    from i2ris_calib.io.atomic import write_csv, write_json
+    from i2ris_calib.io.atomic import atomic_path, check_output_dir, write_json
     from i2ris_calib.io.provenance import provenance
 
     if model not in (*MODEL_KINDS, "all"):
@@ -230,6 +237,7 @@ def fit_files(
     if saved is not None:
         kinds = (*kinds, "diagnosed")
     fit_config = config.fit
+    out = check_output_dir(out, ("predictions.csv", "fit.json"))
     datasets = load_datasets(paths, axis, fit_config)
     console = Console(stderr=True)
     with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
@@ -241,10 +249,22 @@ def fit_files(
         fitted = fit_datasets(datasets, kinds, fit_config, progress=step, saved=saved)
     inputs = [*paths, *([model_file] if model_file is not None else [])]
     doc = fit_document(fitted, axis, kinds, provenance(inputs, config))
-    out = Path(out)
-    write_csv(out / "predictions.csv", predictions_frame(fitted))
-    write_json(out / "fit.json", doc)
+    # both files or neither: fit.json is renamed into place only after predictions.csv
+    with atomic_path(out / "fit.json") as tmp_json:
+        write_json(tmp_json, doc)
+        with atomic_path(out / "predictions.csv") as tmp_csv:
+            predictions_frame(fitted).to_csv(tmp_csv, index=False, float_format="%.10g")
     Console().print(results_table(fitted, kinds, axis))
+    for d in doc["datasets"]:
+        r = d["rows"]
+        console.print(
+            f"{d['name']}: {r['total']} samples drive the models; {r['in_direction']} are its own "
+            f"({r['fitted']} fitted, {r['holdout']} held out, {r['angle_missing']} not measured)"
+        )
+        for kind, rec in d["models"].items():
+            for w in rec["warnings"]:
+                if not w.startswith("not converged"):
+                    console.print(f"warning: {d['name']} {kind}: {w}")
     if any(not r.converged for _, res in fitted for r in res.values()):
         console.print(
             "* not converged: see 'message' in fit.json (try more starts or --config [fit] max_nfev)"

@@ -74,3 +74,30 @@ def test_folder_inputs_cover_every_file_below(tmp_path):
     assert is_up_to_date(st)
     (d / "yaw" / "predictions.csv").write_text("new file")
     assert not is_up_to_date(st)
+
+
+def _fake_session(folder, name, payload):
+    folder.mkdir(parents=True)
+    (folder / "session.toml").write_text(f'name = "{name}"\n')
+    (folder / "top.mp4").write_bytes(payload)
+    return folder
+
+
+def test_run_dir_refuses_another_session_with_the_same_name(tmp_path):
+    """Two sessions named alike, one --out: the second is refused, the first's outputs
+    stay; the same session moved to another folder keeps its run folder."""
+    from i2ris_calib.errors import CalibError
+    from i2ris_calib.io.run import claim_run_dir
+
+    a = _fake_session(tmp_path / "a", "s", b"one recording")
+    b = _fake_session(tmp_path / "b", "s", b"another recording!")
+    run_dir = tmp_path / "runs" / "s"
+    claim_run_dir(a, run_dir)
+    (run_dir / "result.txt").write_text("a's results")
+    with pytest.raises(CalibError, match="another session") as exc:
+        claim_run_dir(b, run_dir)
+    assert "\n" not in str(exc.value) and str(a.resolve()) in str(exc.value)
+    assert (run_dir / "result.txt").read_text() == "a's results"
+    moved = tmp_path / "moved"
+    a.rename(moved)
+    claim_run_dir(moved, run_dir)  # same recording, new folder: accepted

@@ -162,8 +162,61 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
 def run_one_session(
     session: Path, run_dir: Path, config: PipelineConfig, force: bool
 ) -> list[tuple[str, str]]:
-    """Run every stage of one session in order; returns (stage, outcome) pairs."""
-    return [(st.name, run_stage(st, force)) for st in session_stages(session, run_dir, config)]
+    """Run every stage of one session in order; returns (stage, outcome) pairs.
+
+    A CalibError names the session folder, so a batch run says which one failed.
+    """
+    try:
+        claim_run_dir(session, run_dir)
+        return [(st.name, run_stage(st, force)) for st in session_stages(session, run_dir, config)]
+    except CalibError as exc:
+        raise CalibError(f"session {session}: {exc}") from None
+
+
+OWNER = ".session.json"
+
+
+def session_identity(session: Path) -> str:
+    """SHA-256 of a session's session.toml and the names and sizes of its files: the
+    same for a session moved to another folder, different for another recording."""
+    h = hashlib.sha256()
+    for p in session_inputs(session):
+        h.update(f"{p.name}\0{p.stat().st_size}\0".encode())
+        if p.name == "session.toml":
+            h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def claim_run_dir(session: Path, run_dir: Path) -> None:
+    """Record which session ``run_dir`` belongs to; refuse one made from another session.
+
+    ``run_dir/.session.json`` holds the session's identity (:func:`session_identity`)
+    and folder, written once with exclusive creation (two runs at once cannot both
+    claim it). A session moved to another folder keeps its identity and its outputs.
+    """
+    ident = session_identity(session)
+    marker = run_dir / OWNER
+    record = {"identity": ident, "session": str(session.resolve())}
+    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        fd = os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:
+        try:
+            owner = json.loads(marker.read_text())
+        except (OSError, json.JSONDecodeError):
+            owner = {}
+        if owner.get("identity") != ident:
+            raise CalibError(
+                f"{run_dir} holds the results of another session ({owner.get('session', '?')}) "
+                "with the same name; give this one a unique name in session.toml or use another --out"
+            ) from None
+        return
+    except OSError as exc:
+        raise CalibError(
+            f"{run_dir}: cannot write there ({exc.strerror}); choose another --out"
+        ) from None
+    with os.fdopen(fd, "w") as f:
+        json.dump(record, f)
 
 
 def checked_session_name(session: Path) -> str:
@@ -206,7 +259,12 @@ def run_sessions(
     from rich.console import Console
 
     console = Console(stderr=True)
-    names = [checked_session_name(Path(s)) for s in sessions]
+    names = []
+    for s in sessions:
+        try:
+            names.append(checked_session_name(Path(s)))
+        except CalibError as exc:
+            raise CalibError(f"session {s}: {exc}") from None
     if len(set(names)) != len(names):
         raise CalibError(
             f"two sessions share a name ({', '.join(names)}); give each a unique [name] in session.toml"
@@ -214,10 +272,14 @@ def run_sessions(
     run_dirs = {name: Path(out) / name for name in names}
     jobs = jobs or os.cpu_count() or 1
     results: dict[str, list[tuple[str, str]]] = {}
+    failed: dict[str, CalibError] = {}
     if jobs == 1 or len(sessions) == 1:
         for s, name in zip(sessions, names, strict=True):
             console.print(f"[bold]{name}[/]: {s}")
-            results[name] = run_one_session(Path(s), run_dirs[name], config, force)
+            try:
+                results[name] = run_one_session(Path(s), run_dirs[name], config, force)
+            except CalibError as exc:
+                failed[name] = exc
     else:
         # spawn, not fork: a forked child inherits OpenCV/numba thread pools and can deadlock
         ctx = multiprocessing.get_context("spawn")
@@ -227,8 +289,22 @@ def run_sessions(
                 for s, name in zip(sessions, names, strict=True)
             }
             for fut in as_completed(futures):
-                results[futures[fut]] = fut.result()
+                try:
+                    results[futures[fut]] = fut.result()
+                except CalibError as exc:
+                    failed[futures[fut]] = exc
     for name in names:
-        done = ", ".join(f"{stage}: {outcome}" for stage, outcome in results[name])
-        console.print(f"[green]{name}[/] -> {run_dirs[name] / 'report' / 'report.html'} ({done})")
+        if name in results:
+            done = ", ".join(f"{stage}: {outcome}" for stage, outcome in results[name])
+            console.print(
+                f"[green]{name}[/] -> {run_dirs[name] / 'report' / 'report.html'} ({done})"
+            )
+    if failed:
+        first = next(iter(failed.values()))
+        more = (
+            f" (and {len(failed) - 1} more session(s) failed, see above)" if len(failed) > 1 else ""
+        )
+        for exc in list(failed.values())[1:]:
+            console.print(f"error: {exc}", markup=False, highlight=False)
+        raise CalibError(f"{first}{more}")
     return results

@@ -244,3 +244,13 @@ def test_predictions_with_only_egpi_c_and_other_rows_are_read(run_dir):
     pred = run.fits[0].predictions
     assert set(pred["split"]) == {"fit", "holdout", "other"}
     assert pred["egpi_c_deg"].dtype.kind == "f"
+
+
+def test_parent_of_run_folders_is_refused(tmp_path, capsys):
+    """`report runs/` (the folder holding runs) says which folder to give."""
+    (tmp_path / "runs" / "s1" / "fit").mkdir(parents=True)
+    (tmp_path / "runs" / "s2" / "sync").mkdir(parents=True)
+    assert main(["report", str(tmp_path / "runs")]) == 2
+    err = capsys.readouterr().err
+    assert "holds runs" in err and "s1" in err and err.count("\n") == 1
+    assert not (tmp_path / "runs" / "report").exists()

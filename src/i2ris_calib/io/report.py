@@ -274,6 +274,7 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
     root = Path(run_dir)
     if not root.is_dir():
         raise CalibError(f"run folder not found: {root} (give the folder written by 'run')")
+    _check_is_run_folder(root)
     r = _Reader(root)
     angles = r.csv("track/angles.csv", ANGLES_COLUMNS)
     track = r.json("track/track.json")
@@ -292,6 +293,31 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
         absent=dict(r.absent),
     )
     return run, r.read
+
+
+STAGE_FOLDERS = ("track", "sync", "fit", "diagnose")
+
+
+def _check_is_run_folder(root: Path) -> None:
+    """CalibError when ``root`` holds no stage output but other folders: the parent of
+    run folders (say which to give) or an unrelated folder. An empty folder passes (the
+    report then says what is missing)."""
+    if any((root / s).is_dir() for s in STAGE_FOLDERS):
+        return
+    runs = sorted(
+        p.name
+        for p in root.iterdir()
+        if p.is_dir() and any((p / s).is_dir() for s in STAGE_FOLDERS)
+    )
+    if runs:
+        raise CalibError(
+            f"{root} holds runs, not one run: give one of them, e.g. 'report {root / runs[0]}' "
+            f"({len(runs)} run(s): {', '.join(runs[:5])}{', ...' if len(runs) > 5 else ''})"
+        )
+    if any(p.is_dir() for p in root.iterdir()):
+        raise CalibError(
+            f"{root}: no track/, sync/, fit/ or diagnose/ folder; give a run folder written by 'run'"
+        )
 
 
 def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, Any]:

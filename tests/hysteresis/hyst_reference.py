@@ -8,7 +8,7 @@ import numpy as np
 def play_reference(v, gl, gr, r, ml=1.0, mr=1.0):
     """One generalized play operator, written directly from Eq1-2 (pure Python).
 
-    ``gl``, ``gr`` are callables; initial state 0 clamped into the band (MODEL.md).
+    ``gl``, ``gr`` are callables; initial state 0 clamped into the band (docs/models.md).
     """
     w = min(max(0.0, gl(v[0]) - ml * r), gr(v[0]) + mr * r)
     out = [w]

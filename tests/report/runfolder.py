@@ -1,4 +1,4 @@
-"""Build small synthetic run folders exactly per the COMMON.md contracts, with known truth.
+"""Build small synthetic run folders exactly per the documented contracts (docs/formats.md), with known truth.
 
 Every number the report shows is computed here from known functions, independently
 of the code under test, and returned in a ``Truth`` dict so tests can compare.

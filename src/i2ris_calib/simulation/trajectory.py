@@ -210,7 +210,7 @@ def axis_knots(schedule: list[Excursion], axis: str) -> tuple[np.ndarray, np.nda
 
 
 def ctrl_from_cam(cfg: SimulationConfig, t_cam: np.ndarray) -> np.ndarray:
-    """Controller-clock time of camera-clock times (COMMON.md clock convention)."""
+    """Controller-clock time of camera-clock times (docs/sync.md clock convention)."""
     return cfg.offset_s + (1.0 + cfg.drift_ppm * 1e-6) * np.asarray(t_cam, dtype=float)
 
 

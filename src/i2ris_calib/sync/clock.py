@@ -11,7 +11,7 @@ PPM = 1e-6
 
 @dataclass(frozen=True)
 class ClockModel:
-    """Camera clock -> controller clock (COMMON.md convention).
+    """Camera clock -> controller clock (docs/sync.md convention).
 
     Attributes
     ----------

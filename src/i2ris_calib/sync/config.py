@@ -10,7 +10,7 @@ from typing import Literal
 class SyncConfig:
     """Settings of the sync stage. Units are in the field names.
 
-    Clock convention (COMMON.md): ``t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam``.
+    Clock convention (docs/sync.md): ``t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam``.
     """
 
     # "auto": event when the encoder log has a sync_flash edge and the video shows it,

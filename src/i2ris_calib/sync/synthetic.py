@@ -2,7 +2,7 @@
 
 Used by the sync tests and ``benchmarks/bench_sync.py``. The input is the
 hysteresis presets' Fig-5-like loading trajectory and the angle the I2RIS EGPI model
-(MODEL.md Eq16-24) with the presets' parameter recipe, rescaled to a chosen backlash.
+(docs/models.md, Eq16-24) with the presets' parameter recipe, rescaled to a chosen backlash.
 """
 
 from __future__ import annotations

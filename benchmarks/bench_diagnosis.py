@@ -11,10 +11,17 @@ hidden). Prints the confusion table (hidden effect x first named effect) and:
   in the median and per case);
 - time per diagnosis.
 
+``--two-directions``: every case is a signed recording whose loading cycles
+alternate between positive and negative input
+(:func:`~i2ris_calib.diagnosis.synthetic.make_two_direction_case`, 12 cycles), and the
+``"-"`` dataset is diagnosed over the whole history (the ``"+"`` cycles only drive the
+models).
+
 Usage::
 
     python benchmarks/bench_diagnosis.py            # 42 hidden + 12 clean cases
     python benchmarks/bench_diagnosis.py --quick    # 7 hidden + 3 clean cases
+    python benchmarks/bench_diagnosis.py --quick --two-directions
 """
 
 from __future__ import annotations
@@ -31,7 +38,12 @@ import numpy as np  # noqa: E402
 
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.effects import CATALOGUE  # noqa: E402
-from i2ris_calib.diagnosis.synthetic import STRENGTHS, case_dataset, make_case  # noqa: E402
+from i2ris_calib.diagnosis.synthetic import (  # noqa: E402
+    STRENGTHS,
+    case_dataset,
+    make_case,
+    make_two_direction_case,
+)
 from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model  # noqa: E402
 
 
@@ -52,11 +64,15 @@ def cases(quick: bool) -> list[tuple[str | None, dict | None, float, int]]:
     return out
 
 
-def run_case(effect, params, noise, seed, config=None) -> dict:
+def run_case(effect, params, noise, seed, config=None, two_directions=False) -> dict:
     """Diagnose one case; the row of the results table."""
-    case = make_case(seed, effect, params, noise_deg=noise)
+    if two_directions:
+        case = make_two_direction_case(seed, effect, params, noise_deg=noise)
+        data = case_dataset(case, direction="-")  # the "-" dataset, whole history
+    else:
+        case = make_case(seed, effect, params, noise_deg=noise)
+        data = case_dataset(case)  # the "+" Dataset fit and diagnose build from its CSV
     t0 = time.perf_counter()
-    data = case_dataset(case)  # the "+" Dataset fit and diagnose build from its CSV
     start = fit_start_model("egpi", data)
     diag = diagnose(start, data, config)
     dt = time.perf_counter() - t0
@@ -100,11 +116,16 @@ def main() -> None:
     ap.add_argument(
         "--choose-by", default="holdout", choices=("holdout", "bic"), help="[diagnose] choose_by"
     )
+    ap.add_argument(
+        "--two-directions",
+        action="store_true",
+        help="alternating +/- cycles; diagnose the '-' dataset over the whole history",
+    )
     args = ap.parse_args()
     config = DiagnosisConfig(choose_by=args.choose_by)
     rows = []
     for effect, params, noise, seed in cases(args.quick):
-        r = run_case(effect, params, noise, seed, config)
+        r = run_case(effect, params, noise, seed, config, args.two_directions)
         rows.append(r)
         print(
             f"{r['effect']:<21} {str(r['params']):<48} noise {noise:.1f}  named {r['named']}"

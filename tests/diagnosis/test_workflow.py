@@ -145,3 +145,22 @@ def test_too_few_samples_state_the_sample_minimum():
     assert data.holdout.any()
     with pytest.raises(CalibError, match="at least 50 fitted and 20 held-out"):
         check_dataset(data)
+
+
+def test_two_direction_case_is_the_minus_truth_over_the_whole_history():
+    """The benchmark's signed case: the "-" dataset's angle is the "-" truth driven by
+    max(-enc, 0) over every sample, to within the noise, on the "-" samples only."""
+    from i2ris_calib.diagnosis.effects import model_values
+    from i2ris_calib.diagnosis.synthetic import make_two_direction_case
+
+    for seed in (1, 2):
+        case = make_two_direction_case(seed, "time_delay", {"tau_s": 0.1}, noise_deg=0.1)
+        minus = case_dataset(case, direction="-")
+        plus = case_dataset(case, direction="+")
+        assert minus.n_samples == plus.n_samples == case.signals.v.size
+        assert 0.3 < minus.in_direction.mean() < 0.7
+        np.testing.assert_array_equal(minus.in_direction, ~plus.in_direction)
+        y = case.truth.evaluate(minus.signals, model_values(case.truth))
+        r = (minus.theta_deg - y)[minus.in_direction]
+        assert abs(np.sqrt(np.mean(r**2)) - 0.1) < 0.01  # the noise, nothing else
+        assert minus.holdout.any() and not (minus.holdout & plus.in_direction).any()

@@ -138,12 +138,61 @@ def make_case(
     return Case(sig, theta, truth, effect, noise_deg)
 
 
-def case_dataset(case: Case, fit_config=None, axis: str = "yaw"):
-    """The case as the ``"+"`` :class:`~i2ris_calib.data.Dataset` that ``diagnose``
-    and ``fit`` would build from its synced CSV (bands derived from the input unless
-    ``fit_config`` sets them, its held-out cycles from ``fit_config.holdout_fraction``).
+def make_two_direction_case(
+    seed: int,
+    effect: str | None = None,
+    params: dict[str, float] | None = None,
+    noise_deg: float = 0.2,
+    n_cycles: int = 12,
+) -> Case:
+    """A signed recording: loading cycles alternately positive and negative.
 
-    The case's input never goes negative, so every sample is in the ``"+"`` direction.
+    The trajectory of :func:`make_case` with every second cycle mirrored to negative
+    input. Each direction has its own truth (``paper_like_params("yaw+")`` and
+    ``("yaw-")``, the same hidden effect), driven by the input that direction sees
+    over the whole history (``max(enc, 0)``, ``max(-enc, 0)``); the measured angle is
+    the ``"+"`` truth on the ``"+"`` samples and minus the ``"-"`` truth on the ``"-"``
+    samples (attribution of :func:`i2ris_calib.data.dataset.direction_of_samples`),
+    plus noise. ``signals.v`` is the signed input; ``truth`` is the ``"-"`` truth (in
+    the ``"-"`` dataset's convention, the angle is ``-theta``).
+    """
+    from i2ris_calib.data.dataset import direction_of_samples, input_bands
+    from i2ris_calib.hysteresis.models import i2ris_egpi_model
+    from i2ris_calib.hysteresis.presets import paper_like_params
+
+    rng = np.random.default_rng(seed)
+    t, v = excitation(rng, n_cycles=n_cycles)
+    moving = v > 0
+    starts = moving & ~np.concatenate([[False], moving[:-1]])
+    sign = np.where(np.cumsum(starts) % 2 == 1, 1.0, -1.0)
+    enc = sign * v
+    v_other = np.round(3000.0 + 2800.0 * np.sin(2 * np.pi * t / 37.0 + rng.uniform(0, 2 * np.pi)))
+    other = i2ris_egpi_model(**paper_like_params("pitch+"))
+    th_other = other(v_other) + rng.normal(0.0, noise_deg, t.size)
+    effects = {} if effect is None else {effect: params or STRENGTHS[effect][1]}
+    side = direction_of_samples(enc, input_bands(enc).zero_band)
+    theta = np.zeros(t.size)
+    truths = {}
+    for d, s in (("+", 1.0), ("-", -1.0)):
+        truth = build_model(i2ris_egpi_model(**paper_like_params(f"yaw{d}")), effects)
+        sig_d = Signals(
+            v=np.maximum(s * enc, 0.0), t_s=t, v_other=v_other, theta_other_deg=th_other
+        )
+        theta += np.where(side == s, s * truth.evaluate(sig_d, model_values(truth)), 0.0)
+        truths[d] = truth
+    theta += rng.normal(0.0, noise_deg, t.size)
+    sig = Signals(v=enc, t_s=t, v_other=v_other, theta_other_deg=th_other)
+    return Case(sig, theta, truths["-"], effect, noise_deg)
+
+
+def case_dataset(case: Case, fit_config=None, axis: str = "yaw", direction: str = "+"):
+    """The case as the ``direction`` :class:`~i2ris_calib.data.Dataset` that
+    ``diagnose`` and ``fit`` would build from its synced CSV (bands derived from the
+    input unless ``fit_config`` sets them, its held-out cycles from
+    ``fit_config.holdout_fraction``).
+
+    The input of :func:`make_case` never goes negative, so every sample is in its
+    ``"+"`` dataset; :func:`make_two_direction_case` has both.
     """
     from i2ris_calib.data.dataset import input_bands, make_dataset
     from i2ris_calib.fitting.config import FitConfig
@@ -152,7 +201,7 @@ def case_dataset(case: Case, fit_config=None, axis: str = "yaw"):
     s = case.signals
     return make_dataset(
         axis,
-        "+",
+        direction,
         s.t_s,
         s.v,
         case.theta_deg,

@@ -69,6 +69,24 @@ def axis_series(angles: pd.DataFrame) -> list[AxisSeries]:
     return out
 
 
+def frame_series(angles: pd.DataFrame) -> list[AxisSeries]:
+    """Every frame of each axis in time order, angle NaN where not measured (``model``).
+
+    The hysteresis model carries state, so the ``model`` method runs it over the whole
+    frame history; unmeasured frames only leave the loss. An axis needs >= 8 measured
+    frames.
+    """
+    out = []
+    measured = angles["status"].astype(str).to_numpy() == "measured"
+    t = angles["time_s"].to_numpy(dtype=float)
+    for axis, col, channel in AXES:
+        th = pd.to_numeric(angles[col], errors="coerce").to_numpy(dtype=float)
+        ok = measured & np.isfinite(th)
+        if ok.sum() >= 8:
+            out.append(AxisSeries(axis, channel, t, np.where(ok, th, np.nan)))
+    return out
+
+
 def flash_cameras(angles: pd.DataFrame, cfg: SyncConfig) -> list[str]:
     """Cameras with a ``mean_gray_<camera>`` column (restricted to ``cfg.flash_cameras``)."""
     cams = [c[len("mean_gray_") :] for c in angles.columns if c.startswith("mean_gray_")]
@@ -142,7 +160,7 @@ def estimate_clock(
         )
     if method == "xcorr":
         return clock_from_xcorr(series, log, cfg)
-    clock = clock_from_model(series, log, cfg, fit_config)
+    clock = clock_from_model(frame_series(angles), log, cfg, fit_config)
     if reason:
         clock.evidence["auto"] = f"model method used: {reason}"
     return clock
@@ -165,7 +183,7 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     if cfg.auto_refine_stderr_s <= 0 or not series or not sd > cfg.auto_refine_stderr_s:
         return event
     try:
-        clock = clock_from_model(series, log, cfg, fit_config, prior=event)
+        clock = clock_from_model(frame_series(angles), log, cfg, fit_config, prior=event)
     except CalibError as exc:
         event.evidence["auto"] = f"event kept; model refinement failed: {exc}"
         return event

@@ -7,14 +7,23 @@ explains the measured angle best:
 
 1. frames are mapped to the controller clock with a candidate clock, the encoder is
    interpolated there, and the model is fitted per axis and motion direction
-   (``i2ris_calib.fitting``); the objective is the total residual sum of squares;
+   (``i2ris_calib.fitting``) over the axis's **whole frame history**: one sequence of
+   every frame in time order, the direction's input ``max(+-enc, 0)`` on all of them,
+   the loss restricted to the direction's measured samples (exactly the attribution
+   of ``i2ris_calib.data.dataset``); the objective is the total (trimmed) residual
+   sum of squares;
 2. the offset profile is scanned on a grid around the cross-correlation offset and
-   refined by golden-section search; its curvature gives the standard error;
+   refined by golden-section search; its curvature, inflated for model misfit and
+   residual autocorrelation (:func:`offset_stderr`), gives the standard error;
 3. drift: with the fitted models held fixed, a Gauss-Newton step on (offset, drift)
    over all frames, then the offset profile is refined again at the new drift.
 
-The sample set (which frames, which direction block) is fixed once, so the objective
-is a smooth function of the offset and not of which samples happen to be in range.
+The frame set and the direction attribution are fixed for a profile (at the coarse
+offset, then again at the scanned minimum), so the objective is a smooth function
+of the offset and not of which samples happen to be in range. Frames are only ever
+truncated at the ends of the recording (where a candidate offset could map them
+outside the encoder log), never dropped in the middle: the play operators carry
+state, and a spliced input would show them fake steps.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2ris_calib.data.dataset import Bands, direction_datasets, direction_input, input_bands
 from i2ris_calib.errors import CalibError
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_model
 from i2ris_calib.sync.config import SyncConfig
@@ -30,29 +40,51 @@ from i2ris_calib.sync.log import EncoderLog
 from i2ris_calib.sync.xcorr import AxisSeries, coarse_xcorr_offset
 
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+REST_KEEP_S = 0.5
+"""Seconds of each rest at zero (input inside the zero band) kept in the sync loss."""
 
 
 @dataclass(frozen=True)
 class Block:
-    """Frames of one axis and motion direction, fitted as one hysteresis dataset.
+    """One axis and motion direction over the axis's whole frame history.
 
     Attributes
     ----------
     name : str
-        e.g. ``"yaw+"``.
+        e.g. ``"yaw+"``, ``"pitch-"`` (``"yaw±"`` with ``[fit] signed``).
     channel : str
         Encoder channel of the axis.
-    sign : float
-        +1, or -1 for a negative-input dataset (|counts| -> |deg|, the paper's convention).
-    t_cam_s, theta_deg : ndarray, shape (m,)
-        Frame times (camera clock) and measured angles (sign applied).
+    direction : str
+        ``"+"``, ``"-"`` or ``"±"``: the model's input is
+        ``direction_input(enc, direction)`` (``max(enc, 0)``, ``max(-enc, 0)``, ``enc``).
+    t_cam_s : ndarray, shape (m,)
+        Every frame of the axis in time order (camera clock, s), measured or not.
+    theta_deg : ndarray, shape (m,)
+        Angle in the direction's convention (``-theta`` for ``"-"``), NaN where not
+        measured or not in this direction (out of the loss; the model still runs).
+    in_direction : ndarray of bool, shape (m,)
+        Frames attributed to this direction (``data.dataset.direction_of_samples``).
+    bands : Bands
+        Zero band and ``v'`` dead band of the axis (encoder counts), fixed for the profile.
     """
 
     name: str
     channel: str
-    sign: float
+    direction: str
     t_cam_s: np.ndarray
     theta_deg: np.ndarray
+    in_direction: np.ndarray
+    bands: Bands
+
+    @property
+    def sign(self) -> float:
+        """-1 for a ``"-"`` block (angle sign flipped), else +1."""
+        return -1.0 if self.direction == "-" else 1.0
+
+    @property
+    def n_loss(self) -> int:
+        """Frames in the loss (in direction, angle measured)."""
+        return int(np.isfinite(self.theta_deg).sum())
 
 
 def map_times(t_cam_s: np.ndarray, offset_c_s: float, drift_ppm: float, t_c_s: float) -> np.ndarray:
@@ -69,29 +101,77 @@ def model_blocks(
     fit_config,
     min_range_counts: float,
 ) -> list[Block]:
-    """Split each moving axis into motion-direction blocks (fitting.direction_blocks).
+    """Motion-direction blocks of each moving axis, each over the axis's whole history.
 
-    Only frames whose mapped time stays inside the log for every offset within
-    ``margin_s`` are used, so the sample set does not change during the search.
-    An axis whose encoder spans less than ``min_range_counts`` is skipped.
+    Per axis ONE sequence of frames: every frame whose mapped time stays inside the
+    log for every offset within ``offset_c_s +- margin_s`` (a contiguous run: frames
+    are truncated at the ends, never dropped in the middle; unmeasured frames stay,
+    with NaN angle). The blocks of an axis share these frames; each gets the
+    direction's input and its own loss mask, attributed by
+    :func:`i2ris_calib.data.dataset.direction_datasets` with the axis's bands
+    (``[fit] zero_band_counts``/``deadband_counts``, negative = derived from the
+    input) exactly as ``fit`` does. An axis whose encoder spans less than
+    ``min_range_counts`` is skipped, and so is a direction with fewer than
+    ``fit_config.min_block_samples`` frames outside the zero band.
+
+    Parameters
+    ----------
+    series : list of AxisSeries
+        Per axis every frame in time order (``theta_deg`` NaN where not measured).
+    log : EncoderLog
+    offset_c_s, t_c_s : float
+        Offset at camera time ``t_c_s`` (s) used to attribute frames to directions.
+    margin_s : float
+        Half-width of the offsets the blocks must stay valid for, s.
+    fit_config : FitConfig
+    min_range_counts : float
+
+    Returns
+    -------
+    list of Block
     """
-    from i2ris_calib.fitting.pipeline import direction_blocks
-
     lo, hi = log.time_range()
     blocks = []
     for s in series:
         tc = map_times(s.t_cam_s, offset_c_s, 0.0, t_c_s)
-        keep = (tc - margin_s >= lo) & (tc + margin_s <= hi) & np.isfinite(s.theta_deg)
-        t, th = s.t_cam_s[keep], s.theta_deg[keep]
-        enc = log.interpolate(s.channel, tc[keep])
-        if enc.size == 0 or np.ptp(enc) < min_range_counts:
+        keep = np.flatnonzero((tc - margin_s >= lo) & (tc + margin_s <= hi))
+        if keep.size < 8:
             continue
-        for b in direction_blocks(enc, fit_config):
-            sign = 1.0 if b.direction == "+" else -1.0
-            blocks.append(
-                Block(s.axis + b.direction, s.channel, sign, t[b.index], sign * th[b.index])
-            )
+        run = slice(keep[0], keep[-1] + 1)  # contiguous (times increase): ends only
+        t, th = s.t_cam_s[run], s.theta_deg[run]
+        enc = log.interpolate(s.channel, tc[run])
+        if not np.isfinite(enc).all() or np.ptp(enc) < min_range_counts:
+            continue
+        bands = input_bands(enc, fit_config.zero_band_counts, fit_config.deadband_counts)
+        datasets = direction_datasets(
+            s.axis, t, enc, th, bands=bands, holdout_fraction=0.0,
+            min_samples=fit_config.min_block_samples, signed=fit_config.signed,
+        )  # fmt: skip
+        quiet = long_rest(t, enc, bands.zero_band)
+        for ds in datasets:
+            theta = np.where(quiet, np.nan, ds.theta_deg)
+            if np.isfinite(theta).sum() < 16:
+                continue
+            blocks.append(Block(ds.name, s.channel, ds.direction, t, theta, ds.in_direction, bands))
     return blocks
+
+
+def long_rest(t_s: np.ndarray, enc: np.ndarray, zero_band: float) -> np.ndarray:
+    """Frames resting at zero for longer than :data:`REST_KEEP_S` (bool, shape (m,)).
+
+    A frame inside the zero band more than ``REST_KEEP_S`` after the input entered it.
+    These frames still drive the model (whole history) but leave the *sync* loss: the
+    input does not change there, so they carry no clock information, while their angle
+    is where slow effects no hysteresis model has live (creep, relaxation of the
+    residual deflection). Kept: the first ``REST_KEEP_S`` of each rest, where the input
+    stops (a corner that does carry timing information).
+    """
+    band = np.abs(np.asarray(enc, dtype=float)) <= zero_band
+    start = np.flatnonzero(band & ~np.concatenate(([False], band[:-1])))
+    idx = np.zeros(band.size, dtype=int)
+    idx[start] = start
+    idx = np.maximum.accumulate(idx)
+    return band & (np.asarray(t_s) - np.asarray(t_s)[idx] > REST_KEEP_S)
 
 
 class OffsetProfile:
@@ -102,22 +182,25 @@ class OffsetProfile:
     ``cold`` is True (the coarse scan), the fitter's own data-driven multi-start; the
     lowest residual wins. A warm-start chain alone can stay in a poor local minimum
     found far from the true offset. Results are cached by offset.
+
+    ``seeds``: ``{block name: parameter vector}`` tried as starts (from an earlier
+    profile); with seeds the profile starts warm.
     """
 
     def __init__(self, blocks, log, t_c_s, drift_ppm, kind, fit_config, seeds=None):
         self.blocks, self.log, self.t_c, self.drift = blocks, log, t_c_s, drift_ppm
         self.kind, self.fit_config = kind, fit_config
         self.cache: dict[float, tuple[float, list]] = {}
-        self.n_samples = sum(int(np.isfinite(b.theta_deg).sum()) for b in blocks)
+        self.n_samples = sum(b.n_loss for b in blocks)
         self.n_params = 0
         self.cold = seeds is None
-        self.seeds = seeds  # per-block parameter vectors to try as starts
+        self.seeds = seeds or {}
 
     def inputs(self, block: Block, offset_c_s: float, drift_ppm: float | None = None) -> np.ndarray:
-        """Encoder input (counts, sign applied) of ``block`` at a candidate clock."""
+        """The direction's input (counts), shape (m,), of ``block`` at a candidate clock."""
         d = self.drift if drift_ppm is None else drift_ppm
         tc = map_times(block.t_cam_s, offset_c_s, d, self.t_c)
-        return block.sign * self.log.interpolate(block.channel, tc)
+        return direction_input(self.log.interpolate(block.channel, tc), block.direction)
 
     def __call__(self, offset_c_s: float) -> float:
         key = round(float(offset_c_s), 9)
@@ -130,19 +213,19 @@ class OffsetProfile:
         self(offset_c_s)
         return self.cache[round(float(offset_c_s), 9)][1]
 
-    def best_params(self) -> list:
-        """Per-block parameter vectors of the lowest-RSS evaluation (or the seeds)."""
+    def best_params(self) -> dict:
+        """``{block name: parameter vector}`` of the lowest-RSS evaluation (or the seeds)."""
         if not self.cache:
-            return self.seeds
+            return dict(self.seeds)
         k = min(self.cache, key=lambda x: self.cache[x][0])
-        return [r.model.values for r in self.cache[k][1]]
+        return {b.name: r.model.values for b, r in zip(self.blocks, self.cache[k][1], strict=True)}
 
     def _starts(self, i: int, offset_c_s: float) -> list:
         near = sorted(self.cache, key=lambda k: abs(k - offset_c_s))[:2]
         starts = [self.cache[k][1][i].model.values for k in near]
         best = self.best_params()
-        if best is not None:
-            starts.append(best[i])
+        if self.blocks[i].name in best:
+            starts.append(best[self.blocks[i].name])
         return starts
 
     def _fit(self, offset_c_s: float) -> tuple[float, list]:
@@ -150,22 +233,29 @@ class OffsetProfile:
         from i2ris_calib.fitting.pipeline import build_model, fit_kind
 
         total, results = 0.0, []
+        cfg = self.fit_config
         for i, b in enumerate(self.blocks):
             v = self.inputs(b, offset_c_s)
+            db = b.bands.deadband
             candidates = []
             starts = self._starts(i, offset_c_s)
             if starts:
-                model = build_model(self.kind, v, self.fit_config)
+                model = build_model(self.kind, v, cfg, db)
                 candidates.append(
-                    fit_model(model, v, b.theta_deg, starts=starts, method=self.fit_config.method)
+                    fit_model(
+                        model,
+                        v,
+                        b.theta_deg,
+                        starts=starts,
+                        method=cfg.method,
+                        max_nfev=cfg.max_nfev,
+                    )  # fmt: skip
                 )
             if self.cold or not starts:
                 hold = np.zeros(v.size, bool)
-                candidates.append(fit_kind(self.kind, v, b.theta_deg, self.fit_config, hold))
+                candidates.append(fit_kind(self.kind, v, b.theta_deg, cfg, hold, deadband=db))
             # never worse than the warm starts themselves (a refit can wander off)
-            candidates += [
-                start_as_fit(self.kind, v, b.theta_deg, x, self.fit_config) for x in starts
-            ]
+            candidates += [start_as_fit(self.kind, v, b.theta_deg, x, cfg, db) for x in starts]
             res = min(candidates, key=lambda r: trimmed_ss(r.residuals))
             total += trimmed_ss(res.residuals)
             results.append(res)
@@ -195,6 +285,18 @@ def trimmed_ss(residuals: np.ndarray, fraction: float = TRIM_FRACTION) -> float:
     return float(np.sort(e)[: e.size - k].sum())
 
 
+def trim_mask(residuals: np.ndarray, fraction: float = TRIM_FRACTION) -> np.ndarray:
+    """Finite residuals kept by :func:`trimmed_ss` (bool, same shape)."""
+    r = np.asarray(residuals, dtype=float)
+    ok = np.isfinite(r)
+    e = np.abs(r[ok])
+    k = min(max(int(fraction * e.size), 2), max(e.size - 1, 0))
+    if k > 0:
+        cut = np.sort(e)[e.size - k - 1]
+        ok &= np.abs(np.where(ok, r, 0.0)) <= cut
+    return ok
+
+
 @dataclass(frozen=True)
 class StartEval:
     """A parameter vector evaluated without refitting (the parts of FitResult used here)."""
@@ -208,11 +310,13 @@ class StartEval:
         return self.model.evaluate(v, self.model.values)
 
 
-def start_as_fit(kind: str, v: np.ndarray, theta: np.ndarray, values: np.ndarray, fit_config):
+def start_as_fit(
+    kind: str, v: np.ndarray, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None
+):
     """:class:`StartEval` of ``values`` on (v, theta): the fallback when a refit is worse."""
     from i2ris_calib.fitting.pipeline import build_model
 
-    model = build_model(kind, v, fit_config).with_values(values)
+    model = build_model(kind, v, fit_config, deadband).with_values(values)
     free = tuple(p.name for p in model.parameters if not p.fixed)
     return StartEval(model, model.evaluate(v, model.values) - theta, free)
 
@@ -264,43 +368,238 @@ def golden_min(f, a: float, b: float, tol: float) -> float:
     return c if fc < fd else d
 
 
-def profile_stderr(profile: OffsetProfile, best: float, halfwidth: float) -> float:
-    """Standard error of the offset from the profile curvature, s.
+# ----------------------------------------------------------------------------- uncertainty
 
-    ``var = 2 sigma^2 / RSS''`` with ``sigma^2 = RSS_min / (n - p - 1)``, inflated by
-    ``(1 + rho) / (1 - rho)`` for the lag-1 autocorrelation ``rho`` of the residuals
-    (model misfit is correlated in time; white-noise errors would be too optimistic).
-    The quadratic is fitted to the evaluated points within ``halfwidth`` of the
-    minimum, widened twice (x2, x4) while there are too few or the fit is not convex;
-    NaN if it never is.
+
+def nw_bandwidth(scores: list[np.ndarray]) -> int:
+    """Newey-West lag truncation from the data (Andrews 1991, AR(1) plug-in, Bartlett).
+
+    ``L = ceil(1.1447 (alpha n)^(1/3))`` with ``alpha = 4 rho^2 / ((1 - rho)^2 (1 + rho)^2)``,
+    ``rho`` the pooled lag-1 autocorrelation of the score sequences (clipped to
+    [0, 0.97]) and ``n`` the number of non-zero scores; at least 1, at most the longest
+    sequence minus 1.
+
+    Parameters
+    ----------
+    scores : list of ndarray, shape (m_b,) or (m_b, k)
+        Per block the score ``J_i r_i`` of every frame in time order, 0 where the frame
+        is not in the loss (so lag products never pair frames across a gap wrongly).
     """
+    num = den = 0.0
+    n = 0
+    longest = 1
+    for s in scores:
+        s = np.asarray(s, dtype=float).reshape(len(s), -1)
+        num += float(np.sum(s[1:] * s[:-1]))
+        den += float(np.sum(s * s))
+        n += int(np.count_nonzero(np.any(s != 0, axis=1)))
+        longest = max(longest, s.shape[0])
+    rho = min(max(num / den, 0.0), 0.97) if den > 0 else 0.0
+    alpha = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    lag = int(np.ceil(1.1447 * (alpha * max(n, 1)) ** (1 / 3)))
+    return int(min(max(lag, 1), longest - 1))
+
+
+def long_run_covariance(scores: list[np.ndarray], bandwidth: int) -> np.ndarray:
+    """Newey-West (Bartlett kernel) long-run covariance ``sum_l w_l Gamma_l``, (k, k).
+
+    ``Gamma_l = sum_i s_i s_(i+l)^T`` within each block, ``w_l = 1 - |l| / (L + 1)``;
+    blocks are summed as independent.
+    """
+    out = None
+    for s in scores:
+        s = np.asarray(s, dtype=float).reshape(len(s), -1)
+        om = s.T @ s
+        for lag in range(1, min(bandwidth, s.shape[0] - 1) + 1):
+            g = s[lag:].T @ s[:-lag]
+            om = om + (1 - lag / (bandwidth + 1)) * (g + g.T)
+        out = om if out is None else out + om
+    return out
+
+
+def noise_sd(residuals: list[np.ndarray]) -> float:
+    """Tracking-noise sd (deg) from the residuals' frame-to-frame differences.
+
+    ``1.4826 MAD(diff r) / sqrt(2)`` over consecutive frames both in the loss: the
+    white tracking noise doubles the variance of a difference, a smooth misfit adds
+    almost nothing to it. NaN with fewer than 10 pairs.
+    """
+    d = np.concatenate([np.diff(r) for r in residuals if r.size > 1] or [np.zeros(0)])
+    d = d[np.isfinite(d)]
+    if d.size < 10:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
+def _param_jacobian(model, v: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """d(model output)/d(free least-squares parameters), shape (m, q), central differences
+    (the profiled flag point ``v_f`` excluded: the output is piecewise constant in it)."""
+    from i2ris_calib.fitting.fit import PROFILE_PARAMS
+
+    cols = []
+    for i, p in enumerate(model.parameters):
+        if p.fixed or p.name in PROFILE_PARAMS:
+            continue
+        h = 1e-5 * max(abs(float(x[i])), 1e-4)
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        cols.append((model.evaluate(v, xp) - model.evaluate(v, xm)) / (2 * h))
+    return np.column_stack(cols) if cols else np.zeros((v.size, 0))
+
+
+def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3):
+    """Per block the residual and the profiled offset sensitivity at ``offset_c_s``.
+
+    ``J_o = d y / d offset`` (central difference, the fitted parameters held) projected
+    orthogonal to the parameter Jacobian (what the parameters cannot absorb: the
+    sensitivity of the profiled objective), on the frames of the trimmed loss that are
+    not among the 1 % largest ``|J_o|`` (frames whose EGPI branch switches within
+    ``+-eps_s`` have spike derivatives).
+
+    Returns
+    -------
+    list of (j_perp, r, cycle), each ndarray shape (m_b,)
+        ``j_perp`` and ``r`` are 0 where a frame is not used (NaN-free, time order
+        kept); ``cycle`` is the loading-cycle number of each frame
+        (:func:`i2ris_calib.fitting.cycles.cycle_index` of the direction's input).
+    """
+    from i2ris_calib.fitting.cycles import cycle_index
+
+    out = []
+    for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
+        model, x = f.model, np.asarray(f.model.values, dtype=float)
+        v = profile.inputs(b, offset_c_s)
+        r = np.asarray(f.residuals, dtype=float)
+        jo = (
+            model.evaluate(profile.inputs(b, offset_c_s + eps_s), x)
+            - model.evaluate(profile.inputs(b, offset_c_s - eps_s), x)
+        ) / (2 * eps_s)
+        use = trim_mask(r) & np.isfinite(jo)
+        if use.sum() > 10:
+            use &= np.abs(jo) <= np.quantile(np.abs(jo[use]), 1 - TRIM_FRACTION)
+        jp = np.zeros(r.size)
+        rr = np.zeros(r.size)
+        if use.sum() > 2:
+            jt = _param_jacobian(model, v, x)[use]
+            ok = np.isfinite(jt).all(axis=0)
+            jt = jt[:, ok]
+            proj = jo[use]
+            if jt.shape[1]:
+                coef, *_ = np.linalg.lstsq(jt, proj, rcond=None)
+                proj = proj - jt @ coef
+            jp[use] = proj
+            rr[use] = r[use]
+        out.append((jp, rr, cycle_index(v)))
+    return out
+
+
+def cluster_covariance(
+    scores: list[np.ndarray], clusters: list[np.ndarray]
+) -> tuple[np.ndarray, int]:
+    """Cluster-robust long-run covariance ``G/(G-1) sum_g S_g S_g^T`` (k, k) and ``G``.
+
+    ``S_g`` is the sum of the scores of cluster ``g``; clusters are the loading cycles
+    of each block: the misfit may be correlated in any way within a cycle (a whole
+    ramp), cycles are taken as independent. ``G`` counts the clusters with a non-zero
+    score; the covariance is NaN when ``G < 2``.
+
+    Parameters
+    ----------
+    scores : list of ndarray, shape (m_b,) or (m_b, k)
+    clusters : list of ndarray of int, shape (m_b,)
+    """
+    sums = []
+    for s, c in zip(scores, clusters, strict=True):
+        s = np.asarray(s, dtype=float).reshape(len(s), -1)
+        if s.shape[0] == 0:
+            continue
+        c = np.asarray(c, dtype=int)
+        tot = np.stack([np.bincount(c, weights=s[:, j]) for j in range(s.shape[1])], axis=1)
+        sums.append(tot[np.any(tot != 0, axis=1)])
+    k = sums[0].shape[1] if sums else 1
+    allsums = np.concatenate(sums) if sums else np.zeros((0, k))
+    g = allsums.shape[0]
+    if g < 2:
+        return np.full((k, k), np.nan), g
+    return g / (g - 1) * (allsums.T @ allsums), g
+
+
+def curvature(profile: OffsetProfile, best: float, halfwidth: float) -> float:
+    """``RSS''(best)`` (deg^2/s^2) from a quadratic through the evaluated points within
+    ``halfwidth`` of the minimum, widened twice (x2, x4) while there are too few or the
+    fit is not convex; NaN if it never is."""
     x, y = profile.points()
-    c2 = 0.0
-    for width in (halfwidth, 2 * halfwidth, 4 * halfwidth):  # widen until curved
+    for width in (halfwidth, 2 * halfwidth, 4 * halfwidth):
         sel = np.abs(x - best) <= width
         if sel.sum() >= 3:
             c2 = np.polyfit(x[sel] - best, y[sel], 2)[0]
             if c2 > 0:
-                break
-    if not c2 > 0:
-        return float("nan")
+                return float(2 * c2)
+    return float("nan")
+
+
+def offset_stderr(profile: OffsetProfile, best: float, halfwidth: float) -> tuple[float, dict]:
+    """Standard error of the offset (s) and how it was obtained.
+
+    ::
+
+        sd^2 = 2 sigma_n^2 chi2 / RSS''  *  F
+        chi2 = max(1, sigma_r^2 / sigma_n^2)          misfit inflation
+        F    = max(1, Omega / (sigma_r^2 B))          residual autocorrelation
+
+    * ``RSS''``: curvature of the (trimmed) offset profile at its minimum
+      (:func:`curvature`); ``2 sigma^2 / RSS''`` is the least-squares variance of the
+      profiled offset for white errors of variance ``sigma^2``.
+    * ``sigma_n``: tracking noise from the residuals' frame-to-frame differences
+      (:func:`noise_sd`); ``sigma_r^2 = RSS_min / (n - p - 1) / 0.915`` (trim-corrected);
+      ``chi2`` is the reduced chi-square of the fit against the tracking noise, so
+      ``sigma_n^2 chi2 = max(sigma_r^2, sigma_n^2)``: model misfit raises the variance.
+    * ``F``: the long-run variance ``Omega`` of the scores ``s_i = J_i r_i`` over
+      their white-noise variance ``sigma_r^2 B``, ``B = sum J_i^2`` (``J_i``: the
+      profiled offset sensitivity of frame i, :func:`offset_scores`). ``Omega`` is the
+      larger of the Newey-West estimate (Bartlett kernel, data-driven lag,
+      :func:`nw_bandwidth`) and the cluster-robust one with the loading cycles as
+      clusters (:func:`cluster_covariance`: misfit correlated over a whole cycle,
+      longer than a kernel lag sees). The effective number of independent samples is
+      ``n / F``; ``(2 sigma_r^2 / RSS'') F`` is the sandwich ``Omega / B^2`` written as
+      an inflation of the curvature-based variance (``RSS'' = 2 B`` for a linear model).
+    """
+    info: dict = {}
+    c = curvature(profile, best, halfwidth)
+    fits = profile.fits(best)
     dof = max(profile.n_samples - profile.n_params - 1, 1)
-    sigma2 = profile(best) / dof / TRIMMED_VARIANCE
-    return float(np.sqrt(2 * sigma2 / (2 * c2) * residual_inflation(profile.fits(best))))
-
-
-def residual_inflation(fits: list) -> float:
-    """``(1 + rho) / (1 - rho)`` from the pooled lag-1 autocorrelation of the residuals."""
-    num = den = 0.0
-    for r in fits:
-        e = r.residuals[np.isfinite(r.residuals)]
-        if e.size < 3:
-            continue
-        e = e - e.mean()
-        num += float(e[1:] @ e[:-1])
-        den += float(e @ e)
-    rho = min(max(num / den, 0.0), 0.95) if den > 0 else 0.0
-    return (1 + rho) / (1 - rho)
+    sigma_r2 = profile(best) / dof / TRIMMED_VARIANCE
+    resid = [np.where(trim_mask(f.residuals), f.residuals, np.nan) for f in fits]
+    sn = noise_sd(resid)
+    sigma_n2 = sn**2 if np.isfinite(sn) and sn > 0 else sigma_r2
+    chi2 = sigma_r2 / sigma_n2
+    scores = offset_scores(profile, best)
+    s = [j * r for j, r, _ in scores]
+    bread = float(sum(j @ j for j, _, _ in scores))
+    lag = nw_bandwidth(s)
+    omega_nw = float(long_run_covariance(s, lag)[0, 0]) if s else float("nan")
+    om_cl, n_clusters = cluster_covariance(s, [c for _, _, c in scores])
+    omega_cl = float(om_cl[0, 0])
+    omega = np.nanmax([omega_nw, omega_cl])
+    f_ac = omega / (sigma_r2 * bread) if bread > 0 else float("nan")
+    factor = max(1.0, f_ac) if np.isfinite(f_ac) else 1.0
+    var = 2 * sigma_n2 * max(chi2, 1.0) / c * factor if c > 0 else float("nan")
+    info = {
+        "formula": "sd^2 = 2 sigma_n^2 max(1, chi2) / RSS'' * max(1, F)",
+        "rss_curvature_deg2_per_s2": c,
+        "sigma_resid_deg": float(np.sqrt(sigma_r2)),
+        "sigma_noise_deg": float(np.sqrt(sigma_n2)),
+        "chi2_reduced": float(chi2),
+        "autocorr_factor_F": float(f_ac),
+        "nw_lag_frames": lag,
+        "F_newey_west": omega_nw / (sigma_r2 * bread) if bread > 0 else float("nan"),
+        "F_cycle_clusters": omega_cl / (sigma_r2 * bread) if bread > 0 else float("nan"),
+        "n_cycle_clusters": n_clusters,
+        "curvature_only_sd_s": float(np.sqrt(2 * sigma_r2 / c)) if c > 0 else float("nan"),
+        "sandwich_sd_s": float(np.sqrt(omega) / bread) if bread > 0 else float("nan"),
+    }
+    return float(np.sqrt(var)), info
 
 
 def drift_gauss_newton(
@@ -308,12 +607,19 @@ def drift_gauss_newton(
 ) -> tuple[float, float, np.ndarray]:
     """(offset_c, drift) by Gauss-Newton with the fitted models held fixed.
 
-    Returns the new offset at ``t_c``, drift (ppm) and their covariance (2, 2),
-    inflated for residual autocorrelation like :func:`profile_stderr`.
+    Returns the new offset at ``t_c``, drift (ppm) and their covariance (2, 2): the
+    white-noise covariance ``sigma^2 (A^T A)^-1`` scaled up (never down) so that its
+    diagonal covers the sandwiches ``(A^T A)^-1 Omega (A^T A)^-1`` of the scores
+    ``A_i r_i``, ``Omega`` by Newey-West and by loading-cycle clusters (residual
+    autocorrelation, as :func:`offset_stderr`).
     """
+    from i2ris_calib.fitting.cycles import cycle_index
+
     fits = profile.fits(offset_c_s)
     o, d = offset_c_s, drift_ppm
     eps_o, eps_d = 1e-3, 50.0
+    sizes = [b.t_cam_s.size for b in profile.blocks]
+    splits = np.cumsum(sizes)[:-1]
 
     def predict(o_, d_):
         out = [
@@ -323,6 +629,7 @@ def drift_gauss_newton(
 
     theta = np.concatenate([b.theta_deg for b in profile.blocks])
     ok = np.isfinite(theta)
+    cycles = [cycle_index(profile.inputs(b, o, d)) for b in profile.blocks]
     cov = np.full((2, 2), np.nan)
     for _ in range(iters):
         y = predict(o, d)
@@ -341,10 +648,31 @@ def drift_gauss_newton(
         step, *_ = np.linalg.lstsq(a, r, rcond=None)
         o, d = o + step[0], d + step[1]
         dof = max(r.size - 2 - profile.n_params, 1)
-        cov = np.linalg.inv(a.T @ a) * float(r @ r) / dof
+        sigma2 = float(r @ r) / dof
+        inv = np.linalg.inv(a.T @ a)
+        cov = inv * sigma2
+        scores = np.where(use[:, None], np.column_stack([jo, jd]) * r_all[:, None], 0.0)
+        parts = np.split(scores, splits)
+        factor = 1.0
+        omegas = [long_run_covariance(parts, nw_bandwidth(parts))]
+        omegas.append(cluster_covariance(parts, cycles)[0])
+        for omega in omegas:
+            if np.isfinite(omega).all():
+                sand = inv @ omega @ inv
+                factor = max(factor, float(np.max(np.diag(sand) / np.diag(cov))))
+        cov = cov * factor
         if abs(step[0]) < 1e-5 and abs(step[1]) < 0.1:
             break
-    return o, d, cov * residual_inflation(fits)
+    return o, d, cov
+
+
+def frames_series(series: list[AxisSeries]) -> list[AxisSeries]:
+    """The measured frames of each series (finite angle), for the cross-correlation."""
+    out = []
+    for s in series:
+        ok = np.isfinite(s.theta_deg)
+        out.append(AxisSeries(s.axis, s.channel, s.t_cam_s[ok], s.theta_deg[ok]))
+    return out
 
 
 def clock_from_model(
@@ -364,20 +692,24 @@ def clock_from_model(
     Parameters
     ----------
     series : list of AxisSeries
-        Measured angles per axis.
+        Per axis every frame in time order, ``theta_deg`` NaN where not measured
+        (:func:`i2ris_calib.sync.estimate.frame_series`); series of measured frames
+        only also work (the model then sees the input at those frames only).
     log : EncoderLog
         Encoder channels.
     cfg : SyncConfig
         ``model`` (egpi/gpi), ``profile_*``, ``estimate_drift``, ``min_axis_range_counts``.
     fit_config : FitConfig, optional
-        Fitting settings (``[fit]``); holdout is disabled for the profile.
+        Fitting settings (``[fit]``: bands, ``signed``, ``min_block_samples``, starts);
+        holdout is disabled for the profile.
     prior : ClockModel, optional
         A coarser clock (sync event) bounding the offset search.
 
     Returns
     -------
     ClockModel
-        With the offset profile (offsets at ``t_c``, RSS) as evidence.
+        With the offset profile (offsets at ``t_c``, RSS) and the uncertainty terms
+        (:func:`offset_stderr`) as evidence.
     """
     from dataclasses import replace
 
@@ -387,14 +719,21 @@ def clock_from_model(
     t_c = float(np.mean(np.concatenate([s.t_cam_s for s in series])))
     step = cfg.profile_step_s
     if prior is None:
-        o_x, halfwidth = coarse_xcorr_offset(series, log, cfg), cfg.profile_halfwidth_s
+        o_x = coarse_xcorr_offset(frames_series(series), log, cfg)
+        halfwidth = cfg.profile_halfwidth_s
         margin = 5 * halfwidth
     else:
         o_x = prior.offset_at(t_c)
         halfwidth = max(4 * prior.offset_stderr_at(t_c), 4 * cfg.profile_tol_s)
         step = min(step, halfwidth / 2)
         margin = 2 * halfwidth
-    blocks = model_blocks(series, log, o_x, t_c, margin, fit_config, cfg.min_axis_range_counts)
+
+    def blocks_at(offset: float) -> list[Block]:
+        return model_blocks(
+            series, log, offset, t_c, margin, fit_config, cfg.min_axis_range_counts,
+        )  # fmt: skip
+
+    blocks = blocks_at(o_x)
     if not blocks:
         raise CalibError(
             "sync (model): no axis moves enough inside the encoder log to fit the hysteresis "
@@ -402,6 +741,18 @@ def clock_from_model(
         )
     profile = OffsetProfile(blocks, log, t_c, 0.0, cfg.model, fit_config)
     best = scan_profile(profile, o_x, halfwidth, step, extend=prior is None)
+    # the direction attribution was made at the coarse offset: redo it at the minimum
+    # (same frames, so only frames near a change of direction can change block)
+    seeds = profile.best_params()
+    blocks = blocks_at(best)
+    if [b.name for b in blocks] != [b.name for b in profile.blocks] or any(
+        not np.array_equal(a.in_direction, b.in_direction)
+        for a, b in zip(blocks, profile.blocks, strict=True)
+    ):
+        scanned = profile
+        profile = OffsetProfile(blocks, log, t_c, 0.0, cfg.model, fit_config, seeds)
+        for x in sorted(scanned.cache, key=lambda k: abs(k - best))[:3]:
+            profile(x)
     profile.cold = False  # refinement: warm starts only
     best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     drift, drift_sd = 0.0, float("nan")
@@ -412,7 +763,7 @@ def clock_from_model(
             seeds = profile.best_params()
             profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
             best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
-    sd_c = profile_stderr(profile, best, 1.5 * step)
+    sd_c, unc = offset_stderr(profile, best, 1.5 * step)
     offset0 = best - drift * PPM * t_c  # offset at camera time 0 (t_ctrl - t_cam)
     var_d = drift_sd**2 if np.isfinite(drift_sd) else 0.0
     cov = np.array(
@@ -424,11 +775,15 @@ def clock_from_model(
         "xcorr_offset_s" if prior is None else "prior_offset_at_t_ref_s": o_x,
         "search_halfwidth_s": halfwidth,
         "t_ref_cam_s": t_c,
-        "blocks": [{"name": b.name, "n_frames": int(b.t_cam_s.size)} for b in blocks],
+        "blocks": [
+            {"name": b.name, "n_frames": int(b.t_cam_s.size), "n_in_loss": b.n_loss} for b in blocks
+        ],
         "profile": {"offset_at_t_ref_s": x, "rss_deg2": y},
         "n_samples": profile.n_samples,
         "rmse_deg": float(np.sqrt(profile(best) / TRIMMED_VARIANCE / max(profile.n_samples, 1))),
-        "note": "offset profile of the hysteresis-model residual (formal stderr, inflated "
-        "for residual autocorrelation)",
+        "uncertainty": unc,
+        "note": "offset profile of the hysteresis-model residual over each axis's whole frame "
+        "history; stderr from its curvature, inflated for misfit (chi2 vs the tracking "
+        "noise) and residual autocorrelation (Newey-West)",
     }
     return clock_model(offset0, drift, cov, "model", evidence, cfg.estimate_drift)

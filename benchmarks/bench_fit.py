@@ -123,7 +123,7 @@ def speed(config: FitConfig) -> bool:
     return dt <= 5.0
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="2 parameter sets, skip the speed part")
     ap.add_argument("--sets", type=int, default=10, help="number of random true parameter sets")
@@ -133,7 +133,8 @@ def main() -> None:
     if not args.quick:
         ok &= speed(config)
     print("ALL TARGETS MET" if ok else "SOME TARGETS MISSED")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

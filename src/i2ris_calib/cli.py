@@ -7,6 +7,7 @@ printed as one line with exit status 2; ``--debug`` shows the traceback.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -139,6 +140,45 @@ def fit(
     fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
 
 
+@app.command()
+def compensate(
+    fit_json: list[Path] = typer.Argument(..., help="fit.json file(s) from 'fit' (one per axis)."),
+    dataset: list[str] = typer.Option(
+        ..., "--dataset", help="yaw+, yaw-, pitch+ or pitch- (repeat for the other axis)."
+    ),
+    target: Path = typer.Option(..., "--target", help="Target CSV: time_s, <axis>_deg."),
+    out: Path = typer.Option(..., "--out", "-o", help="COMMANDS.csv to write (+ compensate.json)."),
+    model: str | None = typer.Option(
+        None, "--model", help="egpi, egpi_c, gpi or diagnosed (default: best held-out)."
+    ),
+    max_counts_per_s: float | None = typer.Option(
+        None, "--max-counts-per-s", help="Motor rate limit (counts/s)."
+    ),
+    start_counts: float | None = typer.Option(
+        None, "--start-counts", help="Encoder counts before the first sample (e.g. 0 at rest)."
+    ),
+    model_file: Path | None = typer.Option(
+        None, "--model-file", help="final_model.json (structure of --model diagnosed)."
+    ),
+    config: Path | None = ConfigOpt,
+) -> None:
+    """Feedforward motor commands that make the fitted model follow a target angle."""
+    cfg = _config(config)
+    from i2ris_calib.io.compensate import compensate_files
+
+    doc = compensate_files(
+        fit_json, dataset, target, out, cfg, model=model, max_counts_per_s=max_counts_per_s,
+        start_counts=start_counts, model_file=model_file,
+    )  # fmt: skip
+    for rec in doc["axes"].values():
+        typer.echo(
+            f"{rec['dataset']} ({rec['model']}): predicted RMSE {rec['rmse_deg']:.4f} deg, "
+            f"max {rec['max_abs_err_deg']:.4f} deg, {rec['n_unreachable']} of "
+            f"{rec['n_samples']} samples unreachable"
+        )
+    typer.echo(f"wrote {out} and {out.with_name('compensate.json')}")
+
+
 @app.command("paper-sim")
 def paper_sim(out: Path = typer.Option(..., "--out", "-o", help="Output folder.")) -> None:
     """Reproduce the paper's simulation verification (Section 3.1, Fig 3c/3d/4)."""
@@ -204,6 +244,20 @@ def show_config(config: Path | None = ConfigOpt) -> None:
     typer.echo(to_toml(_config(config)), nl=False)
 
 
+INTERRUPTED = "interrupted (no partial outputs were kept)"
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether a KeyboardInterrupt is behind ``exc`` (its cause/context chain)."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console entry point: one-line errors, no traceback unless --debug.
 
@@ -214,13 +268,19 @@ def main(argv: list[str] | None = None) -> int:
 
     args = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in args
+    if not debug:  # FFmpeg's and OpenCV's own log lines only with --debug (read at cv2 import)
+        os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+        os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")
     try:
         app(args=args, prog_name="i2ris-calib")
     except SystemExit as exc:
         code = exc.code
+        if _interrupted(exc):  # Typer turns Ctrl-C into a silent exit 130
+            typer.echo(INTERRUPTED, err=True)
+            return 130
         return code if isinstance(code, int) else (0 if code is None else 1)
     except KeyboardInterrupt:
-        typer.echo("interrupted (no partial outputs were kept)", err=True)
+        typer.echo(INTERRUPTED, err=True)
         return 130
     except CalibError as exc:
         if debug:

@@ -1,0 +1,283 @@
+"""Feedforward compensation: the commands that make a fitted hysteresis model follow a
+target angle, by exact inversion of the stateful model (:mod:`.kernel`).
+
+Everything here works in the *model's* convention: the input ``v`` the model sees
+(a motion direction's input, >= 0, encoder counts for I2RIS) and its output angle
+(deg; ``-theta`` for a ``"-"`` dataset). :mod:`i2ris_calib.io.compensate` maps
+signed encoder counts and angles to and from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from i2ris_calib.compensation import kernel as K
+from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.hysteresis.models import (
+    ContinuousEGPIModel,
+    GPIModel,
+    I2RISEGPIModel,
+    density,
+    thresholds,
+)
+
+STATUS_NAMES = {
+    K.STATUS_OK: "reached",
+    K.STATUS_ABOVE: "above_range",
+    K.STATUS_BELOW: "below_range",
+    K.STATUS_RATE: "rate_limit",
+    K.STATUS_GAP: "output_step",
+    K.STATUS_DELAY: "within_delay",
+}
+"""Meaning of :attr:`CompensationResult.status`: ``above_range`` / ``below_range`` -
+the target is beyond what the model reaches inside the allowed input range;
+``rate_limit`` - the rate limit stops the command short; ``output_step`` - the target
+lies inside a discontinuity of the model's output (the paper's EGPI step at ``v_f``,
+or the reversal jump of the ``r = 0`` operator), the nearer side is taken;
+``within_delay`` - the first ``delay_s`` seconds of a model with a time delay, which
+no command can reach any more."""
+
+SUPPORTED_EFFECTS = ("time_delay",)
+
+
+@dataclass(frozen=True)
+class CompensationResult:
+    """Commands for a target and what the model predicts for them.
+
+    Attributes
+    ----------
+    commands : ndarray, shape (n,)
+        Model input to send (input unit; whole multiples of ``quantum``).
+    commands_real : ndarray, shape (n,)
+        The best real-valued input at each sample, from the state the sent commands
+        left (before quantisation).
+    predicted_deg : ndarray, shape (n,)
+        The model's output for ``commands`` (deg), evaluated by the forward model
+        over the whole command sequence.
+    target_deg : ndarray, shape (n,)
+        The target (deg, model convention).
+    status : ndarray of int8, shape (n,)
+        0 = reached; see :data:`STATUS_NAMES`.
+    t_s : ndarray, shape (n,) or None
+        Sample times (s).
+    kind : str
+        Model kind (``gpi``, ``egpi``, ``egpi_c``, or ``<kind>+time_delay``).
+    v_limits : tuple of float
+        Allowed input range.
+    max_rate : float
+        Rate limit (input unit per s; ``inf`` = none).
+    quantum : float
+        Command resolution (0 = real-valued).
+    delay_s : float
+        Total delay of the model's time-delay effects; the target was inverted
+        ``delay_s`` ahead.
+    """
+
+    commands: np.ndarray
+    commands_real: np.ndarray
+    predicted_deg: np.ndarray
+    target_deg: np.ndarray
+    status: np.ndarray
+    t_s: np.ndarray | None
+    kind: str
+    v_limits: tuple[float, float]
+    max_rate: float
+    quantum: float
+    delay_s: float = 0.0
+
+    @property
+    def reachable(self) -> np.ndarray:
+        """True where the real-valued inverse reached the target, shape (n,)."""
+        return self.status == K.STATUS_OK
+
+    @property
+    def error_deg(self) -> np.ndarray:
+        """``predicted - target`` (deg), shape (n,)."""
+        return self.predicted_deg - self.target_deg
+
+    def summary(self) -> dict:
+        """Plain numbers for reports: RMSE and max |error| (all samples and reachable
+        ones), unreachable counts by reason."""
+        e = self.error_deg
+        ok = self.reachable
+
+        def rms(a):
+            return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
+
+        def mx(a):
+            return float(np.max(np.abs(a))) if a.size else float("nan")
+
+        return {
+            "n_samples": int(e.size),
+            "rmse_deg": rms(e),
+            "max_abs_err_deg": mx(e),
+            "rmse_reachable_deg": rms(e[ok]),
+            "max_abs_err_reachable_deg": mx(e[ok]),
+            "n_unreachable": int((~ok).sum()),
+            "unreachable": {
+                name: int((self.status == code).sum())
+                for code, name in STATUS_NAMES.items()
+                if code != K.STATUS_OK
+            },
+        }
+
+
+def _base_and_delay(model) -> tuple[object, float]:
+    """(GPI/EGPI base model, total delay in s) of a possibly extended model."""
+    from i2ris_calib.diagnosis.effects import base_of, effects_of
+
+    effects = effects_of(model)
+    bad = sorted({name for name, _, _ in effects if name not in SUPPORTED_EFFECTS})
+    if bad:
+        raise CalibError(
+            f"compensate cannot invert the effect(s) {', '.join(bad)}; supported: "
+            f"{', '.join(SUPPORTED_EFFECTS)} (use the fitted egpi/egpi_c/gpi model instead)"
+        )
+    delay = float(sum(vals.get("tau_s", 0.0) for _, _, vals in effects))
+    return base_of(model), delay
+
+
+def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, float, float]:
+    """(kind code, c (6,), r (m,), p (m,), kappa, v_f, dead band) of a base model."""
+    v = model.value_dict()
+    r = thresholds(v["r1"], v["rn"], int(model.n))
+    p = density(r, v["lam"], v["sigma"])
+    if isinstance(model, I2RISEGPIModel):
+        code = K.KIND_EGPI_C if isinstance(model, ContinuousEGPIModel) else K.KIND_EGPI
+        c = np.array([v[k] for k in ("a1", "a2", "a3", "a4", "a5", "a6")])
+        return code, c, r, p, v["kappa"], v["v_f"], float(model.deadband_counts)
+    if isinstance(model, GPIModel):
+        c = np.array([v["a1"], v["a2"], v["a3"], v["a4"], v["a3"], v["a4"]])
+        return K.KIND_GPI, c, r, p, 1.0, np.inf, 0.0
+    raise CalibError(
+        f"compensate inverts gpi, egpi and egpi_c models (optionally with a time delay), "
+        f"not '{getattr(model, 'name', type(model).__name__)}'"
+    )
+
+
+def _check(target: np.ndarray, t: np.ndarray | None) -> None:
+    if target.ndim != 1 or target.size == 0:
+        raise CalibError("the target must be a non-empty 1-D array of angles (deg)")
+    bad = np.flatnonzero(~np.isfinite(target))
+    if bad.size:
+        raise CalibError(
+            f"the target has {bad.size} NaN/inf angle(s) (first at sample {bad[0]}); "
+            "fill or remove them"
+        )
+    if t is not None:
+        if t.shape != target.shape:
+            raise CalibError(f"t_s has {t.size} samples, the target {target.size}")
+        if not np.all(np.isfinite(t)):
+            raise CalibError("the target's times contain NaN/inf")
+        d = np.flatnonzero(np.diff(t) <= 0)
+        if d.size:
+            raise CalibError(
+                f"the target's times must increase strictly; sample {d[0] + 1} "
+                f"(t = {t[d[0] + 1]:g} s) does not"
+            )
+
+
+def compensate(
+    model,
+    target_deg: np.ndarray,
+    t_s: np.ndarray | None = None,
+    *,
+    v_limits: tuple[float, float],
+    max_rate: float | None = None,
+    quantum: float = 1.0,
+    v_initial: float | None = None,
+) -> CompensationResult:
+    """Commands that make ``model`` follow ``target_deg``: exact inversion, sample by sample.
+
+    Parameters
+    ----------
+    model : GPIModel, I2RISEGPIModel, ContinuousEGPIModel or EffectModel
+        Fitted model (its current parameter values); an extended model may carry
+        ``time_delay`` effects (the target is then inverted ``tau`` ahead).
+    target_deg : ndarray, shape (n,)
+        Desired output angle (deg, the model's convention), finite.
+    t_s : ndarray, shape (n,), optional
+        Sample times (s), strictly increasing; needed for ``max_rate`` and delays.
+    v_limits : (float, float)
+        Allowed input range (input unit), e.g. the range the model was fitted on.
+    max_rate : float, optional
+        Largest |input change| per second (input unit/s).
+    quantum : float
+        Command resolution (1.0 = whole encoder counts; 0 = real-valued).
+    v_initial : float, optional
+        Input before the first sample (e.g. 0 at rest): the operators start from
+        the model's initial state there and the first command is a normal step.
+        Default: the first command itself sets the initial state.
+
+    Returns
+    -------
+    CompensationResult
+        ``predicted_deg`` is the forward model evaluated over the whole command
+        sequence (from ``v_initial`` when given), so it is exactly what the model
+        predicts for the commands sent.
+    """
+    target = np.ascontiguousarray(target_deg, dtype=float)
+    t = None if t_s is None else np.ascontiguousarray(t_s, dtype=float)
+    _check(target, t)
+    lo, hi = (float(x) for x in v_limits)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise CalibError(f"v_limits must be finite with lo < hi, got ({lo:g}, {hi:g})")
+    rate = np.inf if max_rate is None else float(max_rate)
+    if not rate > 0:
+        raise CalibError(f"max_counts_per_s must be > 0, got {rate:g}")
+    if np.isfinite(rate) and t is None:
+        raise CalibError("a rate limit needs the target's times (time_s)")
+    if not (quantum >= 0 and np.isfinite(quantum)):
+        raise CalibError(f"quantum must be >= 0, got {quantum:g}")
+    if v_initial is not None and not lo <= float(v_initial) <= hi:
+        raise CalibError(f"the initial input {v_initial:g} is outside v_limits ({lo:g}, {hi:g})")
+    base, delay = _base_and_delay(model)
+    if delay > 0 and t is None:
+        raise CalibError("a model with a time delay needs the target's times (time_s)")
+    code, c, r, p, kappa, vf, db = kernel_params(base)
+    goal = np.interp(t + delay, t, target) if delay > 0 else target
+    tt = np.zeros_like(target) if t is None else t
+    v0 = 0.0 if v_initial is None else float(v_initial)
+    if quantum > 0 and v_initial is not None:
+        v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
+    u, u_real, _, status = K.invert(
+        code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
+        float(quantum), v0, v_initial is not None,
+    )  # fmt: skip
+    if delay > 0:
+        # command k serves the target at t_k + delay: report status on the target's samples
+        j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
+        status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
+    predicted = forward(model, u, t, None if v_initial is None else v0)
+    kind = base.name + ("+time_delay" if delay > 0 else "")
+    return CompensationResult(
+        commands=u,
+        commands_real=u_real,
+        predicted_deg=predicted,
+        target_deg=target,
+        status=status,
+        t_s=t,
+        kind=kind,
+        v_limits=(lo, hi),
+        max_rate=rate,
+        quantum=float(quantum),
+        delay_s=delay,
+    )
+
+
+def forward(model, v: np.ndarray, t_s: np.ndarray | None = None, v_initial: float | None = None):
+    """The model's output (deg), shape (n,), for input ``v`` (shape (n,)), preceded by
+    ``v_initial`` when given (that sample is dropped from the result)."""
+    from i2ris_calib.diagnosis.effects import model_values
+
+    v = np.asarray(v, dtype=float)
+    t = None if t_s is None else np.asarray(t_s, dtype=float)
+    if v_initial is not None:
+        dt = float(t[1] - t[0]) if t is not None and t.size > 1 else 1.0
+        v = np.concatenate(([float(v_initial)], v))
+        t = None if t is None else np.concatenate(([t[0] - dt], t))
+    y = model.evaluate(Signals(v=v, t_s=t), model_values(model))
+    return y[1:] if v_initial is not None else y

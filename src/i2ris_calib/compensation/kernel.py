@@ -1,0 +1,442 @@
+"""Compiled sample-by-sample inversion of the GPI / EGPI / continuous EGPI (numba).
+
+The forward models (:mod:`i2ris_calib.hysteresis.kernel`) map an input sequence to
+an angle sequence; the operator states make the map stateful. The inverse walks the
+target sequence once, carrying the *same* state as the forward kernels: at every
+sample it chooses the input that brings the model's output closest to the target,
+then advances the state with that input exactly as the forward recursion would.
+
+Why a 1-D root find suffices: from a given state, every operator family's output
+after one step to input ``u`` is a nondecreasing function of ``u`` on each side of
+the previous input (loading: ``max(gamma_l(u) - r, w)``, unloading:
+``min(gamma_r(u) + r, w)``, with nondecreasing envelopes), and the initial state
+``min(max(0, gamma_l - r), gamma_r + r)`` is nondecreasing in ``u`` too. The only
+non-monotone places are where the paper's EGPI switches its output between the two
+families (at the flag point ``v_f`` and where ``v'`` changes sign after the dead
+band) and where the continuous EGPI's initial state changes boundary at ``v_f``:
+the candidate interval is split there ("regions"), and on each region the root is
+bracketed and found by safeguarded regula falsi (bisection whenever the bracket
+shrinks by less than half). Every candidate is re-evaluated with the exact forward
+step and the best is kept (smallest |error|; ties, i.e. a dead zone where the output
+has not moved yet, -> the largest move toward the target). A target
+inside an output discontinuity (the EGPI step at ``v_f``, the reversal jump of the
+``r = 0`` operator when ``gamma_l != gamma_r``) is therefore approached as closely as
+the model allows and flagged.
+
+Conventions: ``c`` = envelope coefficients (a1..a6; GPI uses a5 = a3, a6 = a4),
+``r``, ``p`` thresholds and weights (shape (m,)), ``kind`` one of the ``KIND_*``
+codes, ``w`` operator states (2, m) (family 1 only used by the paper's EGPI).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+KIND_GPI = 0
+KIND_EGPI = 1
+KIND_EGPI_C = 2
+
+STATUS_OK = 0
+STATUS_ABOVE = 1
+STATUS_BELOW = 2
+STATUS_RATE = 3
+STATUS_GAP = 4
+STATUS_DELAY = 5
+
+SIDE_INIT = 2
+SIDE_UP = 1
+SIDE_HOLD = 0
+SIDE_DOWN = -1
+
+
+@njit(cache=True)
+def _family(kind, fam, w, wout, c, r, p, kappa, vf, v_prev, u, side):  # pragma: no cover
+    """Output of operator family ``fam`` after one step to ``u`` (state -> ``wout``)."""
+    m = p.size
+    acc = 0.0
+    if side == SIDE_INIT:
+        gl = c[0] * u + c[1]
+        if kind == KIND_EGPI_C:
+            if u > vf:
+                g, kr = c[2] * u + c[3], 1.0
+            else:
+                g, kr = c[4] * u + c[5], kappa
+        elif fam == 1:
+            g, kr = c[4] * u + c[5], kappa
+        else:
+            g, kr = c[2] * u + c[3], 1.0
+        for i in range(m):
+            wi = min(max(0.0, gl - r[i]), g + kr * r[i])
+            wout[i] = wi
+            acc += p[i] * wi
+    elif side == SIDE_UP:
+        g = c[0] * u + c[1]
+        for i in range(m):
+            wi = max(g - r[i], w[i])
+            wout[i] = wi
+            acc += p[i] * wi
+    elif side == SIDE_DOWN:
+        g1 = np.inf
+        if kind == KIND_EGPI_C:
+            if u > vf:
+                g, kr = c[2] * u + c[3], 1.0
+            else:
+                g, kr = c[4] * u + c[5], kappa
+            if v_prev > vf >= u:
+                g1 = c[2] * vf + c[3]
+        elif fam == 1:
+            g, kr = c[4] * u + c[5], kappa
+        else:
+            g, kr = c[2] * u + c[3], 1.0
+        for i in range(m):
+            wi = min(g + kr * r[i], min(g1 + r[i], w[i]))
+            wout[i] = wi
+            acc += p[i] * wi
+    else:
+        for i in range(m):
+            wout[i] = w[i]
+            acc += p[i] * w[i]
+    return acc
+
+
+@njit(cache=True)
+def _direction(dstate, anchor, u, db, init):  # pragma: no cover
+    """``v'`` state after input ``u``: (+1 loading / -1 unloading, anchor), as
+    :func:`i2ris_calib.hysteresis.kernel.motion_direction`."""
+    if init:
+        return 1, u
+    if dstate > 0:
+        if u > anchor:
+            return 1, u
+        if anchor - u > db:
+            return -1, u
+        return 1, anchor
+    if u < anchor:
+        return -1, u
+    if u - anchor > db:
+        return 1, u
+    return -1, anchor
+
+
+@njit(cache=True)
+def _select(kind, dstate, anchor, u, db, vf, init):  # pragma: no cover
+    """Family whose output the model shows after input ``u`` (Eq21 for the EGPI)."""
+    if kind != KIND_EGPI:
+        return 0
+    d, _ = _direction(dstate, anchor, u, db, init)
+    if d > 0:
+        return 0
+    return 1 if u <= vf else 0
+
+
+@njit(cache=True)
+def _side(v_prev, u, init):  # pragma: no cover
+    if init:
+        return SIDE_INIT
+    if u > v_prev:
+        return SIDE_UP
+    if u < v_prev:
+        return SIDE_DOWN
+    return SIDE_HOLD
+
+
+@njit(cache=True)
+def _exact(
+    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, u, init
+):  # pragma: no cover
+    """Model output (deg) after input ``u`` from the current state (state unchanged)."""
+    fam = _select(kind, dstate, anchor, u, db, vf, init)
+    side = _side(v_prev, u, init)
+    return _family(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, u, side)
+
+
+@njit(cache=True)
+def _root(
+    kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, side, lo, hi, target
+):  # pragma: no cover
+    """Input in [lo, hi] where the (nondecreasing) family output meets ``target``:
+    the nearer end when the target is outside the range of the region."""
+    flo = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, lo, side)
+    if target <= flo:
+        return lo
+    fhi = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, hi, side)
+    if target >= fhi:
+        return hi
+    tol_y = 1e-12 * max(1.0, abs(target))
+    bisect = False
+    x = lo
+    fx = flo
+    for _ in range(200):
+        width = hi - lo
+        if width <= 1e-13 * max(1.0, abs(hi)) or fhi - flo <= tol_y:
+            break
+        if bisect or fhi <= flo:
+            x = 0.5 * (lo + hi)
+        else:
+            x = lo + (target - flo) * (hi - lo) / (fhi - flo)
+            if not (lo < x < hi):
+                x = 0.5 * (lo + hi)
+        fx = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, x, side)
+        if abs(fx - target) <= tol_y:
+            return x
+        if fx < target:
+            lo, flo = x, fx
+        else:
+            hi, fhi = x, fx
+        bisect = (hi - lo) > 0.5 * width
+    return lo if abs(flo - target) <= abs(fhi - target) else hi
+
+
+@njit(cache=True)
+def _better(err, move, best_err, best_move):  # pragma: no cover
+    """True when (err, move) beats the best so far: smaller |error|; on a tie the larger
+    ``move`` (the signed move toward the target, see :func:`invert`)."""
+    tie = 1e-12 * max(1.0, best_err)
+    if err < best_err - tie:
+        return True
+    return err <= best_err + tie and move > best_move
+
+
+@njit(cache=True)
+def _move(x, v_prev, tk, y_prev, init, err):  # pragma: no cover
+    """Tie-break score of candidate input ``x`` (larger wins among equal errors).
+
+    Target met (several inputs reach it): the smallest move, which changes the
+    operator states least. Target not met and the output flat (a dead zone): the
+    move toward the target's side, which is what eventually reaches it under a rate
+    limit. The initial sample prefers the smaller input.
+    """
+    if init:
+        return -x
+    if err <= 1e-8 * max(1.0, abs(tk)) or tk == y_prev:
+        return -abs(x - v_prev)
+    if tk < y_prev:
+        return v_prev - x
+    return x - v_prev
+
+
+@njit(cache=True)
+def invert(
+    kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init
+):  # pragma: no cover - compiled
+    """Invert the model on ``target`` sample by sample.
+
+    Parameters
+    ----------
+    kind : int
+        ``KIND_GPI``, ``KIND_EGPI`` or ``KIND_EGPI_C``.
+    c : ndarray, shape (6,)
+        Envelope coefficients a1..a6.
+    r, p : ndarray, shape (m,)
+        Thresholds and weights.
+    kappa, vf, db : float
+        Stage-2 regulator, flag point, ``v'`` dead band (input unit).
+    target : ndarray, shape (n,)
+        Desired output (deg).
+    t : ndarray, shape (n,)
+        Sample times (s) (only used with a rate limit).
+    lo, hi : float
+        Allowed input range.
+    max_rate : float
+        Largest |input change| per second; ``inf`` for none.
+    quantum : float
+        Input resolution (1 = whole counts); 0 = real-valued commands.
+    v_init : float
+        Input before the first target sample (used when ``has_init``).
+    has_init : bool
+        True: the state starts at ``v_init`` and the first sample is an ordinary step
+        (rate limited); False: the first command itself sets the initial state.
+
+    Returns
+    -------
+    u : ndarray, shape (n,)
+        Commands (quantised when ``quantum > 0``).
+    u_real : ndarray, shape (n,)
+        The best real-valued input at each sample (from the state the quantised
+        commands left).
+    y : ndarray, shape (n,)
+        Model output for ``u`` (deg).
+    status : ndarray of int8, shape (n,)
+        ``STATUS_*`` of the real-valued best (0 = target reached).
+    """
+    n = target.size
+    m = p.size
+    w = np.zeros((2, m))
+    w_new = np.zeros((2, m))
+    scratch = np.empty(m)
+    u_out = np.empty(n)
+    u_real = np.empty(n)
+    y_out = np.empty(n)
+    status = np.zeros(n, dtype=np.int8)
+    n_fam = 2 if kind == KIND_EGPI else 1
+    dstate, anchor, v_prev, y_prev = 1, 0.0, 0.0, 0.0
+    init = True
+    if has_init:
+        for f in range(n_fam):
+            _family(kind, f, w[f], w[f], c, r, p, kappa, vf, 0.0, v_init, SIDE_INIT)
+        dstate, anchor = _direction(1, 0.0, v_init, db, True)
+        fam = _select(kind, 1, 0.0, v_init, db, vf, True)
+        y_prev = 0.0
+        for i in range(m):
+            y_prev += p[i] * w[fam, i]
+        v_prev = v_init
+        init = False
+    dt0 = t[1] - t[0] if n > 1 else 1.0
+    bps = np.empty(3)
+    edges = np.empty(6)
+    for k in range(n):
+        tk = target[k]
+        if init:
+            a_lim, b_lim = lo, hi
+        else:
+            step = max_rate * (t[k] - t[k - 1]) if k > 0 else max_rate * dt0
+            if not np.isfinite(step):
+                step = np.inf
+            a_lim = max(lo, v_prev - step)
+            b_lim = min(hi, v_prev + step)
+            a_lim = min(a_lim, v_prev)
+            b_lim = max(b_lim, v_prev)
+        # the search spans the whole input range; a rate limit then slews the command
+        # toward the unconstrained inverse (through dead zones and output switches that
+        # a myopic choice inside the rate window would never cross)
+        if quantum > 0:
+            qa = np.ceil(a_lim / quantum - 1e-9) * quantum
+            qb = np.floor(b_lim / quantum + 1e-9) * quantum
+            qlo = np.ceil(lo / quantum - 1e-9) * quantum
+            qhi = np.floor(hi / quantum + 1e-9) * quantum
+        else:
+            qa, qb, qlo, qhi = a_lim, b_lim, lo, hi
+        best_r, best_r_err, best_r_move = v_prev, np.inf, -np.inf
+        best_q, best_q_err, best_q_move = v_prev, np.inf, -np.inf
+        if not init:
+            e = abs(y_prev - tk)
+            best_r, best_r_err, best_r_move = v_prev, e, _move(v_prev, v_prev, tk, y_prev, init, e)
+            best_q, best_q_err, best_q_move = best_r, e, best_r_move
+        # breakpoints where the shown family (or the initial boundary) changes
+        nb = 0
+        if kind == KIND_EGPI and not init:
+            bps[0] = vf
+            bps[1] = anchor + db
+            bps[2] = anchor - db
+            nb = 3
+        elif kind == KIND_EGPI_C:
+            bps[0] = vf
+            nb = 1
+        for side_i in range(2):
+            if init:
+                if side_i == 1:
+                    break
+                s_lo, s_hi, side = lo, hi, SIDE_INIT
+            elif side_i == 0:
+                if hi <= v_prev:
+                    continue
+                if kind != KIND_EGPI and tk <= y_prev:
+                    continue
+                s_lo, s_hi, side = v_prev, hi, SIDE_UP
+            else:
+                if lo >= v_prev:
+                    continue
+                if kind != KIND_EGPI and tk >= y_prev:
+                    continue
+                s_lo, s_hi, side = lo, v_prev, SIDE_DOWN
+            # region edges: side ends plus the breakpoints inside, sorted
+            ne = 0
+            edges[ne] = s_lo
+            ne += 1
+            for j in range(nb):
+                if s_lo < bps[j] < s_hi:
+                    edges[ne] = bps[j]
+                    ne += 1
+            edges[ne] = s_hi
+            ne += 1
+            edges[:ne].sort()
+            for j in range(ne - 1):
+                e0, e1 = edges[j], edges[j + 1]
+                if e1 <= e0:
+                    continue
+                mid = 0.5 * (e0 + e1)
+                fam = _select(kind, dstate, anchor, mid, db, vf, init)
+                x = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
+                # an open end (the previous input, a breakpoint) -> just inside the region
+                eps = 1e-9 * max(1.0, abs(x))
+                if x == e0 and not (init or (side == SIDE_DOWN and j == 0)):
+                    x = min(e0 + eps, mid)
+                elif x == e1 and not (init or (side == SIDE_UP and j == ne - 2)):
+                    x = max(e1 - eps, mid)
+                y = _exact(
+                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init
+                )
+                err = abs(y - tk)
+                mv = _move(x, v_prev, tk, y_prev, init, err)
+                if _better(err, mv, best_r_err, best_r_move):
+                    best_r, best_r_err, best_r_move = x, err, mv
+                if quantum > 0:
+                    for qi in range(2):
+                        xq = (np.floor(x / quantum) if qi == 0 else np.ceil(x / quantum)) * quantum
+                        xq = min(max(xq, qlo), qhi)
+                        yq = _exact(
+                            kind,
+                            w,
+                            scratch,
+                            c,
+                            r,
+                            p,
+                            kappa,
+                            vf,
+                            db,
+                            dstate,
+                            anchor,
+                            v_prev,
+                            xq,
+                            init,
+                        )
+                        eq = abs(yq - tk)
+                        mq = _move(xq, v_prev, tk, y_prev, init, eq)
+                        if _better(eq, mq, best_q_err, best_q_move):
+                            best_q, best_q_err, best_q_move = xq, eq, mq
+        if quantum <= 0:
+            best_q = best_r
+        # status of the real-valued best (unconstrained by the rate limit)
+        tol = 1e-8 * max(1.0, abs(tk))
+        near = 1e-6 * max(1.0, abs(best_r))
+        if best_r_err > tol:
+            y_best = _exact(
+                kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_r, init
+            )
+            if tk > y_best and best_r >= hi - near:
+                status[k] = STATUS_ABOVE
+            elif tk < y_best and best_r <= lo + near:
+                status[k] = STATUS_BELOW
+            else:
+                status[k] = STATUS_GAP
+        if best_r > b_lim or best_r < a_lim:
+            best_r = min(max(best_r, a_lim), b_lim)
+            best_q = qb if best_q > qb else qa if best_q < qa else best_q
+            if status[k] == STATUS_OK:
+                y_c = _exact(
+                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_r, init
+                )
+                if abs(y_c - tk) > tol:
+                    status[k] = STATUS_RATE
+        elif best_q > qb or best_q < qa:
+            best_q = qb if best_q > qb else qa
+        u_real[k] = best_r
+        # apply the chosen command to every family and to v'
+        u = best_q
+        side = _side(v_prev, u, init)
+        for f in range(n_fam):
+            _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
+            for i in range(m):
+                w[f, i] = w_new[f, i]
+        fam = _select(kind, dstate, anchor, u, db, vf, init)
+        dstate, anchor = _direction(dstate, anchor, u, db, init)
+        acc = 0.0
+        for i in range(m):
+            acc += p[i] * w[fam, i]
+        y_prev = acc
+        v_prev = u
+        init = False
+        u_out[k] = u
+        y_out[k] = acc
+    return u_out, u_real, y_out, status

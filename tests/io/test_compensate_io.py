@@ -1,0 +1,163 @@
+"""``i2ris-calib compensate``: files, sign conventions, one-line errors, atomic outputs."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from i2ris_calib.cli import main
+from i2ris_calib.compensation.inverse import forward
+from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
+from i2ris_calib.io.compensate import compensate_files
+
+
+def _fit_json(path, axis="yaw", kinds=("egpi", "egpi_c", "gpi")):
+    P = paper_like_params(f"{axis}+")
+    hold = {"egpi": 0.2, "egpi_c": 0.1, "gpi": 0.5}
+    datasets = []
+    for name in (f"{axis}+", f"{axis}-"):
+        models = {
+            k: {
+                "params": gpi_values(P) if k == "gpi" else P,
+                "n_operators": 30,
+                "deadband_counts": 2.0,
+                "metrics": {"rmse_deg": 0.1},
+                "holdout_metrics": {"rmse_deg": hold[k]},
+            }
+            for k in kinds
+        }
+        datasets.append({"name": name, "input_range_counts": [0.0, 6000.0], "models": models})
+    doc = {"schema": "i2ris-calib.fit/1", "axis": axis, "datasets": datasets}
+    path.write_text(json.dumps(doc))
+    return P
+
+
+@pytest.fixture
+def files(tmp_path):
+    P = _fit_json(tmp_path / "fit.json")
+    t = np.arange(0, 10, 0.02)
+    pd.DataFrame({"time_s": t, "yaw_deg": -(14 + 8 * np.sin(t))}).to_csv(
+        tmp_path / "target.csv", index=False
+    )
+    return tmp_path, P
+
+
+def test_minus_dataset_signs_and_exact_prediction(files):
+    tmp, P = files
+    doc = compensate_files(
+        [tmp / "fit.json"], ["yaw-"], tmp / "target.csv", tmp / "out" / "cmd.csv", model="egpi"
+    )
+    df = pd.read_csv(tmp / "out" / "cmd.csv")
+    assert list(df.columns) == ["time_s", "enc_yaw", "predicted_yaw_deg", "reachable"]
+    assert df["enc_yaw"].dtype == np.int64 and (df["enc_yaw"] <= 0).all()
+    model = model_from_params("egpi", P, 30, 2.0)
+    # predicted angle = -(model output for |counts|): the "-" dataset's convention
+    np.testing.assert_allclose(
+        df["predicted_yaw_deg"], -forward(model, -df["enc_yaw"].to_numpy(float)), atol=1e-8
+    )
+    target = pd.read_csv(tmp / "target.csv")["yaw_deg"]
+    ok = df["reachable"] == 1
+    assert ok.mean() > 0.9
+    assert np.max(np.abs(df["predicted_yaw_deg"][ok] - target[ok])) < 0.01
+    saved = json.loads((tmp / "out" / "compensate.json").read_text())
+    assert saved["axes"]["yaw"]["model"] == "egpi" == doc["axes"]["yaw"]["model"]
+    assert saved["axes"]["yaw"]["n_unreachable"] == int((~ok).sum())
+    assert "v_f" in saved["method"]
+
+
+def test_default_model_is_best_held_out_and_rate_limit(files):
+    tmp, _ = files
+    doc = compensate_files(
+        [tmp / "fit.json"], ["yaw-"], tmp / "target.csv", tmp / "c.csv",
+        max_counts_per_s=2000.0, start_counts=0.0,
+    )  # fmt: skip
+    assert doc["axes"]["yaw"]["model"] == "egpi_c"
+    enc = pd.read_csv(tmp / "c.csv")["enc_yaw"].to_numpy()
+    assert np.max(np.abs(np.diff(np.concatenate(([0], enc))))) <= 2000 * 0.02 + 1e-9
+
+
+def test_both_axes(files):
+    tmp, _ = files
+    _fit_json(tmp / "fit_pitch.json", axis="pitch")
+    t = np.arange(0, 5, 0.02)
+    pd.DataFrame(
+        {"time_s": t, "yaw_deg": 12 + 5 * np.sin(t), "pitch_deg": 10 + 4 * np.cos(t)}
+    ).to_csv(tmp / "both.csv", index=False)
+    compensate_files(
+        [tmp / "fit.json", tmp / "fit_pitch.json"], ["yaw+", "pitch+"], tmp / "both.csv",
+        tmp / "b.csv",
+    )  # fmt: skip
+    cols = pd.read_csv(tmp / "b.csv").columns
+    assert {"enc_yaw", "enc_pitch", "reachable_yaw", "reachable_pitch", "reachable"} <= set(cols)
+
+
+@pytest.mark.parametrize(
+    ("edit", "args", "match"),
+    [
+        (lambda df: df.drop(columns="yaw_deg"), {}, "missing column"),
+        (lambda df: df.assign(time_s=df["time_s"][::-1].to_numpy()), {}, "increase strictly"),
+        (
+            lambda df: df.assign(yaw_deg=np.where(df.index == 5, np.nan, df["yaw_deg"])),
+            {},
+            "line 7",
+        ),
+        (None, {"datasets": ["pitch+"]}, r"missing column\(s\) pitch_deg"),
+        (None, {"datasets": ["yaw*"]}, "--dataset must be"),
+        (None, {"model": "diagnosed"}, "no 'diagnosed' model"),
+        (None, {"out_name": "x.txt"}, "ending in .csv"),
+    ],
+)
+def test_bad_inputs_one_line_errors_and_nothing_written(files, edit, args, match):
+    tmp, _ = files
+    if edit is not None:
+        edit(pd.read_csv(tmp / "target.csv")).to_csv(tmp / "target.csv", index=False)
+    out = tmp / "o" / args.get("out_name", "c.csv")
+    with pytest.raises(CalibError, match=match) as exc:
+        compensate_files(
+            [tmp / "fit.json"], args.get("datasets", ["yaw+"]), tmp / "target.csv", out,
+            model=args.get("model"),
+        )  # fmt: skip
+    assert "\n" not in str(exc.value)
+    assert not out.exists() and not (out.parent / "compensate.json").exists()
+
+
+def test_missing_model_kind(tmp_path):
+    _fit_json(tmp_path / "fit.json", kinds=("gpi",))
+    pd.DataFrame({"time_s": [0.0, 1.0], "yaw_deg": [5.0, 6.0]}).to_csv(
+        tmp_path / "t.csv", index=False
+    )
+    with pytest.raises(CalibError, match="no 'egpi' model"):
+        compensate_files(
+            [tmp_path / "fit.json"], ["yaw+"], tmp_path / "t.csv", tmp_path / "c.csv", model="egpi"
+        )
+
+
+def test_outputs_atomic_on_failure(files, monkeypatch):
+    tmp, _ = files
+
+    def boom(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(pd.DataFrame, "to_csv", boom)
+    with pytest.raises(CalibError, match="cannot write"):
+        compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "target.csv", tmp / "o" / "c.csv")
+    assert not any((tmp / "o").glob("*")) if (tmp / "o").exists() else True
+
+
+def test_cli_one_line_error_and_success(files, capsys):
+    tmp, _ = files
+    code = main(["compensate", str(tmp / "fit.json"), "--dataset", "yaw+", "--target",
+                 str(tmp / "nope.csv"), "--out", str(tmp / "c.csv")])  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and "\n" not in err
+    code = main(["compensate", str(tmp / "fit.json"), "--dataset", "yaw-", "--target",
+                 str(tmp / "target.csv"), "--out", str(tmp / "c.csv"), "--model", "gpi"])  # fmt: skip
+    assert code == 0
+    assert "gpi" in capsys.readouterr().out
+    assert (tmp / "c.csv").is_file() and (tmp / "compensate.json").is_file()

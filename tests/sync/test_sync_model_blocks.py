@@ -53,12 +53,15 @@ def test_model_blocks_keep_the_whole_history_in_time_order():
     direction = direction_of_samples(enc, input_bands(enc).zero_band)
     assert set(np.unique(direction)) == {-1, 1}  # every frame belongs to a direction
     profile = OffsetProfile(blocks, log, 7.0, 0.0, "gpi", FitConfig())
+    rest = long_rest(frames, enc, input_bands(enc).zero_band)
     for b, sign in zip(blocks, (1, -1), strict=True):
         np.testing.assert_array_equal(b.t_cam_s, frames)  # no frame dropped, none reordered
         assert np.all(np.diff(b.t_cam_s) > 0)
         np.testing.assert_array_equal(b.in_direction, direction == sign)
-        want = np.where(direction == sign, sign * theta[first : last + 1], np.nan)
-        np.testing.assert_array_equal(b.theta_deg, want)  # NaN: other direction or unmeasured
+        mine = (direction == sign) & ~rest
+        want = np.where(mine, sign * theta[first : last + 1], np.nan)
+        # NaN: other direction, unmeasured, or a long rest at zero
+        np.testing.assert_array_equal(b.theta_deg, want)
         v = profile.inputs(b, 0.0)
         np.testing.assert_allclose(v, np.maximum(sign * enc, 0.0))
         # the input rests at 0 (no jump) through the other direction's excursion
@@ -67,7 +70,6 @@ def test_model_blocks_keep_the_whole_history_in_time_order():
         assert np.max(np.abs(np.diff(v))) <= np.max(np.abs(np.diff(enc))) + 1e-9
     # the loss masks partition the measured frames, less the long rests at zero
     loss = np.isfinite(blocks[0].theta_deg) | np.isfinite(blocks[1].theta_deg)
-    rest = long_rest(frames, enc, input_bands(enc).zero_band)
     np.testing.assert_array_equal(loss, np.isfinite(theta[first : last + 1]) & ~rest)
     # a rest keeps its first REST_KEEP_S (the corner where the input stops), then leaves
     # the loss; the 1.5 s holds at zero here lose about 1 s each

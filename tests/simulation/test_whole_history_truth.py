@@ -45,11 +45,20 @@ def test_truth_at_frame_times_is_exact_for_a_frame_rate_dataset(seed):
     cfg = _exact_cfg(seed)
     tr = session_truth(cfg)
     tq = np.arange(-0.5, tj.motion_duration_s(cfg) + 0.5, 1 / 30.0) + 0.000437
+    # plus samples inside the 1 ms grid interval of every step of the truth (flag point,
+    # direction change), where interpolating the grid would blend both sides
+    steps = np.flatnonzero(
+        (np.abs(np.diff(tr.yaw_deg)) > 0.3) | (np.abs(np.diff(tr.pitch_deg)) > 0.3)
+    )
+    assert steps.size >= 4
+    tq = np.sort(np.concatenate([tq, tr.t_s[steps] + 0.0004]))
     yaw, pitch = truth_at(cfg, tr, tq)
     for axis, enc_grid, ang in (("yaw", tr.enc_yaw, yaw), ("pitch", tr.enc_pitch, pitch)):
         enc = np.interp(tq, tr.t_s, enc_grid.astype(float))
         err = _model_error(axis, tq, enc, ang, tr.params)
         assert max(err.values()) < 1e-9, err
+    blend = np.interp(tq, tr.t_s, tr.yaw_deg)
+    assert np.abs(blend - yaw).max() > 0.1  # the case the exact evaluation exists for
 
 
 def test_whole_history_truth_has_steps_the_blocks_truth_fades():

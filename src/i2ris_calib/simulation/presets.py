@@ -11,15 +11,16 @@ from dataclasses import replace
 from i2ris_calib.simulation.config import SimulationConfig
 
 PRESETS: dict[str, dict] = {
-    # CI: tiny frames, two datasets, ~10 s; renders and tracks in seconds.
+    # CI: tiny frames, two datasets, ~10 s; renders and tracks in seconds. The sample and
+    # CI sessions take the exact whole-history truth (what the fit assumes).
     "ci": dict(width_px=320, height_px=256, marker_size_px=80.0, focal_px=20000.0,
                datasets=("yaw+", "pitch-"), cycles=1, cycle_fractions=(1.0,), ramp_s=1.2,
                pause_s=0.3, rest_s=1.0, settle_s=0.4, blur_sigma_px=1.0, noise_sigma=2.0,
-               amplitude_counts=(4500.0, 4500.0), pivot_mm=0.8),
+               amplitude_counts=(4500.0, 4500.0), pivot_mm=0.8, truth="whole_history"),
     # sample_data/: 640x512, all four datasets, ~45 s, lossy mp4 (a few MB).
     "sample": dict(width_px=640, height_px=512, marker_size_px=110.0, video_format="mp4",
                    cycles=2, cycle_fractions=(0.6, 1.0), ramp_s=2.5, pause_s=0.6, rest_s=1.5,
-                   settle_s=0.6),
+                   settle_s=0.6, truth="whole_history"),
     # The tracking benchmark: 2 minutes, 1280x1024, 200 px markers, sigma 2, 3 deg.
     "benchmark": dict(width_px=1280, height_px=1024, marker_size_px=200.0, noise_sigma=2.0,
                       blur_sigma_px=1.2, misalignment_deg=3.0, focal_px=50000.0, ramp_s=7.0,

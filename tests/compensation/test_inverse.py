@@ -40,10 +40,11 @@ def test_forward_of_inverse_is_the_target_on_reachable_samples(seed, kind):
     target = forward(model, random_input(rng, 600))
     res = compensate(model, target, v_limits=(0.0, V_MAX), quantum=0.0)
     ok = res.reachable
-    # greedy, no lookahead: where many inputs meet a target (a flat dead zone) the smallest
-    # move is kept, and a later reversal may meet an output jump the generating path
-    # avoided (flagged output_step); docs/compensate.md, known limits
-    assert ok.mean() >= 0.75, f"only {ok.mean():.2f} of the model's own outputs reached"
+    # GPI/EGPI: every sample (150 seeds checked); the continuous EGPI can take an input in
+    # a flat stretch from which a later reversal meets an output jump the generating path
+    # avoided (greedy, no lookahead; >= 86 % over 150 seeds, mean 99 %; docs/compensate.md)
+    floor = 0.8 if kind == "egpi_c" else 0.99
+    assert ok.mean() >= floor, f"only {ok.mean():.2f} of the model's own outputs reached"
     np.testing.assert_allclose(res.predicted_deg[ok], target[ok], atol=1e-8, rtol=0)
     # the flagged rest are approached, not ignored: error bounded by the model's steps
     assert np.all(np.abs(res.error_deg) < 5.0)
@@ -59,7 +60,7 @@ def test_kernel_state_matches_forward_model(kind):
     code, c, r, p, kappa, vf, db = kernel_params(model)
     for quantum in (0.0, 1.0):
         u, _, y, _ = K.invert(
-            code, c, r, p, kappa, vf, db, target, t, 0.0, V_MAX, np.inf, quantum, 0.0, False
+            code, c, r, p, kappa, vf, db, target, t, 0.0, V_MAX, np.inf, quantum, 0.0, False, 0.0
         )
         np.testing.assert_allclose(y, forward(model, u), atol=1e-10, rtol=0)
     del rng

@@ -71,6 +71,8 @@ class CompensationResult:
         Rate limit (input unit per s; ``inf`` = none).
     quantum : float
         Command resolution (0 = real-valued).
+    tol_deg : float
+        Output error (deg) that counts as meeting the target.
     delay_s : float
         Total delay of the model's time-delay effects; the target was inverted
         ``delay_s`` ahead.
@@ -87,6 +89,7 @@ class CompensationResult:
     max_rate: float
     quantum: float
     delay_s: float = 0.0
+    tol_deg: float = 0.0
 
     @property
     def reachable(self) -> np.ndarray:
@@ -189,6 +192,7 @@ def compensate(
     max_rate: float | None = None,
     quantum: float = 1.0,
     v_initial: float | None = None,
+    tol_deg: float | None = None,
 ) -> CompensationResult:
     """Commands that make ``model`` follow ``target_deg``: exact inversion, sample by sample.
 
@@ -211,6 +215,13 @@ def compensate(
         Input before the first sample (e.g. 0 at rest): the operators start from
         the model's initial state there and the first command is a normal step.
         Default: the first command itself sets the initial state.
+    tol_deg : float, optional
+        An output within ``tol_deg`` of the target meets it: such a sample is
+        ``reached``, and among inputs that meet the target the one that keeps the
+        motion direction and moves least is sent (no reversal for an error a count
+        cannot resolve anyway). Default: 0 (numerical precision) for real-valued
+        commands; half the angle of one ``quantum`` on the steepest envelope
+        (``0.5 quantum max(a1, a3) sum p``) for whole counts.
 
     Returns
     -------
@@ -238,6 +249,10 @@ def compensate(
     if delay > 0 and t is None:
         raise CalibError("a model with a time delay needs the target's times (time_s)")
     code, c, r, p, kappa, vf, db = kernel_params(base)
+    if tol_deg is None:
+        tol_deg = 0.5 * quantum * max(abs(c[0]), abs(c[2])) * float(np.sum(p))
+    if not (tol_deg >= 0 and np.isfinite(tol_deg)):
+        raise CalibError(f"tol_deg must be >= 0, got {tol_deg:g}")
     goal = np.interp(t + delay, t, target) if delay > 0 else target
     tt = np.zeros_like(target) if t is None else t
     v0 = 0.0 if v_initial is None else float(v_initial)
@@ -245,7 +260,7 @@ def compensate(
         v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
     u, u_real, _, status = K.invert(
         code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
-        float(quantum), v0, v_initial is not None,
+        float(quantum), v0, v_initial is not None, float(tol_deg),
     )  # fmt: skip
     if delay > 0:
         # command k serves the target at t_k + delay: report status on the target's samples
@@ -265,6 +280,7 @@ def compensate(
         max_rate=rate,
         quantum=float(quantum),
         delay_s=delay,
+        tol_deg=float(tol_deg),
     )
 
 

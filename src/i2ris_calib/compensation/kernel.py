@@ -17,8 +17,9 @@ band) and where the continuous EGPI's initial state changes boundary at ``v_f``:
 the candidate interval is split there ("regions"), and on each region the root is
 bracketed and found by safeguarded regula falsi (bisection whenever the bracket
 shrinks by less than half). Every candidate is re-evaluated with the exact forward
-step and the best is kept (smallest |error|; ties, i.e. a dead zone where the output
-has not moved yet, -> the largest move toward the target). A target
+step and the best is kept (:func:`_choose`: smallest |error|; among inputs that all
+meet the target, no reversal of ``v'`` if possible, then the smallest move; in a dead
+zone where the output has not moved yet, the largest move toward the target). A target
 inside an output discontinuity (the EGPI step at ``v_f``, the reversal jump of the
 ``r = 0`` operator when ``gamma_l != gamma_r``) is therefore approached as closely as
 the model allows and flagged.
@@ -189,36 +190,49 @@ def _root(
 
 
 @njit(cache=True)
-def _better(err, move, best_err, best_move):  # pragma: no cover
-    """True when (err, move) beats the best so far: smaller |error|; on a tie the larger
-    ``move`` (the signed move toward the target, see :func:`invert`)."""
-    tie = 1e-12 * max(1.0, best_err)
-    if err < best_err - tie:
-        return True
-    return err <= best_err + tie and move > best_move
+def _choose(xs, errs, keep, nc, v_prev, tk, y_prev, init, tol_deg):  # pragma: no cover
+    """Pick among candidate inputs ``xs[:nc]`` (|errors| ``errs``; ``keep``: the
+    candidate does not reverse ``v'``). Returns (input, |error|).
 
-
-@njit(cache=True)
-def _move(x, v_prev, tk, y_prev, init, err):  # pragma: no cover
-    """Tie-break score of candidate input ``x`` (larger wins among equal errors).
-
-    Target met (several inputs reach it): the smallest move, which changes the
-    operator states least. Target not met and the output flat (a dead zone): the
-    move toward the target's side, which is what eventually reaches it under a rate
-    limit. The initial sample prefers the smaller input.
+    Smallest |error| first. Among candidates that all meet the target (several inputs
+    do, e.g. on both sides of an EGPI output switch): keep the motion direction if
+    possible, then the smallest move, which changes the operator states least; this
+    also keeps the paper EGPI's inverse from alternating between its two families from
+    one sample to the next. Among candidates that equally miss it (a flat dead zone):
+    the largest move toward the target, which is what eventually reaches it under a
+    rate limit. The initial sample prefers the smaller input. "Meets" means within
+    ``tol_deg`` (at least 1e-10 relative).
     """
-    if init:
-        return -x
-    if err <= 1e-8 * max(1.0, abs(tk)) or tk == y_prev:
-        return -abs(x - v_prev)
-    if tk < y_prev:
-        return v_prev - x
-    return x - v_prev
+    tol = max(tol_deg, 1e-10 * max(1.0, abs(tk)))
+    best_e = np.inf
+    for i in range(nc):
+        best_e = min(best_e, errs[i])
+    met = best_e <= tol
+    lim = tol if met else best_e + 1e-12 * max(1.0, best_e)
+    bi = -1
+    b_keep = False
+    b_score = -np.inf
+    for i in range(nc):
+        if errs[i] > lim:
+            continue
+        x = xs[i]
+        if init:
+            score = -x
+        elif met or tk == y_prev:
+            score = -abs(x - v_prev)
+        elif tk < y_prev:
+            score = v_prev - x
+        else:
+            score = x - v_prev
+        kp = keep[i] and met
+        if bi < 0 or (kp and not b_keep) or (kp == b_keep and score > b_score):
+            bi, b_keep, b_score = i, kp, score
+    return xs[bi], errs[bi]
 
 
 @njit(cache=True)
 def invert(
-    kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init
+    kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init, tol_deg
 ):  # pragma: no cover - compiled
     """Invert the model on ``target`` sample by sample.
 
@@ -247,6 +261,9 @@ def invert(
     has_init : bool
         True: the state starts at ``v_init`` and the first sample is an ordinary step
         (rate limited); False: the first command itself sets the initial state.
+    tol_deg : float
+        An output within ``tol_deg`` of the target counts as meeting it (choice among
+        inputs, status); at least 1e-10 relative.
 
     Returns
     -------
@@ -285,6 +302,9 @@ def invert(
     dt0 = t[1] - t[0] if n > 1 else 1.0
     bps = np.empty(3)
     edges = np.empty(6)
+    cand_x = np.empty(16)
+    cand_e = np.empty(16)
+    cand_keep = np.empty(16, dtype=np.bool_)
     for k in range(n):
         tk = target[k]
         if init:
@@ -307,12 +327,12 @@ def invert(
             qhi = np.floor(hi / quantum + 1e-9) * quantum
         else:
             qa, qb, qlo, qhi = a_lim, b_lim, lo, hi
-        best_r, best_r_err, best_r_move = v_prev, np.inf, -np.inf
-        best_q, best_q_err, best_q_move = v_prev, np.inf, -np.inf
+        nc = 0
         if not init:
-            e = abs(y_prev - tk)
-            best_r, best_r_err, best_r_move = v_prev, e, _move(v_prev, v_prev, tk, y_prev, init, e)
-            best_q, best_q_err, best_q_move = best_r, e, best_r_move
+            cand_x[0] = v_prev
+            cand_e[0] = abs(y_prev - tk)
+            cand_keep[0] = True
+            nc = 1
         # breakpoints where the shown family (or the initial boundary) changes
         nb = 0
         if kind == KIND_EGPI and not init:
@@ -367,38 +387,39 @@ def invert(
                 y = _exact(
                     kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init
                 )
-                err = abs(y - tk)
-                mv = _move(x, v_prev, tk, y_prev, init, err)
-                if _better(err, mv, best_r_err, best_r_move):
-                    best_r, best_r_err, best_r_move = x, err, mv
-                if quantum > 0:
-                    for qi in range(2):
-                        xq = (np.floor(x / quantum) if qi == 0 else np.ceil(x / quantum)) * quantum
-                        xq = min(max(xq, qlo), qhi)
-                        yq = _exact(
-                            kind,
-                            w,
-                            scratch,
-                            c,
-                            r,
-                            p,
-                            kappa,
-                            vf,
-                            db,
-                            dstate,
-                            anchor,
-                            v_prev,
-                            xq,
-                            init,
-                        )
-                        eq = abs(yq - tk)
-                        mq = _move(xq, v_prev, tk, y_prev, init, eq)
-                        if _better(eq, mq, best_q_err, best_q_move):
-                            best_q, best_q_err, best_q_move = xq, eq, mq
-        if quantum <= 0:
-            best_q = best_r
+                cand_x[nc] = x
+                cand_e[nc] = abs(y - tk)
+                d_new, _ = _direction(dstate, anchor, x, db, init)
+                cand_keep[nc] = init or d_new == dstate
+                nc += 1
+        best_r, best_r_err = _choose(
+            cand_x, cand_e, cand_keep, nc, v_prev, tk, y_prev, init, tol_deg
+        )
+        best_q = best_r
+        if quantum > 0:
+            # the whole counts around the chosen input (and the hold)
+            nq = 0
+            if not init:
+                cand_x[0] = v_prev
+                cand_e[0] = abs(y_prev - tk)
+                cand_keep[0] = True
+                nq = 1
+            for qi in range(2):
+                xq = (
+                    np.floor(best_r / quantum) if qi == 0 else np.ceil(best_r / quantum)
+                ) * quantum
+                xq = min(max(xq, qlo), qhi)
+                yq = _exact(
+                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, xq, init
+                )
+                cand_x[nq] = xq
+                cand_e[nq] = abs(yq - tk)
+                d_new, _ = _direction(dstate, anchor, xq, db, init)
+                cand_keep[nq] = init or d_new == dstate
+                nq += 1
+            best_q, _ = _choose(cand_x, cand_e, cand_keep, nq, v_prev, tk, y_prev, init, tol_deg)
         # status of the real-valued best (unconstrained by the rate limit)
-        tol = 1e-8 * max(1.0, abs(tk))
+        tol = max(tol_deg, 1e-10 * max(1.0, abs(tk)))
         near = 1e-6 * max(1.0, abs(best_r))
         if best_r_err > tol:
             y_best = _exact(

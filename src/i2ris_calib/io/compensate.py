@@ -21,10 +21,12 @@ DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
 METHOD_NOTE = (
     "exact inversion of the stateful model sample by sample (one root find per branch "
     "region); where the model's output has a step (the paper EGPI's switch at v_f, a "
-    "reversal jump) the command whose output is nearest the target is chosen (ties, i.e. "
-    "a dead zone: the largest move toward the target); commands are rounded to whole counts (the nearer of the two "
-    "neighbours of the real-valued inverse, by the model's error) and the predicted "
-    "angles are the forward model evaluated over the rounded commands"
+    "reversal jump) the command whose output is nearest the target is chosen; among "
+    "commands that all meet the target (within tol_deg) the one that keeps the motion "
+    "direction, then the smallest move; in a dead zone the largest move toward the "
+    "target; a rate limit slews toward the unconstrained inverse; commands are whole "
+    "counts (the better of the two neighbours of the chosen real-valued inverse, or the "
+    "hold) and the predicted angles are the forward model evaluated over them"
 )
 
 
@@ -242,6 +244,7 @@ def compensate_files(
             "max_counts_per_s": max_counts_per_s,
             "start_counts": start_counts,
             "delay_s": res.delay_s,
+            "tol_deg": res.tol_deg,
             **summ,
             "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
             "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},

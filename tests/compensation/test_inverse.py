@@ -187,3 +187,18 @@ def test_unsupported_effect_is_refused():
     model = add_effect(make_model("egpi", paper_like_params("yaw+")), "dead_zone")
     with pytest.raises(CalibError, match="cannot invert the effect"):
         compensate(model, np.ones(3), v_limits=(0.0, V_MAX))
+
+
+def test_paper_egpi_inverse_does_not_alternate_between_families():
+    # both EGPI families can meet the target (on either side of a v' switch); the
+    # inverse keeps the motion direction, so large command jumps happen only where the
+    # target reverses (one dead-zone crossing each), not sample after sample
+    model = make_model("egpi", paper_like_params("yaw+"))
+    t = np.arange(6000) * 0.01
+    s = 0.62 * np.sin(2 * np.pi * t / 19.0 - 1.3) + 0.38 * np.sin(2 * np.pi * t / 4.7 + 0.4)
+    target = 16.5 + 12.0 * s / np.max(np.abs(s))
+    res = compensate(model, target, t, v_limits=(0.0, V_MAX))
+    n_reversals = int(np.sum(np.diff(np.sign(np.diff(target))) != 0))
+    n_jumps = int(np.sum(np.abs(np.diff(res.commands)) > 200))
+    assert n_jumps <= n_reversals + 1
+    assert np.sqrt(np.mean(res.error_deg[res.reachable] ** 2)) < 0.01

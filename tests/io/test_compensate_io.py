@@ -161,3 +161,39 @@ def test_cli_one_line_error_and_success(files, capsys):
     assert code == 0
     assert "gpi" in capsys.readouterr().out
     assert (tmp / "c.csv").is_file() and (tmp / "compensate.json").is_file()
+
+
+def test_diagnosed_model_with_delay(tmp_path):
+    from i2ris_calib.diagnosis.effects import add_effect
+    from i2ris_calib.diagnosis.serialize import model_to_dict
+
+    P = _fit_json(tmp_path / "fit.json", kinds=("egpi",))
+    model = add_effect(model_from_params("egpi", P, 30, 2.0), "time_delay", {"tau_s": 0.1})
+    (tmp_path / "final_model.json").write_text(json.dumps(model_to_dict(model)))
+    doc = json.loads((tmp_path / "fit.json").read_text())
+    rec = dict(doc["datasets"][0]["models"]["egpi"])
+    rec["params"] = {p.name: p.value for p in model.parameters}
+    doc["datasets"][0]["models"]["diagnosed"] = rec
+    (tmp_path / "fit.json").write_text(json.dumps(doc))
+    t = np.arange(0, 10, 0.01)
+    pd.DataFrame({"time_s": t, "yaw_deg": 15 + 5 * np.sin(t)}).to_csv(
+        tmp_path / "t.csv", index=False
+    )
+    with pytest.raises(CalibError, match="needs --model-file"):
+        compensate_files(
+            [tmp_path / "fit.json"],
+            ["yaw+"],
+            tmp_path / "t.csv",
+            tmp_path / "c.csv",
+            model="diagnosed",
+        )
+    out = compensate_files(
+        [tmp_path / "fit.json"], ["yaw+"], tmp_path / "t.csv", tmp_path / "c.csv",
+        model="diagnosed", model_file=tmp_path / "final_model.json",
+    )  # fmt: skip
+    assert out["axes"]["yaw"]["delay_s"] == pytest.approx(0.1)
+    df = pd.read_csv(tmp_path / "c.csv")
+    late = df["time_s"] > 0.1
+    err = df["predicted_yaw_deg"][late] - 15 - 5 * np.sin(df["time_s"][late])
+    assert np.max(np.abs(err)) < 0.02
+    assert out["axes"]["yaw"]["unreachable"]["within_delay"] == int((~late).sum())

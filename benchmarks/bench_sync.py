@@ -321,8 +321,10 @@ def rendered_check(angles_csv: Path | None) -> bool:
     if unc:
         print(
             "uncertainty terms: "
-            + ", ".join(f"{k} {v:.4g}" for k, v in unc.items() if k != "formula")
+            + ", ".join(f"{k} {v:.4g}" for k, v in unc.items() if isinstance(v, (int, float)))
         )
+    if unc and unc.get("drift"):
+        print("drift terms: " + ", ".join(f"{k} {v:.4g}" for k, v in unc["drift"].items()))
     met = abs(err) * 1e3 <= MODEL_TARGET_MS and abs(err / sd) <= MODEL_TARGET_Z
     print(
         f"target |offset err mid| <= {MODEL_TARGET_MS:g} ms and |z| <= {MODEL_TARGET_Z:g}: "

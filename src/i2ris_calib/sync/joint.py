@@ -34,7 +34,7 @@ import numpy as np
 
 from i2ris_calib.data.dataset import Bands, direction_datasets, direction_input, input_bands
 from i2ris_calib.errors import CalibError
-from i2ris_calib.sync.clock import PPM, ClockModel, clock_model
+from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
 from i2ris_calib.sync.config import SyncConfig
 from i2ris_calib.sync.log import EncoderLog
 from i2ris_calib.sync.xcorr import AxisSeries, coarse_xcorr_offset
@@ -666,6 +666,56 @@ def drift_gauss_newton(
     return o, d, cov
 
 
+def cycle_offsets(
+    profile: OffsetProfile, offset_c_s: float, drift_ppm: float, eps_s: float = 1e-3
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Local offsets, one per loading cycle of every block, with the models held fixed.
+
+    For each (block, loading cycle) with >= 10 frames in the trimmed loss: one
+    Gauss-Newton step of the offset on that cycle's frames alone,
+    ``o_g = offset + sum(J r) / sum(J^2)``, its white-noise sd
+    ``sigma_b / sqrt(sum J^2)`` (``sigma_b``: the block's residual rms) and its time
+    ``t_g = sum(J^2 t) / sum(J^2)`` (camera clock). Their scatter about the clock line
+    shows misfit that differs between cycles and axes (which a drift fitted to all
+    frames at once cannot see).
+
+    Returns
+    -------
+    t_cam_s, offsets_s, sd_s : ndarray, shape (g,)
+        Offsets as ``t_ctrl - t_cam`` at ``t_g`` (the clock's offset at ``t_c`` moved
+        along the drift).
+    """
+    from i2ris_calib.fitting.cycles import cycle_index
+
+    ts, os_, sds = [], [], []
+    for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
+        x = np.asarray(f.model.values, dtype=float)
+        v = profile.inputs(b, offset_c_s, drift_ppm)
+        r = b.theta_deg - f.model.evaluate(v, x)
+        jo = (
+            f.model.evaluate(profile.inputs(b, offset_c_s + eps_s, drift_ppm), x)
+            - f.model.evaluate(profile.inputs(b, offset_c_s - eps_s, drift_ppm), x)
+        ) / (2 * eps_s)
+        use = trim_mask(r) & np.isfinite(jo)
+        if use.sum() < 10:
+            continue
+        use &= np.abs(jo) <= np.quantile(np.abs(jo[use]), 1 - TRIM_FRACTION)
+        sigma = float(np.sqrt(np.mean(r[use] ** 2)))
+        cyc = cycle_index(v)
+        for g in np.unique(cyc[use]):
+            sel = use & (cyc == g)
+            jj = float(jo[sel] @ jo[sel])
+            if sel.sum() < 10 or not jj > 0:
+                continue
+            t_g = float(jo[sel] ** 2 @ b.t_cam_s[sel]) / jj
+            ts.append(t_g)
+            os_.append(
+                offset_c_s + float(jo[sel] @ r[sel]) / jj + drift_ppm * PPM * (t_g - profile.t_c)
+            )
+            sds.append(sigma / np.sqrt(jj))
+    return np.array(ts), np.array(os_), np.array(sds)
+
+
 def frames_series(series: list[AxisSeries]) -> list[AxisSeries]:
     """The measured frames of each series (finite angle), for the cross-correlation."""
     out = []
@@ -756,6 +806,7 @@ def clock_from_model(
     profile.cold = False  # refinement: warm starts only
     best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     drift, drift_sd = 0.0, float("nan")
+    drift_scatter = {}
     if cfg.estimate_drift:
         for _ in range(2):  # drift with the models fixed, then the offset refitted at it
             _, drift, cov = drift_gauss_newton(profile, best, drift)
@@ -764,6 +815,24 @@ def clock_from_model(
             profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
             best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     sd_c, unc = offset_stderr(profile, best, 1.5 * step)
+    if cfg.estimate_drift:
+        # the drift's sd is at least that of a line through the per-cycle offsets, whose
+        # white sd is inflated by F (misfit correlated within a cycle, as for the offset)
+        # and scaled by their reduced chi-square when they scatter more than that
+        t_g, o_g, sd_g = cycle_offsets(profile, best, drift)
+        f_ac = unc.get("autocorr_factor_F", 1.0)
+        sd_g = sd_g * np.sqrt(max(1.0, f_ac if np.isfinite(f_ac) else 1.0))
+        if t_g.size >= 3 and np.ptp(t_g) > 0:
+            _, d_line, cov_line, chi2_line = clock_from_offsets(t_g, o_g, sd_g, True, "if_larger")
+            line_sd = float(np.sqrt(cov_line[1, 1]))
+            drift_scatter = {
+                "n_cycles": int(t_g.size),
+                "line_drift_ppm": float(d_line),
+                "line_drift_sd_ppm": line_sd,
+                "chi2_reduced": float(chi2_line),
+                "gauss_newton_drift_sd_ppm": drift_sd,
+            }
+            drift_sd = max(drift_sd, line_sd)
     offset0 = best - drift * PPM * t_c  # offset at camera time 0 (t_ctrl - t_cam)
     var_d = drift_sd**2 if np.isfinite(drift_sd) else 0.0
     cov = np.array(
@@ -781,7 +850,7 @@ def clock_from_model(
         "profile": {"offset_at_t_ref_s": x, "rss_deg2": y},
         "n_samples": profile.n_samples,
         "rmse_deg": float(np.sqrt(profile(best) / TRIMMED_VARIANCE / max(profile.n_samples, 1))),
-        "uncertainty": unc,
+        "uncertainty": unc | ({"drift": drift_scatter} if drift_scatter else {}),
         "note": "offset profile of the hysteresis-model residual over each axis's whole frame "
         "history; stderr from its curvature, inflated for misfit (chi2 vs the tracking "
         "noise) and residual autocorrelation (Newey-West)",

@@ -6,6 +6,7 @@ the session folder. Loading lives in :mod:`i2ris_calib.io.session`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -35,6 +36,16 @@ class EncoderLogSpec:
     sync_field: str = "data"  # message field of sync_topic, nonzero = LED on
     time_source: Literal["log", "header"] = "log"  # bag receive time or msg.header.stamp
 
+    def validate(self) -> None:
+        """Raise ValueError on values no log can have."""
+        if not (math.isfinite(self.time_unit_s) and self.time_unit_s > 0):
+            raise ValueError(
+                f"time_unit_s = {self.time_unit_s} must be a number > 0 (seconds per unit of "
+                "the time column: 1 for s, 0.001 for ms, 1e-9 for ns)"
+            )
+        if self.value_index < 0:
+            raise ValueError(f"value_index = {self.value_index} must be >= 0")
+
 
 @dataclass(frozen=True)
 class CameraSpec:
@@ -51,6 +62,13 @@ class CameraSpec:
     # ideal viewing direction of this camera, in the robot base frame
     view: Literal["top", "side"] = "top"
 
+    def validate(self) -> None:
+        """Raise ValueError on values no camera can have."""
+        if self.marker_id < 0:
+            raise ValueError(f"marker_id = {self.marker_id} must be >= 0 (an ArUco id)")
+        if not (math.isfinite(self.pixel_size_mm) and self.pixel_size_mm >= 0):
+            raise ValueError(f"pixel_size_mm = {self.pixel_size_mm} must be >= 0 (0 = derived)")
+
 
 @dataclass(frozen=True)
 class MarkerSpec:
@@ -59,6 +77,19 @@ class MarkerSpec:
     dictionary: str = "DICT_4X4_50"
     marker_size_mm: float = 0.8
     cube_size_mm: float = 1.0
+
+    def validate(self) -> None:
+        """Raise ValueError unless 0 < marker_size_mm <= cube_size_mm (finite)."""
+        m, c = self.marker_size_mm, self.cube_size_mm
+        if not (math.isfinite(m) and m > 0):
+            raise ValueError(
+                f"marker_size_mm = {m} must be > 0 (the printed marker's black outer edge, mm)"
+            )
+        if not (math.isfinite(c) and c >= m):
+            raise ValueError(
+                f"cube_size_mm = {c} must be >= marker_size_mm = {m} (the marker sits on a "
+                "cube face; measure both edges in mm)"
+            )
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,10 @@ def _node_matrix(node, rows: int, cols: int | None = None) -> np.ndarray:
     data = node.getNode("data") if node.isMap() else node
     if not data.isSeq():
         return np.zeros((0,))
-    vals = np.array([data.at(i).real() for i in range(data.size())], dtype=float)
+    items = [data.at(i) for i in range(data.size())]
+    if not all(it.isReal() or it.isInt() for it in items):
+        raise ValueError("non-numeric matrix entries")
+    vals = np.array([it.real() for it in items], dtype=float)
     return vals.reshape(rows, -1) if cols is None else vals.reshape(rows, cols)
 
 
@@ -41,27 +44,40 @@ def read_camera_yaml(path: str | Path) -> tuple[np.ndarray, np.ndarray, int, int
     p = Path(path)
     if not p.is_file():
         raise CalibError(f"camera calibration file not found: {p}")
+    fix = "(expected OpenCV FileStorage or ROS camera_info YAML, see docs/session.md; rerun 'i2ris-calib calibrate')"
     try:
         fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
-        raise CalibError(
-            f"{p}: not a readable OpenCV/ROS YAML file ({str(exc).splitlines()[-1]})"
-        ) from None
+    except (cv2.error, SystemError):  # OpenCV 5 raises SystemError on unparsable text
+        raise CalibError(f"{p}: not a readable OpenCV/ROS YAML file {fix}") from None
     if not fs.isOpened():
-        raise CalibError(f"{p}: not a readable OpenCV/ROS YAML file")
+        raise CalibError(f"{p}: not a readable OpenCV/ROS YAML file {fix}")
     try:
         K = _node_matrix(fs.getNode("camera_matrix"), 3, 3)
         dist = _node_matrix(fs.getNode("distortion_coefficients"), 1).ravel()
         w = int(fs.getNode("image_width").real()) if not fs.getNode("image_width").empty() else 0
         h = int(fs.getNode("image_height").real()) if not fs.getNode("image_height").empty() else 0
-    except (cv2.error, ValueError) as exc:
-        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
-        raise CalibError(f"{p}: malformed camera_matrix/distortion_coefficients ({msg})") from None
+    except (cv2.error, ValueError, SystemError):
+        raise CalibError(
+            f"{p}: malformed camera_matrix/distortion_coefficients (3x3 and 1xN numeric "
+            f"matrices) {fix}"
+        ) from None
     finally:
         fs.release()
-    if K.shape != (3, 3) or not np.all(np.isfinite(K)) or K[0, 0] <= 0 or K[1, 1] <= 0:
+    plausible = (
+        K.shape == (3, 3)
+        and np.all(np.isfinite(K))
+        and 0 < K[0, 0] < 1e12
+        and 0 < K[1, 1] < 1e12
+        and np.allclose(K[2], [0.0, 0.0, 1.0])
+        and np.all(np.abs(K) < 1e12)
+    )
+    if not plausible:
         raise CalibError(
-            f"{p}: no valid 3x3 camera_matrix (OpenCV or ROS camera_info format expected)"
+            f"{p}: no valid 3x3 camera_matrix (finite focal lengths > 0, last row 0 0 1) {fix}"
+        )
+    if not np.all(np.isfinite(dist)) or np.any(np.abs(dist) > 1e6) or w < 0 or h < 0:
+        raise CalibError(
+            f"{p}: invalid distortion_coefficients or image size (finite numbers expected) {fix}"
         )
     return K, dist, w, h
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.config_io import dataclass_from_mapping, load_toml
-from i2ris_calib.session import CameraSpec, SessionSpec
+from i2ris_calib.session import CameraSpec, EncoderLogSpec, MarkerSpec, SessionSpec
 
 SESSION_FILE = "session.toml"
 
@@ -26,7 +26,12 @@ def load_session(folder: str | Path) -> SessionSpec:
         )
     data = load_toml(path)
     cams = data.pop("cameras", {})
-    spec = dataclass_from_mapping(SessionSpec, data, where=str(path))
+    tables = {  # sub-tables built on their own, so messages say "session.toml [marker]"
+        key: dataclass_from_mapping(cls, data.pop(key), where=f"{path} [{key}]")
+        for key, cls in (("marker", MarkerSpec), ("encoder", EncoderLogSpec))
+        if key in data
+    }
+    spec = replace(dataclass_from_mapping(SessionSpec, data, where=str(path)), **tables)
     if not isinstance(cams, dict) or not cams:
         raise CalibError(
             f"{path}: no [cameras.<name>] tables (a session needs two cameras, see docs/session.md)"

@@ -9,7 +9,6 @@ The two videos render in two processes; the folder appears atomically when done.
 from __future__ import annotations
 
 import multiprocessing as mp
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -20,6 +19,7 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json, write_text
 from i2ris_calib.io.calibrate import write_camera_yaml
 from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.simulation import trajectory as tj
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.simulation.scene import CameraModel, make_cameras, make_cube, true_marker_corners
@@ -207,10 +207,8 @@ def _render_all(plans: list[CameraPlan], cube, cfg: SimulationConfig, progress: 
     ctx = mp.get_context("spawn")  # fork can deadlock on inherited OpenCV threads
     counter = ctx.Value("l", 0)
     total = sum(len(p.rotations) for p in plans)
-    with ProcessPoolExecutor(
-        len(plans), mp_context=ctx, initializer=_init_worker, initargs=(counter,)
-    ) as ex:
-        futs = [ex.submit(_render_camera, p, cube, cfg) for p in plans]
+    work = [(_render_camera, p, cube, cfg) for p in plans]
+    with quiet_pool(len(plans), ctx, work, _init_worker, (counter,)) as futs:
         with Progress(disable=not progress, transient=True) as bar:
             task = bar.add_task("rendering videos", total=total)
             while not all(f.done() for f in futs):

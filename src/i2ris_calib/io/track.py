@@ -10,17 +10,18 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import typer
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import load_session, session_file
+from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.session import CameraSpec, SessionSpec
 from i2ris_calib.tracking import fuse as fz
 from i2ris_calib.tracking.config import TrackingConfig
@@ -57,9 +58,31 @@ def track_session(session: Path, out: Path | None, config) -> Path:
     ]
     inputs += [session_file(session, c.timestamps, "timestamps") for c in spec.cameras.values()]
     summary = {**result["summary"], "provenance": provenance(inputs, cfg)}
+    for line in track_warnings(summary):
+        typer.echo(f"warning: {line}", err=True)
     with atomic_dir(out) as tmp:
         write_csv(tmp / "angles.csv", result["angles"], "%.6f")
         write_json(tmp / "track.json", summary)
+    return out
+
+
+def track_warnings(summary: dict) -> list[str]:
+    """Plain warnings for the terminal (also kept in track.json under ``warnings``)."""
+    out = []
+    for name, cam in summary["cameras"].items():
+        g = cam.get("gaps", {})
+        if g.get("count"):
+            out.append(
+                f"camera '{name}' dropped about {g['missing_frames']} frame(s) in {g['count']} "
+                f"gap(s), longest {g['longest_s']:.3f} s (frames inside gaps over "
+                "max_interp_gap_s are not_found, never interpolated)"
+            )
+    if summary.get("view_check", {}).get("verdict") == "inconclusive":
+        out.append(
+            "the top/side view labels could not be verified (the tip turned too little); "
+            "check that yaw follows the yaw motor"
+        )
+    summary["warnings"] = out
     return out
 
 
@@ -82,11 +105,26 @@ def track(session: Path, spec: SessionSpec, cfg: TrackingConfig, progress: bool 
         for n in names
     }
     videos = {n: session_file(session, cams[n].video, f"video of camera '{n}'") for n in names}
+    for n in names:  # every input that can be checked is checked before decoding
+        check_calibration(session, n, cams[n])
     streams = run_streams(videos, spec, cfg, progress)
     for n in names:
         check_stream(n, videos[n], times[n], streams[n], cams[n], spec)
     intr = {n: intrinsics(session, cams[n], streams[n].shape, cfg) for n in names}
-    return fuse_session(names, cams, times, streams, intr, spec, cfg)
+    result = fuse_session(names, cams, times, streams, intr, spec, cfg)
+    check = result["summary"]["view_check"]
+    if check["verdict"] == "swapped":
+        top = next(n for n in names if cams[n].view == "top")
+        side = next(n for n in names if cams[n].view == "side")
+        spread = check["rigid_rig_spread_mm"]
+        raise CalibError(
+            f"{session / 'session.toml'}: the view labels look swapped: camera '{top}' "
+            f'(view = "top") sees the side face and camera \'{side}\' (view = "side") the top face (the cube centre seen by both moves '
+            f"{spread['as_labelled']:.3f} mm as labelled, {spread['swapped']:.4f} mm swapped; "
+            f'yaw and pitch would come out exchanged): set view = "side" in [cameras.{top}] '
+            f'and view = "top" in [cameras.{side}]'
+        )
+    return result
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -96,10 +134,16 @@ def read_timestamps(path: Path) -> pd.DataFrame:
         df = pd.read_csv(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise CalibError(f"{path}: unreadable CSV ({str(exc).splitlines()[0]})") from None
+    df.columns = [str(c).strip() for c in df.columns]
     missing = {"frame", "time_s"} - set(df.columns)
     if missing:
         raise CalibError(
             f"{path}: missing column(s) {', '.join(sorted(missing))} (need frame, time_s)"
+        )
+    if len(df) < 2:
+        raise CalibError(
+            f"{path}: {len(df)} frame row(s) below the header (need one row per video frame: "
+            "re-export the camera timestamps)"
         )
     t = pd.to_numeric(df["time_s"], errors="coerce").to_numpy(float)
     fr = pd.to_numeric(df["frame"], errors="coerce").to_numpy(float)
@@ -119,6 +163,20 @@ def read_timestamps(path: Path) -> pd.DataFrame:
             "fix the camera clock export"
         )
     return pd.DataFrame({"frame": fr.astype(int), "time_s": t, "valid": valid})
+
+
+def check_calibration(session: Path, name: str, cam: CameraSpec) -> None:
+    """A pinhole camera's calibration file exists and parses (before any decoding)."""
+    from i2ris_calib.io.calibrate import read_camera_yaml
+
+    if cam.model != "pinhole":
+        return
+    if not cam.calibration:
+        raise CalibError(
+            f'{session / "session.toml"} [cameras.{name}]: model = "pinhole" but no '
+            'calibration file (set calibration = "<camera>.yaml" or use model = "weak_perspective")'
+        )
+    read_camera_yaml(session_file(session, cam.calibration, f"calibration of camera '{name}'"))
 
 
 def intrinsics(
@@ -205,15 +263,14 @@ def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: 
         return {n: detect_stream(*a) for n, a in jobs.items()}
     ctx = mp.get_context("spawn")  # fork can deadlock on inherited OpenCV threads
     counter = ctx.Value("l", 0)
-    with ProcessPoolExecutor(min(cfg.workers, len(jobs)), mp_context=ctx, initializer=_init_worker,
-                             initargs=(counter,)) as ex:  # fmt: skip
-        futs = {n: ex.submit(detect_stream, *a) for n, a in jobs.items()}
+    work = [(detect_stream, *a) for a in jobs.values()]
+    with quiet_pool(min(cfg.workers, len(jobs)), ctx, work, _init_worker, (counter,)) as futs:
         with Progress(disable=not progress, transient=True) as bar:
             task = bar.add_task("tracking markers", total=total)
-            while not all(f.done() for f in futs.values()):
+            while not all(f.done() for f in futs):
                 bar.update(task, completed=counter.value)
                 time.sleep(0.2)
-        return {n: f.result() for n, f in futs.items()}
+        return {n: f.result() for n, f in zip(jobs, futs, strict=True)}
 
 
 def check_stream(
@@ -295,6 +352,7 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     if not (va.ok & vb.ok).any():
         raise CalibError("no frame time where both markers are measured: cannot fuse the two views")
     res = fz.fuse_views(va, vb, t, cfg)
+    views = view_check(res, ca, cb, intr[a_name], intr[b_name], t, spec, cfg)
     status = res.status.copy()
     status[~ta["valid"].to_numpy()] = fz.REJECTED
     ref = reference_mask(t, cfg)
@@ -322,7 +380,79 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             df[f"yaw_plain_{name}_deg"] = pa[:, 0]
             df[f"pitch_plain_{name}_deg"] = pa[:, 1]
     summary = _summary(df, res, streams, names, M, ref, cfg)
+    for n in names:
+        summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
+    summary["view_check"] = views
     return {"angles": df, "summary": summary}
+
+
+#: ``view`` labels are refused as swapped when the rigid-rig spread as labelled exceeds
+#: this fraction of the cube size and this multiple of the spread with the labels swapped.
+SWAP_MIN_SPREAD_CUBE = 0.03
+SWAP_RATIO = 4.0
+
+
+def view_check(
+    res: fz.FusionResult, ca, cb, intr_a, intr_b, t: np.ndarray, spec: SessionSpec, cfg
+) -> dict:
+    """Do the ``view`` labels fit the geometry? Compares both labellings (docs/tracking.md).
+
+    Under (near-)orthographic projection a swapped top/side pair is fitted just as
+    well (a mirror image of the true motion: yaw and pitch exchanged, sign-flipped),
+    but the cube centre that both cameras see then moves along their common sideways
+    axis by up to the cube size (:func:`~i2ris_calib.tracking.fuse.common_axis_positions`).
+    The swapped labelling is fused on up to 400 measured frames and both spreads are
+    compared. Returns the ``view_check`` record of track.json; ``verdict`` is
+    ``consistent``, ``swapped`` (refused by :func:`track`) or ``inconclusive``.
+    """
+    ok = np.flatnonzero(res.status == fz.MEASURED)
+    sub = ok[np.linspace(0, ok.size - 1, min(400, ok.size)).astype(int)] if ok.size else ok
+    given = fz.rigid_rig_spread_mm(res)
+    swapped = float("nan")
+    if sub.size >= 10:
+        va = _view(ca[sub], intr_a, "side", spec)
+        vb = _view(cb[sub], intr_b, "top", spec)
+        try:
+            alt = fz.fuse_views(va, vb, t[sub], cfg)
+            swapped = fz.rigid_rig_spread_mm(alt)
+        except ValueError:
+            pass
+    cube = spec.marker.cube_size_mm
+    verdict = "inconclusive"
+    if np.isfinite(given) and np.isfinite(swapped):
+        floor = 1e-3 * cube
+        if given > SWAP_MIN_SPREAD_CUBE * cube and given > SWAP_RATIO * max(swapped, floor):
+            verdict = "swapped"
+        elif given <= SWAP_RATIO * max(swapped, floor) or given <= SWAP_MIN_SPREAD_CUBE * cube:
+            verdict = "consistent" if swapped > SWAP_RATIO * max(given, floor) else "inconclusive"
+    return {"rigid_rig_spread_mm": {"as_labelled": _num(given), "swapped": _num(swapped)},
+            "frames": int(sub.size), "verdict": verdict}  # fmt: skip
+
+
+def _num(x: float):
+    return round(float(x), 6) if np.isfinite(x) else None
+
+
+def frame_gaps(ts: pd.DataFrame, cfg: TrackingConfig) -> dict:
+    """Dropped frames of one camera, from its time steps (``gaps`` in track.json).
+
+    A step longer than 1.5 median frame intervals is a gap; ``missing_frames`` counts
+    the frame slots it spans. Gaps longer than ``max_interp_gap_s`` in the side camera
+    leave the top frames inside them ``not_found`` (never interpolated).
+    """
+    t = ts["time_s"].to_numpy()[ts["valid"].to_numpy()]
+    dt = np.diff(t)
+    if dt.size == 0:
+        return {"count": 0, "missing_frames": 0, "longest_s": 0.0, "over_max_interp_gap": 0}
+    step = float(np.median(dt))
+    big = dt > 1.5 * step
+    return {
+        "count": int(big.sum()),
+        "missing_frames": int(np.sum(np.round(dt[big] / step) - 1)) if big.any() else 0,
+        "longest_s": round(float(dt.max()), 6) if big.any() else 0.0,
+        "over_max_interp_gap": int(np.sum(dt > cfg.max_interp_gap_s)),
+        "frame_interval_s": round(step, 6),
+    }
 
 
 def _usable(s: StreamResult, ts: pd.DataFrame) -> np.ndarray:

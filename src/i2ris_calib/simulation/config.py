@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -86,6 +87,7 @@ class SimulationConfig:
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
+        self._validate_numbers()
         if self.width_px < 64 or self.height_px < 64:
             raise ValueError("width_px and height_px must be >= 64")
         if self.fps <= 0 or self.encoder_rate_hz <= 0:
@@ -129,3 +131,40 @@ class SimulationConfig:
             raise ValueError("compound_fraction and minor_loop_fraction must be in [0, 1]")
         if not -0.99 < self.illumination_falloff < 0.99:
             raise ValueError("illumination_falloff must be in (-0.99, 0.99)")
+
+    def _validate_numbers(self) -> None:
+        """Finite, in-range numbers (NaN/inf and negative sizes or times are refused)."""
+        positive = ("fps", "focal_px", "marker_size_px", "marker_size_mm", "cube_size_mm",
+                    "exposure_s", "ramp_s", "encoder_rate_hz", "flash_duration_s",
+                    "occlusion_s")  # fmt: skip
+        non_negative = ("misalignment_deg", "pivot_mm", "blur_sigma_px", "depth_blur_px_per_mm",
+                        "noise_sigma", "pause_s", "rest_s", "settle_s", "timestamp_jitter_s",
+                        "flash_gain", "occlusions", "n_flashes", "drop_fraction")  # fmt: skip
+        for name in positive + non_negative:
+            v = getattr(self, name)
+            if not math.isfinite(v) or v < 0 or (v == 0 and name in positive):
+                need = "> 0" if name in positive else ">= 0"
+                raise ValueError(f"{name} = {v} must be a finite number {need}")
+        for name in ("background_gray", "face_gray", "ink_gray"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0 <= v <= 255):
+                raise ValueError(f"{name} = {v} must be a grey level in [0, 255]")
+        for name in (
+            "offset_s",
+            "drift_ppm",
+            "illumination_gradient",
+            "camera_start_s",
+            "second_camera_phase_s",
+        ):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be a finite number")
+        if not (self.misalignment_deg < 30):
+            raise ValueError("misalignment_deg must be < 30 (each camera must still see its face)")
+        if min(self.marker_ids) < 0:
+            raise ValueError("marker_ids must be >= 0 (ArUco ids)")
+        if any(not (math.isfinite(a) and a > 0) for a in self.amplitude_counts):
+            raise ValueError("amplitude_counts must be finite numbers > 0")
+        if any(not (math.isfinite(f) and 0 < f <= 1) for f in self.cycle_fractions):
+            raise ValueError("cycle_fractions must be in (0, 1]")
+        if any(not math.isfinite(t) for t in self.flash_times_s):
+            raise ValueError("flash_times_s must be finite numbers")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -66,3 +67,13 @@ class TrackingConfig:
             )
         if self.max_reproj_err_px <= 0 or self.iterations < 1:
             raise ValueError("max_reproj_err_px must be > 0 and iterations >= 1")
+        positive = ("corner_accuracy_px", "weak_perspective_focal_px", "ambiguity_deg",
+                    "max_step_deg", "max_reproj_err_px", "reference_duration_s",
+                    "charuco_square_mm", "charuco_marker_mm", "roi_margin")  # fmt: skip
+        non_negative = ("max_interp_gap_s", "same_frame_tol_s", "continuity_gap_s",
+                        "reference_start_s", "extrinsic_rounds")  # fmt: skip
+        for name in positive + non_negative:
+            v = getattr(self, name)
+            if not math.isfinite(v) or v < 0 or (v == 0 and name in positive):
+                need = "> 0" if name in positive else ">= 0"
+                raise ValueError(f"{name} = {v} must be a finite number {need}")

@@ -66,6 +66,8 @@ class FusionResult:
     R_ba: np.ndarray  # (3, 3) camera b <- camera a
     n_competing: int  # frames where two distinct minima were found
     n_by_continuity: int  # of those, resolved by temporal continuity
+    t_a: np.ndarray | None = None  # (n, 3) cube centre in camera a (mm), NaN where not measured
+    t_b: np.ndarray | None = None  # (n, 3) cube centre in camera b (mm), NaN where not measured
 
 
 def _trace_cos(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -222,12 +224,17 @@ def fuse_views(a: ViewData, b: ViewData, times_s: np.ndarray, cfg) -> FusionResu
             Qs[good], ta[good], tb[good], R_ba, _subset(A, good), _subset(B, good), cfg.iterations
         )
     Q[both] = Qs
+    cen_a = np.full((n, 3), np.nan)
+    cen_b = np.full((n, 3), np.nan)
+    cen_a[both], cen_b[both] = ta, tb
     rms[both] = np.sqrt(cost / 16.0)
     st = np.where(np.isfinite(cost), MEASURED, AMBIGUOUS).astype(object)
     st[np.isfinite(cost) & (np.sqrt(cost / 16.0) > cfg.max_reproj_err_px)] = REJECTED
     status[both] = st
     Q[status != MEASURED] = np.nan
-    return FusionResult(Q, rms, status, R_ba, n_comp, n_cont)
+    cen_a[status != MEASURED] = np.nan
+    cen_b[status != MEASURED] = np.nan
+    return FusionResult(Q, rms, status, R_ba, n_comp, n_cont, cen_a, cen_b)
 
 
 def _choose(sols, t: np.ndarray, cfg):
@@ -285,3 +292,46 @@ def reference_rotation(Q: np.ndarray, mask: np.ndarray) -> np.ndarray:
 def relative_angles(Q: np.ndarray, M: np.ndarray) -> np.ndarray:
     """Yaw, pitch, roll (n, 3) deg of ``R_BT = M^T Q`` (NaN rows stay NaN)."""
     return euler_zyx_deg(M.T @ Q)
+
+
+def common_axis_positions(t_a: np.ndarray, t_b: np.ndarray, R_ba: np.ndarray) -> np.ndarray:
+    """Cube centre along the one axis both cameras see sideways, shape (n,) mm.
+
+    Both cameras measure the cube centre's position across their viewing direction
+    well (the depth poorly). The axis ``u`` perpendicular to both viewing directions
+    is seen across by both, so for a rigid two-camera rig ``u_b . t_b - u_a . t_a`` is
+    one constant (the cameras' separation along ``u``) in every frame. The fitted
+    centres are the marker centres minus the face offset ``cube/2 * normal``: with the
+    ``view`` labels swapped the offsets go to the wrong faces and this quantity moves
+    by up to the cube size as the tip turns.
+
+    Parameters
+    ----------
+    t_a, t_b : ndarray (n, 3)
+        Cube centre in camera a and camera b (mm), NaN where not measured.
+    R_ba : ndarray (3, 3)
+        Rotation camera b <- camera a.
+
+    Returns
+    -------
+    ndarray (n,)
+        ``u_b . t_b - u_a . t_a`` (mm); NaN where either centre is missing.
+    """
+    z = np.array([0.0, 0.0, 1.0])
+    u_a = np.cross(z, R_ba.T @ z)
+    norm = np.linalg.norm(u_a)
+    if norm < 1e-6:  # parallel cameras: no common sideways axis
+        return np.full(len(t_a), np.nan)
+    u_a /= norm
+    return t_b @ (R_ba @ u_a) - t_a @ u_a
+
+
+def rigid_rig_spread_mm(res: FusionResult) -> float:
+    """Standard deviation (mm) of :func:`common_axis_positions` over measured frames.
+
+    Near the corner-noise level (micrometres) when the fused poses describe one rigid
+    cube seen by two fixed cameras; NaN with fewer than 10 measured frames.
+    """
+    d = common_axis_positions(res.t_a, res.t_b, res.R_ba)
+    d = d[np.isfinite(d)]
+    return float(np.std(d)) if d.size >= 10 else float("nan")

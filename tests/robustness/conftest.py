@@ -22,12 +22,12 @@ from i2ris_calib.simulation.presets import preset_config  # noqa: E402
 
 @pytest.fixture(scope="session")
 def rendered(tmp_path_factory) -> Path:
-    """~8.6 s at 30 fps (259 frames per camera, 320x256): a yaw+ then a pitch- ramp
+    """~8.6 s at 20 fps (173 frames per camera, 320x256): a yaw+ then a pitch- ramp
     (both axes turn ~40 deg), rest 1 s at the start (reference window), four flashes."""
     folder = tmp_path_factory.mktemp("robust") / "s"
     folder.mkdir()
     cfg = preset_config("ci", datasets=("yaw+", "pitch-"), ramp_s=0.8, pause_s=0.2,
-                        settle_s=0.3, seed=3)  # fmt: skip
+                        settle_s=0.3, fps=20.0, seed=3)  # fmt: skip
     build_session(folder, cfg, name="s")
     return folder
 

@@ -82,7 +82,7 @@ def test_swapped_view_labels_weak_perspective(session, serial_config, capsys):
 # -------------------------------------------------- item 7: backward timestamps tolerated
 def test_backward_timestamps_are_tolerated_by_track_and_sync(session, serial_config, capsys):
     ts = pd.read_csv(session / "top_timestamps.csv")
-    rows = [60, 120, 180]
+    rows = [40, 80, 120]
     for r in rows:
         ts.loc[r, "time_s"] = ts.loc[r - 2, "time_s"]  # goes backwards once
     ts.to_csv(session / "top_timestamps.csv", index=False, float_format="%.6f")
@@ -94,9 +94,26 @@ def test_backward_timestamps_are_tolerated_by_track_and_sync(session, serial_con
     assert rc == 0, err
     js = json.loads((session / "sync" / "sync.json").read_text())
     assert js["n_backward_rejected"] == 3
+    assert js["axis_check"]["swapped_axes"] == [] and js["warnings"] == []
     synced = pd.read_csv(session / "sync" / "synced.csv")
     assert not set(rows) & set(synced["frame"])
     assert np.all(np.diff(synced["time_cam_s"]) > 0)
+
+
+def test_angles_following_the_other_motor_are_flagged_by_sync(tracked_copy, serial_config, capsys):
+    """Once synced, each angle must follow its own motor: swapped encoder columns (or
+    view labels that got past track) are flagged in the terminal and sync.json."""
+    edit_toml(tracked_copy / "session.toml", 'format = "csv"',
+              'format = "csv"\nyaw_column = "enc_pitch"\npitch_column = "enc_yaw"')  # fmt: skip
+    rc, _, err = run_cli(capsys, ["sync", tracked_copy, "-c", serial_config])
+    assert rc == 0, err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("warning: yaw, pitch follow(s) the other motor")
+    js = json.loads((tracked_copy / "sync" / "sync.json").read_text())
+    check = js["axis_check"]
+    assert check["swapped_axes"] == ["yaw", "pitch"] and js["warnings"] == [lines[0][9:]]
+    for axis in ("yaw", "pitch"):  # steps follow the other motor, not their own
+        assert check[axis]["other"] > 0.5 > 0.1 > check[axis]["own"]
 
 
 def test_sync_still_refuses_a_real_clock_reset(tracked_copy, serial_config, capsys):
@@ -193,14 +210,17 @@ def _cli_subprocess(args: list[str], **kw) -> subprocess.Popen:
 
 
 def test_ffmpeg_lines_are_quiet_unless_debug(session, serial_config):
-    """A truncated video: FFmpeg's own 'File ended prematurely' stays out of the way
-    (fresh process: the log level is read when OpenCV loads FFmpeg)."""
-    data = (session / "side.mkv").read_bytes()
-    (session / "side.mkv").write_bytes(data[: len(data) // 2])
+    """A corrupt video: FFmpeg's own '[matroska,webm @ 0x...] EBML header parsing
+    failed' stays out of the way (a fresh process: the log level is read when OpenCV
+    loads FFmpeg)."""
+    (session / "side.mkv").write_bytes(np.random.default_rng(2).bytes(20000))
     p = _cli_subprocess(["track", session, "-c", serial_config])
     out, err = p.communicate(timeout=120)
-    assert_one_line_error(p.returncode, err, "side.mkv", "decodable frames but")
+    assert_one_line_error(p.returncode, err, "side.mkv", "cannot decode video")
     assert not (session / "track").exists()
+    p = _cli_subprocess(["--debug", "track", session, "-c", serial_config])
+    out, err = p.communicate(timeout=120)
+    assert p.returncode != 0 and "[matroska" in err  # --debug shows everything
 
 
 def test_ctrl_c_prints_the_message(session, capsys, monkeypatch):
@@ -270,7 +290,7 @@ def _drop_video_frames(video: Path, timestamps: Path, drop: range) -> None:
 
 def test_dropped_frames_are_flagged_not_guessed(session, serial_config, capsys):
     side_t = pd.read_csv(session / "side_timestamps.csv")["time_s"].to_numpy()
-    gap = (side_t[99], side_t[120])  # 20 frames, 0.7 s > max_interp_gap_s
+    gap = (side_t[99], side_t[120])  # 20 frames, 1 s > max_interp_gap_s
     _drop_video_frames(session / "side.mkv", session / "side_timestamps.csv", range(100, 120))
     rc, _, err = run_cli(capsys, ["track", session, "-c", serial_config])
     assert rc == 0, err

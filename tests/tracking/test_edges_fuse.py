@@ -123,3 +123,21 @@ def test_equal_cost_minima_resolved_by_continuity_else_ambiguous():
     sol2b = (mirror, z, z, np.full(n, 1.2))
     _, _, _, cost_b, _, _ = _choose([sol1b, sol2b], t, cfg)
     assert np.isnan(cost_b).all()
+
+
+def test_common_axis_positions_constant_for_a_rigid_rig(rng):
+    """u_b.t_b - u_a.t_a is the rigid rig's constant; a move along u (what swapped view
+    labels cause) shows up one to one, a move along either camera's depth does not."""
+    from i2ris_calib.tracking.geometry import rodrigues
+
+    R_ba = rodrigues(np.array([np.pi / 2, 0.0, 0.0]) + rng.normal(0, 0.05, 3))
+    t_a = rng.normal(0, 1.0, (50, 3)) + [0, 0, 200.0]
+    t_b = t_a @ R_ba.T + [3.0, -2.0, 150.0]
+    d = fz.common_axis_positions(t_a, t_b, R_ba)
+    assert np.ptp(d) < 1e-9
+    u_a = np.cross([0, 0, 1.0], R_ba.T @ [0, 0, 1.0])
+    u_a /= np.linalg.norm(u_a)
+    moved = t_b + np.outer(np.linspace(0, 0.3, 50), R_ba @ u_a)
+    assert np.ptp(fz.common_axis_positions(t_a, moved, R_ba)) == pytest.approx(0.3, rel=1e-9)
+    deeper = t_b + np.outer(rng.normal(0, 5, 50), [0, 0, 1.0])  # camera b's depth
+    assert np.ptp(fz.common_axis_positions(t_a, deeper, R_ba)) < 1e-9

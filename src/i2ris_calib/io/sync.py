@@ -10,12 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import typer
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json
 from i2ris_calib.io.encoders import encoder_log_path, read_encoder_log
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import SESSION_FILE, load_session
+from i2ris_calib.sync.axes import axis_check
 
 SCHEMA = "i2ris-calib.sync/1"
 CLOCK = "t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam"
@@ -154,11 +156,30 @@ def sync_session(
     check_overlap(len(table), n_dropped, clock, log, t_cam, cfg.sync)
     summary = sync_summary(clock, table, n_dropped, log, t_cam, cfg)
     summary["n_backward_rejected"] = int(df.attrs.get("n_backward_rejected", 0))
+    summary["axis_check"] = axis_check(table)
+    summary["warnings"] = axis_warnings(summary["axis_check"], root)
+    for line in summary["warnings"]:
+        typer.echo(f"warning: {line}", err=True)
     summary["xcorr_comparison"] = comparison
     summary["provenance"] = provenance(input_files(root, log_path, angles_path), cfg)
     write_csv(out_dir / "synced.csv", table, float_format="%.6f")
     write_json(out_dir / "sync.json", summary)
     return out_dir
+
+
+def axis_warnings(check: dict, root: Path) -> list[str]:
+    """Plain warning when an angle follows the other motor (sync.json and terminal)."""
+    if not check["swapped_axes"]:
+        return []
+    rho = ", ".join(
+        f"{a}_deg vs own motor {check[a]['own']}, other {check[a]['other']}"
+        for a in check["swapped_axes"]
+    )
+    return [
+        f"{', '.join(check['swapped_axes'])} follow(s) the other motor ({rho}; |step "
+        f"correlation|): check [encoder] yaw_column/pitch_column and the cameras' view "
+        f"labels in {root / SESSION_FILE}"
+    ]
 
 
 def with_method(cfg, method: str | None):

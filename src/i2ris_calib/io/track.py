@@ -418,13 +418,13 @@ def view_check(
         except ValueError:
             pass
     cube = spec.marker.cube_size_mm
-    verdict = "inconclusive"
+    verdict = "inconclusive"  # e.g. the tip turned too little for either spread to show
     if np.isfinite(given) and np.isfinite(swapped):
-        floor = 1e-3 * cube
-        if given > SWAP_MIN_SPREAD_CUBE * cube and given > SWAP_RATIO * max(swapped, floor):
+        least, floor = SWAP_MIN_SPREAD_CUBE * cube, 1e-3 * cube
+        if given > least and given > SWAP_RATIO * max(swapped, floor):
             verdict = "swapped"
-        elif given <= SWAP_RATIO * max(swapped, floor) or given <= SWAP_MIN_SPREAD_CUBE * cube:
-            verdict = "consistent" if swapped > SWAP_RATIO * max(given, floor) else "inconclusive"
+        elif swapped > least and swapped > SWAP_RATIO * max(given, floor):
+            verdict = "consistent"
     return {"rigid_rig_spread_mm": {"as_labelled": _num(given), "swapped": _num(swapped)},
             "frames": int(sub.size), "verdict": verdict}  # fmt: skip
 

@@ -94,7 +94,9 @@ def test_auto_refines_a_coarse_event_with_the_model():
     assert abs(_mid_error_s(auto, case)) <= 4 * auto.offset_stderr_at(t_ref)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize(
+    "seed", [0, pytest.param(1, marks=pytest.mark.slow), pytest.param(2, marks=pytest.mark.slow)]
+)
 def test_model_method_stated_sd_covers_the_truth(seed):
     """Honest uncertainty: on exact-EGPI synthetic sessions (0.1 deg noise) the offset
     in the middle of the recording is within 3 stated sd of the truth, and the stated

@@ -65,3 +65,12 @@ def test_holdout_never_extrapolates():
     assert 2 not in held and 0 not in held and held.size >= 1
     # two cycles, the second the larger one: nothing can be held out
     assert not holdout_mask(np.r_[0, 0, 1, 1], 0.5, np.r_[0, 50, 0, 90.0]).any()
+
+
+def test_holdout_holds_out_as_many_cycles_as_asked():
+    """Evenly spread picks that round to one cycle still give k distinct cycles."""
+    from i2ris_calib.fitting.cycles import holdout_mask
+
+    cycles = np.repeat(np.arange(4), 10)
+    held = np.unique(cycles[holdout_mask(cycles, 0.5)])
+    assert held.size == 2 and 0 not in held

@@ -77,9 +77,8 @@ def holdout_mask(
     if eligible.size == 0:
         return none
     k = int(min(eligible.size, max(1, round(fraction * n_cyc))))
-    chosen = eligible[
-        np.unique(np.round(np.linspace(0, eligible.size - 1, k + 2)[1:-1]).astype(int))
-    ]
-    if k >= eligible.size:
-        chosen = eligible
+    picks = np.unique(np.round(np.linspace(0, eligible.size - 1, k + 2)[1:-1]).astype(int))
+    if picks.size < k:  # two evenly spread picks rounded to one cycle: spread k distinct
+        picks = np.floor((np.arange(k) + 0.5) * eligible.size / k).astype(int)
+    chosen = eligible if k >= eligible.size else eligible[picks]
     return np.isin(cycles, chosen)

@@ -68,13 +68,22 @@ def _line(v: np.ndarray, theta: np.ndarray, sel: np.ndarray, min_samples: int = 
     return float(slope), float(intercept)
 
 
+def _trimmed_mean(x: np.ndarray) -> float:
+    """Mean of ``x`` without values beyond 3 robust sd (1.4826 MAD) of its median."""
+    med = np.median(x)
+    scale = 1.4826 * np.median(np.abs(x - med))
+    keep = np.abs(x - med) <= 3.0 * scale if scale > 0 else np.ones(x.size, bool)
+    return float(np.mean(x[keep])) if keep.any() else float(med)
+
+
 def flag_point(
     v: np.ndarray, theta: np.ndarray, direction: np.ndarray, loading_slope: float | None = None
 ) -> float | None:
     """Flag point v_f (counts) estimated from the unloading stretches, or None.
 
-    Per unloading stretch covering >= 30 % of the input range, theta is reduced to its
-    median in input bins of 2 % of the range, and v_f is the first bin (walking down in v) where
+    Per unloading stretch covering >= 30 % of the input range, theta is averaged
+    (without values beyond 3 robust sd of the bin's median) in input bins of 2 % of the
+    range, and v_f is the first bin (walking down in v) where
     |d theta/d v| < 0.2 |loading slope| after it has exceeded 0.5 |loading slope|.
     The median over stretches is returned.
     """
@@ -101,8 +110,8 @@ def flag_point(
         keep = counts > 0
         centres = (np.arange(counts.size)[keep] + 0.5) * width + v.min()
         th_sel = theta[sel]
-        # bin medians: a tracking outlier does not fake a slope change
-        means = np.array([np.median(th_sel[vb == b]) for b in np.flatnonzero(keep)])
+        # trimmed bin means: a tracking outlier does not fake a slope change
+        means = np.array([_trimmed_mean(th_sel[vb == b]) for b in np.flatnonzero(keep)])
         # walk from high v to low v
         c, m = centres[::-1], means[::-1]
         slope = np.abs(np.diff(m) / np.diff(c))

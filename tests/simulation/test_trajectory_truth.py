@@ -30,7 +30,7 @@ def test_one_motor_moves_at_a_time_with_the_dataset_sign():
 
 
 def test_truth_is_continuous_and_zero_at_every_dataset_boundary():
-    cfg = preset_config("ci", datasets=("yaw+", "yaw-", "pitch+", "pitch-"))
+    cfg = preset_config("ci", datasets=("yaw+", "yaw-", "pitch+", "pitch-"), truth="blocks")
     tr = session_truth(cfg)
     for b in tj.session_blocks(cfg):
         for t in (b.t0_s, b.t1_s):

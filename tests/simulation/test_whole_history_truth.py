@@ -150,7 +150,7 @@ def test_schedule_is_deterministic_and_seeded():
 
 
 def test_blocks_truth_unchanged_by_truth_at():
-    cfg = preset_config("ci")
+    cfg = preset_config("ci", truth="blocks")
     tr = session_truth(cfg)
     tq = np.linspace(0.0, tj.motion_duration_s(cfg), 777) + 1e-4
     y, p = truth_at(cfg, tr, tq)

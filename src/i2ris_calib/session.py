@@ -101,3 +101,16 @@ class SessionSpec:
     cameras: dict = field(default_factory=dict)  # name -> CameraSpec (built by io.session)
     marker: MarkerSpec = field(default_factory=MarkerSpec)
     notes: str = ""
+
+    def validate(self) -> None:
+        """Raise ValueError when ``name`` cannot be one folder name (run writes OUT/<name>)."""
+        bad = (
+            any(c in self.name for c in "/\\")
+            or self.name.strip() in (".", "..")
+            or any(ord(c) < 32 for c in self.name)
+        )
+        if bad:
+            raise ValueError(
+                f"name = {self.name!r} must be usable as one folder name (no '/', '\\', "
+                "control characters, '.' or '..'; outputs go to OUT/<name>)"
+            )

@@ -137,6 +137,7 @@ def test_sync_still_refuses_a_real_clock_reset(tracked_copy, serial_config, caps
         ("cube_size_mm = 1.0", "cube_size_mm = 0.5", ("[marker]", "cube_size_mm = 0.5 must be >= marker_size_mm")),
         ("marker_id = 1", "marker_id = -1", ("[cameras.side]", "marker_id = -1 must be >= 0")),
         ('format = "csv"', 'format = "csv"\ntime_unit_s = 0', ("[encoder]", "time_unit_s = 0.0 must be a number > 0")),
+        ('name = "s"', 'name = "../escape"', ("name = '../escape' must be usable as one folder name",)),
     ],
 )  # fmt: skip
 def test_invalid_session_values_are_refused_on_load(

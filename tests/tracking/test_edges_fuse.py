@@ -141,3 +141,13 @@ def test_common_axis_positions_constant_for_a_rigid_rig(rng):
     assert np.ptp(fz.common_axis_positions(t_a, moved, R_ba)) == pytest.approx(0.3, rel=1e-9)
     deeper = t_b + np.outer(rng.normal(0, 5, 50), [0, 0, 1.0])  # camera b's depth
     assert np.ptp(fz.common_axis_positions(t_a, deeper, R_ba)) < 1e-9
+
+
+@pytest.mark.parametrize(
+    "given, swapped, verdict",
+    [(0.0005, 0.26, "consistent"), (0.26, 0.0005, "swapped"), (0.04, 0.3, "consistent"),
+     (0.002, 0.01, "inconclusive"),  # the tip barely turned: neither spread shows
+     (0.1, 0.08, "inconclusive"), (float("nan"), 0.3, "inconclusive")],
+)  # fmt: skip
+def test_view_verdict(given, swapped, verdict):
+    assert fz.view_verdict(given, swapped, cube_size_mm=1.0) == verdict

@@ -119,7 +119,8 @@ def track(session: Path, spec: SessionSpec, cfg: TrackingConfig, progress: bool 
         spread = check["rigid_rig_spread_mm"]
         raise CalibError(
             f"{session / 'session.toml'}: the view labels look swapped: camera '{top}' "
-            f'(view = "top") sees the side face and camera \'{side}\' (view = "side") the top face (the cube centre seen by both moves '
+            f'(view = "top") sees the side face and camera \'{side}\' (view = "side") the '
+            "top face (the cube centre seen by both cameras moves "
             f"{spread['as_labelled']:.3f} mm as labelled, {spread['swapped']:.4f} mm swapped; "
             f'yaw and pitch would come out exchanged): set view = "side" in [cameras.{top}] '
             f'and view = "top" in [cameras.{side}]'
@@ -386,12 +387,6 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     return {"angles": df, "summary": summary}
 
 
-#: ``view`` labels are refused as swapped when the rigid-rig spread as labelled exceeds
-#: this fraction of the cube size and this multiple of the spread with the labels swapped.
-SWAP_MIN_SPREAD_CUBE = 0.03
-SWAP_RATIO = 4.0
-
-
 def view_check(
     res: fz.FusionResult, ca, cb, intr_a, intr_b, t: np.ndarray, spec: SessionSpec, cfg
 ) -> dict:
@@ -417,14 +412,7 @@ def view_check(
             swapped = fz.rigid_rig_spread_mm(alt)
         except ValueError:
             pass
-    cube = spec.marker.cube_size_mm
-    verdict = "inconclusive"  # e.g. the tip turned too little for either spread to show
-    if np.isfinite(given) and np.isfinite(swapped):
-        least, floor = SWAP_MIN_SPREAD_CUBE * cube, 1e-3 * cube
-        if given > least and given > SWAP_RATIO * max(swapped, floor):
-            verdict = "swapped"
-        elif swapped > least and swapped > SWAP_RATIO * max(given, floor):
-            verdict = "consistent"
+    verdict = fz.view_verdict(given, swapped, spec.marker.cube_size_mm)
     return {"rigid_rig_spread_mm": {"as_labelled": _num(given), "swapped": _num(swapped)},
             "frames": int(sub.size), "verdict": verdict}  # fmt: skip
 

@@ -335,3 +335,35 @@ def rigid_rig_spread_mm(res: FusionResult) -> float:
     d = common_axis_positions(res.t_a, res.t_b, res.R_ba)
     d = d[np.isfinite(d)]
     return float(np.std(d)) if d.size >= 10 else float("nan")
+
+
+#: A labelling is told apart when its rigid-rig spread exceeds this fraction of the cube
+#: edge and this multiple of the other labelling's spread.
+SWAP_MIN_SPREAD_CUBE = 0.03
+SWAP_RATIO = 4.0
+
+
+def view_verdict(as_labelled_mm: float, swapped_mm: float, cube_size_mm: float) -> str:
+    """``swapped``, ``consistent`` or ``inconclusive`` from the two rigid-rig spreads.
+
+    Parameters
+    ----------
+    as_labelled_mm, swapped_mm : float
+        :func:`rigid_rig_spread_mm` with the ``view`` labels as given and swapped (mm).
+    cube_size_mm : float
+
+    Returns
+    -------
+    str
+        ``swapped`` when the labels as given spread by more than 3 % of the cube edge
+        and 4 times the swapped labels; ``consistent`` in the mirror case; else
+        ``inconclusive`` (the tip turned too little, or NaN spreads).
+    """
+    if not (np.isfinite(as_labelled_mm) and np.isfinite(swapped_mm)):
+        return "inconclusive"
+    least, floor = SWAP_MIN_SPREAD_CUBE * cube_size_mm, 1e-3 * cube_size_mm
+    if as_labelled_mm > least and as_labelled_mm > SWAP_RATIO * max(swapped_mm, floor):
+        return "swapped"
+    if swapped_mm > least and swapped_mm > SWAP_RATIO * max(as_labelled_mm, floor):
+        return "consistent"
+    return "inconclusive"

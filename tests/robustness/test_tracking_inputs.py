@@ -202,6 +202,31 @@ def test_header_only_timestamps_checked_before_decoding(session, serial_config, 
     assert_one_line_error(rc, err, "side_timestamps.csv", "frame row(s) below the header")
 
 
+@pytest.mark.parametrize(
+    "scale, needle",
+    [(1000.0, "look like milliseconds: divide by 1000"), (1e9, "look like ms, us or ns")],
+)
+def test_timestamps_not_in_seconds(session, serial_config, capsys, scale, needle):
+    """Camera times exported in ms (or ns) would make every window and gap 1000x off."""
+    p = session / "side_timestamps.csv"
+    ts = pd.read_csv(p)
+    ts["time_s"] *= scale
+    ts.to_csv(p, index=False)
+    rc, _, err = run_cli(capsys, ["track", session, "-c", serial_config])
+    assert_one_line_error(rc, err, "side_timestamps.csv", "time_s must be in seconds", needle)
+    assert not (session / "track").exists()
+
+
+def test_timestamps_header_with_spaces(tmp_path):
+    """'frame, time_s' (a space after the comma, as spreadsheets write) is read."""
+    from i2ris_calib.io.track import read_timestamps
+
+    p = tmp_path / "t.csv"
+    p.write_text("frame, time_s\n0, 0.0\n1, 0.05\n2, 0.1\n")
+    ts = read_timestamps(p)
+    assert ts["time_s"].tolist() == [0.0, 0.05, 0.1] and ts["valid"].all()
+
+
 def _cli_subprocess(args: list[str], **kw) -> subprocess.Popen:
     env = {k: v for k, v in os.environ.items() if not k.startswith("OPENCV_")}
     return subprocess.Popen(

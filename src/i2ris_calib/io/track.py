@@ -29,6 +29,8 @@ from i2ris_calib.tracking.pose import CameraIntrinsics, weak_perspective_intrins
 
 #: Above this fraction of out-of-order timestamps the file is refused (not flagged).
 MAX_NON_MONOTONIC = 0.05
+#: A median frame interval above this (s) means time_s is not in seconds (ms, ns).
+MAX_FRAME_INTERVAL_S = 2.0
 
 
 @dataclass
@@ -162,6 +164,13 @@ def read_timestamps(path: Path) -> pd.DataFrame:
         raise CalibError(
             f"{path}: {int((~valid).sum())} timestamps are not increasing (first at line {first}); "
             "fix the camera clock export"
+        )
+    step = float(np.median(np.diff(t[valid]))) if valid.sum() >= 2 else 0.0
+    if step > MAX_FRAME_INTERVAL_S:
+        unit = "milliseconds: divide by 1000" if step < 2000 else "ms, us or ns"
+        raise CalibError(
+            f"{path}: median frame interval {step:g} 'seconds' ({1 / step:.3g} fps): time_s "
+            f"must be in seconds (the values look like {unit})"
         )
     return pd.DataFrame({"frame": fr.astype(int), "time_s": t, "valid": valid})
 

@@ -8,12 +8,32 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from i2ris_calib.compensation.config import CompensateConfig
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.sync.config import SyncConfig
 from i2ris_calib.tracking.config import TrackingConfig
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Settings of ``run`` itself (TOML section ``[run]``).
+
+    Attributes
+    ----------
+    diagnose : bool
+        Also diagnose every axis and motion direction after ``fit``
+        (outputs in ``<run>/diagnose/<axis><direction>/``, shown by the report).
+    """
+
+    diagnose: bool = False
+
+    def validate(self) -> None:
+        """Raise ValueError on a non-boolean value."""
+        if not isinstance(self.diagnose, bool):
+            raise ValueError("diagnose must be true or false")
 
 
 @dataclass(frozen=True)
@@ -26,3 +46,5 @@ class PipelineConfig:
     fit: FitConfig = field(default_factory=FitConfig)
     diagnose: DiagnosisConfig = field(default_factory=DiagnosisConfig)
     report: ReportConfig = field(default_factory=ReportConfig)
+    compensate: CompensateConfig = field(default_factory=CompensateConfig)
+    run: RunConfig = field(default_factory=RunConfig)

@@ -17,7 +17,7 @@ from typing import Any
 import pandas as pd
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.report.data import DiagnosisData, FitData, RunData
+from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
 
 AXES = ("yaw", "pitch")
 REPORT_FILES = {"report.html", "report.md", "figures", ".stamp.json"}  # stamp: see io/run.py
@@ -228,6 +228,20 @@ def _load_fits(r: _Reader) -> tuple[FitData, ...]:
     return tuple(fits)
 
 
+def _load_compensation(r: _Reader) -> CompensationData | None:
+    """``compensate/`` (optional: only when ``run`` had a ``[compensate] target``)."""
+    if not (r.root / "compensate" / "compensate.json").is_file():
+        return None
+    doc = r.json("compensate/compensate.json")
+    commands = r.csv("compensate/commands.csv", {"time_s": True, "reachable": True})
+    if doc is None or commands is None:
+        return None
+    target = None
+    if (r.root / "compensate" / "target.csv").is_file():
+        target = r.csv("compensate/target.csv", {"time_s": True})
+    return CompensationData(doc=doc, commands=commands, target=target)
+
+
 def _load_diagnoses(r: _Reader) -> tuple[DiagnosisData, ...]:
     root = r.root / "diagnose"
     if not root.is_dir():
@@ -282,6 +296,7 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
     synced = r.csv("sync/synced.csv", SYNCED_COLUMNS)
     fits = _load_fits(r)
     diagnoses = _load_diagnoses(r)
+    compensation = _load_compensation(r)
     run = RunData(
         name=root.resolve().name,
         angles=angles,
@@ -290,12 +305,13 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
         synced=synced,
         fits=fits,
         diagnoses=diagnoses,
+        compensation=compensation,
         absent=dict(r.absent),
     )
     return run, r.read
 
 
-STAGE_FOLDERS = ("track", "sync", "fit", "diagnose")
+STAGE_FOLDERS = ("track", "sync", "fit", "diagnose", "compensate")
 
 
 def _check_is_run_folder(root: Path) -> None:

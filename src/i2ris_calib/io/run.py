@@ -1,4 +1,7 @@
-"""``i2ris-calib run``: track -> sync -> fit -> report for one or more sessions.
+"""``i2ris-calib run``: track -> sync -> fit [-> diagnose] -> report for one or more sessions.
+
+``[run] diagnose = true`` adds a diagnose stage per axis and motion direction
+(``<run>/diagnose/<axis><direction>/``, ``--start auto``), stamped like the others.
 
 Each stage writes its outputs atomically and then a stamp file ``.stamp.json`` in its
 folder recording the SHA-256 of its inputs, its config section and the package
@@ -147,16 +150,128 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
                 fit_files([synced], axis=axis, model="all", out=fit_dir, config=config)
 
         stages.append(Stage(f"fit {axis}", fit_dir, (synced,), config.fit, fit_axis))
+    if config.run.diagnose:
+        directions = ("±",) if config.fit.signed else ("+", "-")
+        for axis in AXES:
+            for direction in directions:
+                out = run_dir / "diagnose" / f"{axis}{direction}"
+
+                def diagnose_one(axis: str = axis, direction: str = direction, out: Path = out):
+                    diagnose_direction(synced, axis, direction, out, config)
+
+                stages.append(
+                    Stage(
+                        f"diagnose {axis}{direction}",
+                        out,
+                        (synced,),
+                        (config.fit, config.diagnose),
+                        diagnose_one,
+                    )
+                )
+    if config.compensate.target:
+        target = compensation_target(session, config.compensate.target)
+        comp_dir = run_dir / "compensate"
+        stages.append(
+            Stage(
+                "compensate",
+                comp_dir,
+                (target, run_dir / "fit"),
+                config.compensate,
+                lambda: compensate_run(run_dir, target, comp_dir, config),
+            )
+        )
     stages.append(
         Stage(
             "report",
             run_dir / "report",
-            (track_dir, sync_dir, run_dir / "fit", run_dir / "diagnose"),
+            (track_dir, sync_dir, run_dir / "fit", run_dir / "diagnose", run_dir / "compensate"),
             config.report,
             lambda: write_report(run_dir, run_dir / "report", config),
         )
     )
     return stages
+
+
+def diagnose_direction(
+    synced: Path, axis: str, direction: str, out: Path, config: PipelineConfig
+) -> None:
+    """The diagnose stage of one axis and direction (``--start auto``).
+
+    Data the diagnosis cannot work with (the axis does not move in this direction,
+    or fewer than the minimum loading cycles, see
+    :func:`~i2ris_calib.diagnosis.workflow.check_dataset`) do not stop the run:
+    ``out/skipped.json`` records why and the report shows the other diagnoses.
+    """
+    from i2ris_calib.diagnosis.workflow import check_dataset
+    from i2ris_calib.io.atomic import atomic_dir
+    from i2ris_calib.io.diagnose import diagnose_dataset
+    from i2ris_calib.io.synced import load_datasets
+
+    try:
+        if not axis_moves(synced, axis):
+            raise CalibError(f"{axis} does not move in {synced}")
+        (dset,) = load_datasets([synced], axis, config.fit, (direction,))[:1]
+        check_dataset(dset, config.diagnose)
+    except CalibError as exc:
+        with atomic_dir(out) as tmp:
+            write_json(
+                tmp / "skipped.json", {"axis": axis, "direction": direction, "reason": str(exc)}
+            )
+        return
+    diagnose_dataset(dset, axis, "auto", out, config, sources=[synced], show_progress=False)
+
+
+def compensation_target(session: Path, target: str) -> Path:
+    """The ``[compensate] target`` file: absolute, or relative to the session folder,
+    else to the current folder; CalibError when it is in neither."""
+    p = Path(target)
+    for cand in [p] if p.is_absolute() else [session / p, p]:
+        if cand.is_file():
+            return cand
+    raise CalibError(
+        f"[compensate] target {target}: file not found in {session} or the current folder; "
+        "give a target CSV (time_s, <axis>_deg; docs/compensate.md)"
+    )
+
+
+def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineConfig) -> None:
+    """Feedforward commands for the target from this run's fits (docs/compensate.md).
+
+    Datasets: ``[compensate] datasets``, else per axis of the target the direction of
+    its median angle (``+`` when >= 0).
+    """
+    import pandas as pd
+
+    from i2ris_calib.io.compensate import compensate_files
+
+    cc = config.compensate
+    datasets = list(cc.datasets)
+    if not datasets:
+        head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns
+        for axis in AXES:
+            if f"{axis}_deg" in head:
+                col = pd.read_csv(target, usecols=[f"{axis}_deg"], skipinitialspace=True)
+                med = float(pd.to_numeric(col.iloc[:, 0], errors="coerce").median())
+                datasets.append(f"{axis}{'+' if not med < 0 else '-'}")
+    fits = [run_dir / "fit" / d[:-1] / "fit.json" for d in datasets]
+    missing = [str(f) for f in fits if not f.is_file()]
+    if missing:
+        raise CalibError(
+            f"[compensate]: no fit for {', '.join(missing)} (the axis did not move in this "
+            "session); remove that axis from the target or from [compensate] datasets"
+        )
+    compensate_files(
+        fits,
+        datasets,
+        target,
+        out_dir / "commands.csv",
+        config=config,
+        model=cc.model or None,
+        max_counts_per_s=cc.max_counts_per_s or None,
+    )
+    from i2ris_calib.io.atomic import write_bytes
+
+    write_bytes(out_dir / "target.csv", target.read_bytes())  # the target as used, for the report
 
 
 def run_one_session(

@@ -16,7 +16,7 @@ import pandas as pd
 
 from i2ris_calib.report import figures, tables
 from i2ris_calib.report.config import ReportConfig
-from i2ris_calib.report.data import DiagnosisData, FitData, RunData
+from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
 from i2ris_calib.report.document import (
     Code,
     Document,
@@ -65,6 +65,8 @@ def build_document(
     ]
     if run.diagnoses:
         builders.append(("diagnosis", lambda: diagnosis_section(run.diagnoses)))
+    if run.compensation is not None:
+        builders.append(("compensation", lambda: compensation_section(run.compensation, cfg)))
     builders += [
         ("tracking quality", lambda: tracking_section(run, cfg)),
         ("clock sync", lambda: sync_section(run, cfg)),
@@ -84,7 +86,7 @@ def build_document(
 
 def section_count(run: RunData) -> int:
     """Number of top-level sections (= progress calls) :func:`build_document` makes."""
-    return 8 if run.diagnoses else 7
+    return 7 + bool(run.diagnoses) + (run.compensation is not None)
 
 
 def _missing(run: RunData, label: str) -> Note:
@@ -505,3 +507,50 @@ def _slug(text: str) -> str:
     if text[-1:] in suffix:
         text = text[:-1] + suffix[text[-1]]
     return re.sub(r"[^a-z0-9_]+", "_", text.lower()).strip("_") or "x"
+
+
+def compensation_section(comp: CompensationData, cfg: ReportConfig) -> Section:
+    """Feedforward compensation (``[compensate] target``): commands from the inverse of
+    the fitted model, the angle the model predicts for them, unreachable samples."""
+    axes_doc = comp.doc.get("axes", {})
+    rows = []
+    for axis, a in axes_doc.items():
+        un = a.get("unreachable", {})
+        why = ", ".join(f"{k} {v}" for k, v in un.items() if v) or "-"
+        rows.append(
+            (
+                axis,
+                str(a.get("dataset", "?")),
+                str(a.get("model", "?")),
+                tables.fmt(a.get("rmse_deg"), 3),
+                tables.fmt(a.get("max_abs_err_deg"), 3),
+                f"{a.get('n_unreachable', 0)} of {a.get('n_samples', 0)} ({why})",
+            )
+        )
+    blocks: list = [
+        Paragraph(
+            "Motor commands that make the fitted model follow the target angle (exact "
+            "inversion of the stateful model, sample by sample; docs/compensate.md). The "
+            "error is the model's, not a measurement: run the commands on the robot and "
+            "track the result to measure the achieved angle."
+        ),
+        Table(
+            ("axis", "dataset", "model", "RMSE (deg)", "max |error| (deg)", "unreachable"),
+            tuple(rows),
+            "Predicted angle vs target for the commands in compensate/commands.csv.",
+        ),
+    ]
+    axes = [a for a in axes_doc if f"enc_{a}" in comp.commands]
+    if axes:
+        png = figures.compensation_figure_png(
+            comp.commands, comp.target, axes, dpi=cfg.figure_dpi, max_points=cfg.max_plot_points
+        )
+        blocks.append(
+            Figure(
+                "compensation",
+                png,
+                "Target and predicted angle, their difference with unreachable samples "
+                "marked x, and the motor command over time.",
+            )
+        )
+    return Section("compensation", "Feedforward compensation", tuple(blocks))

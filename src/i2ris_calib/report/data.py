@@ -62,6 +62,26 @@ class DiagnosisData:
 
 
 @dataclass(frozen=True)
+class CompensationData:
+    """The ``compensate/`` folder written by ``run`` with a ``[compensate] target``.
+
+    Attributes
+    ----------
+    doc : dict
+        Parsed ``compensate.json`` (schema ``i2ris-calib.compensate/1``).
+    commands : DataFrame
+        ``commands.csv``: time_s (s), enc_<axis> (counts), predicted_<axis>_deg (deg),
+        reachable (0/1).
+    target : DataFrame or None
+        ``target.csv``: the target as given (time_s, <axis>_deg).
+    """
+
+    doc: dict[str, Any]
+    commands: pd.DataFrame
+    target: pd.DataFrame | None = None
+
+
+@dataclass(frozen=True)
 class RunData:
     """Everything the report shows, read from one run folder.
 
@@ -81,6 +101,8 @@ class RunData:
         One per ``fit/<axis>/fit.json`` found, yaw first, then pitch, then others by name.
     diagnoses : tuple of DiagnosisData
         One per ``diagnose/<axis>/diagnosis.json`` found.
+    compensation : CompensationData or None
+        ``compensate/`` when ``run`` was given a target.
     absent : dict
         Input label (e.g. ``"track/angles.csv"``) -> reason it is not shown.
     """
@@ -92,4 +114,5 @@ class RunData:
     synced: pd.DataFrame | None = None
     fits: tuple[FitData, ...] = ()
     diagnoses: tuple[DiagnosisData, ...] = ()
+    compensation: CompensationData | None = None
     absent: dict[str, str] = field(default_factory=dict)

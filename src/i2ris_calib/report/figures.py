@@ -460,3 +460,51 @@ def synced_figure_png(synced: pd.DataFrame, dpi: int = 100, max_points: int = 20
             ax.text(0.5, 0.8, f"{axis} encoder did not move", ha="center", transform=ax.transAxes)
         ax.grid(True, lw=0.4, alpha=0.5)
     return figure_png(fig, dpi)
+
+
+def compensation_figure_png(
+    commands: pd.DataFrame,
+    target: pd.DataFrame | None,
+    axes: list[str],
+    dpi: int = 100,
+    max_points: int = 20000,
+) -> bytes:
+    """Feedforward compensation per axis: target and predicted angle (top), error
+    (middle), motor command (bottom); unreachable samples marked.
+
+    Parameters
+    ----------
+    commands : DataFrame
+        compensate/commands.csv: ``time_s`` (s), ``enc_<axis>`` (counts),
+        ``predicted_<axis>_deg`` (deg), ``reachable`` (0/1).
+    target : DataFrame or None
+        The target (``time_s``, ``<axis>_deg``), same times as ``commands``.
+    axes : list of str
+        Axes to draw (``"yaw"``, ``"pitch"``).
+    """
+    fig = _new_figure(7.0 * len(axes), 6.0)
+    grid = fig.subplots(3, len(axes), sharex=True, squeeze=False)
+    step = thinning_step(len(commands), max_points)
+    t = commands["time_s"].to_numpy()[::step]
+    bad = commands["reachable"].to_numpy()[::step] == 0
+    for j, axis in enumerate(axes):
+        ax_a, ax_e, ax_c = grid[0, j], grid[1, j], grid[2, j]
+        pred = commands[f"predicted_{axis}_deg"].to_numpy()[::step]
+        if target is not None and f"{axis}_deg" in target:
+            tgt = target[f"{axis}_deg"].to_numpy()[::step]
+            ax_a.plot(t, tgt, "-", lw=1.2, color=MEASURED_COLOR, label="target")
+            ax_e.plot(t, pred - tgt, "-", lw=0.8, color="0.2")
+            if bad.any():
+                ax_e.plot(
+                    t[bad], (pred - tgt)[bad], "x", ms=3, color="tab:red", label="unreachable"
+                )
+                ax_e.legend(loc="upper right", fontsize=7)
+        ax_a.plot(t, pred, "-", lw=0.9, color="tab:blue", label="predicted (model)")
+        ax_a.set_ylabel(f"{axis} angle (deg)")
+        ax_a.legend(loc="upper right", fontsize=7)
+        ax_a.set_title(f"{axis}: feedforward compensation")
+        ax_e.set_ylabel("predicted - target (deg)")
+        ax_c.plot(t, commands[f"enc_{axis}"].to_numpy()[::step], "-", lw=0.9, color="0.1")
+        ax_c.set_ylabel(f"command enc_{axis} (counts)")
+        ax_c.set_xlabel("time (s)")
+    return figure_png(fig, dpi)

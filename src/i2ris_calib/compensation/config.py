@@ -1,0 +1,50 @@
+"""Configuration of feedforward compensation in ``run`` (TOML section ``[compensate]``,
+see docs/compensate.md)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+_KINDS = ("", "gpi", "egpi", "egpi_c", "diagnosed")
+_DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
+
+
+@dataclass(frozen=True)
+class CompensateConfig:
+    """Settings of the compensation stage of ``run``. Units are in the field names.
+
+    Attributes
+    ----------
+    target : str
+        Target CSV (``time_s``, ``<axis>_deg``; docs/compensate.md). Empty: no
+        compensation stage. A relative path is looked up in the session folder first,
+        then in the current folder.
+    datasets : tuple of str
+        Which fitted direction inverts each axis of the target (``"yaw+"``, ...). Empty:
+        per axis in the target, ``"+"`` when the target's median angle is >= 0, else
+        ``"-"``.
+    model : str
+        ``gpi``, ``egpi``, ``egpi_c`` or ``diagnosed``; empty: the dataset's model with
+        the lowest held-out RMSE.
+    max_counts_per_s : float
+        Motor rate limit (counts/s); 0: none.
+    """
+
+    target: str = ""
+    datasets: tuple[str, ...] = ()
+    model: str = ""
+    max_counts_per_s: float = 0.0
+
+    def validate(self) -> None:
+        """Raise ValueError on inconsistent settings."""
+        if self.model not in _KINDS:
+            raise ValueError(
+                f"model '{self.model}' is not one of {', '.join(_KINDS[1:])} (or empty)"
+            )
+        bad = [d for d in self.datasets if d not in _DATASETS]
+        if bad:
+            raise ValueError(f"datasets: unknown {bad}; use {', '.join(_DATASETS)}")
+        if len({d[:-1] for d in self.datasets}) != len(self.datasets):
+            raise ValueError("datasets: at most one direction per axis")
+        if self.max_counts_per_s < 0:
+            raise ValueError("max_counts_per_s must be >= 0 (0 = no limit)")

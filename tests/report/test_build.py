@@ -252,3 +252,32 @@ def test_missing_axis_that_does_not_move_is_explained(run_data):
         "fit/pitch/fit.json: not found (its encoder does not move in sync/synced.csv); "
         "this axis is not shown."
     ]
+
+
+def test_stage_warnings_are_listed_in_the_overview():
+    """Warnings recorded by track, sync and fit reach the report's overview."""
+    from i2ris_calib.report.build import overview_section, run_warnings
+    from i2ris_calib.report.data import FitData, RunData
+
+    fit = {
+        "schema": "i2ris-calib.fit/1",
+        "axis": "yaw",
+        "datasets": [
+            {
+                "name": "yaw+",
+                "models": {
+                    "gpi": {"warnings": ["the model explains only 3 % of the angle's variance"]}
+                },
+            }
+        ],
+    }
+    run = RunData(
+        name="r",
+        track={"warnings": ["top: 12 dropped frames"]},
+        sync={"warnings": ["yaw_deg follows enc_pitch"]},
+        fits=(FitData(axis="yaw", fit=fit),),
+    )
+    w = run_warnings(run)
+    assert [x[0] for x in w] == ["track", "sync", "fit"]
+    texts = " ".join(str(b) for b in overview_section(run).blocks)
+    assert "3 warning(s)" in texts and "explains only 3 %" in texts

@@ -125,7 +125,34 @@ def overview_section(run: RunData) -> Section:
     headline = _headline(run.fits)
     if headline is not None:
         blocks.append(headline)
+    warned = run_warnings(run)
+    if warned:
+        blocks.append(
+            Note(
+                f"{len(warned)} warning(s): results that may be wrong although every stage "
+                "finished. Read them before using the numbers below.",
+                "warn",
+            )
+        )
+        blocks.append(
+            Table(("stage", "where", "warning"), tuple(warned), "Warnings of every stage.")
+        )
     return Section("overview", "Overview", tuple(blocks))
+
+
+def run_warnings(run: RunData) -> list[tuple[str, str, str]]:
+    """(stage, where, text) of every warning the stages recorded: ``warnings`` in
+    track.json and sync.json, each fitted model's ``warnings`` in fit.json."""
+    out: list[tuple[str, str, str]] = []
+    for stage, doc, where in (("track", run.track, "track.json"), ("sync", run.sync, "sync.json")):
+        for w in (doc or {}).get("warnings", []) or []:
+            out.append((stage, where, w if isinstance(w, str) else json.dumps(w)))
+    for fd in run.fits:
+        for d in tables.fit_datasets(fd.fit):
+            for kind, rec in d.get("models", {}).items():
+                for w in rec.get("warnings", []) or []:
+                    out.append(("fit", f"{d.get('name', fd.axis)} {kind}", str(w)))
+    return out
 
 
 def _headline(fits: tuple[FitData, ...]) -> Table | None:

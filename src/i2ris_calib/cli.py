@@ -191,7 +191,11 @@ def paper_sim(out: Path = typer.Option(..., "--out", "-o", help="Output folder."
 def diagnose(
     data: Path = typer.Argument(..., help="Synced CSV with both axes."),
     axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
-    start: str = typer.Option("egpi", "--start", help="Starting model: gpi or egpi."),
+    start: str = typer.Option(
+        "auto",
+        "--start",
+        help="Starting model: auto (from gpi and from egpi, one reconciled answer), gpi or egpi.",
+    ),
     out: Path = typer.Option(Path("diagnose_out"), "--out", "-o", help="Output folder."),
     direction: str = typer.Option(
         "auto", "--direction", help="Motion direction: + , - or auto (the one with more samples)."

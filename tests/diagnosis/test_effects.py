@@ -58,8 +58,8 @@ def test_with_values_round_trip_and_stacking(egpi):
     m2 = m.with_values(x)
     assert effects_of(m2)[-1][2] == {"gain": 0.2, "tau_s": 2.0}
     assert effects_of(m)[-1][2]["tau_s"] == 1.0  # original unchanged
-    twice = add_effect(add_effect(egpi, "dead_zone", {"width_counts": 10.0}), "dead_zone")
-    assert twice.parameters[-1].name == "dead_zone_2.width_counts"
+    twice = add_effect(add_effect(egpi, "backlash", {"width_counts": 10.0}), "backlash")
+    assert twice.parameters[-1].name == "backlash_2.width_counts"
 
 
 def test_build_model_rejects_bad_names_and_values(egpi):
@@ -125,9 +125,9 @@ def test_saturation_flattens_only_beyond_the_knee(linear):
     np.testing.assert_allclose(y, -y[::-1])
 
 
-def test_dead_zone_holds_output_after_a_reversal(linear):
+def test_backlash_holds_output_after_a_reversal(linear):
     v = np.concatenate([np.arange(0, 1001, 10.0), np.arange(990, 0, -10.0)])
-    m = build_model(linear, {"dead_zone": {"width_counts": 200.0}})
+    m = build_model(linear, {"backlash": {"width_counts": 200.0}})
     y = m.evaluate(Signals(v=v), model_values(m))
     top = int(np.argmax(v))
     # after the reversal the input travels 200 counts before the output moves
@@ -136,18 +136,56 @@ def test_dead_zone_holds_output_after_a_reversal(linear):
     assert y[top:][v[top:] < 790.0].max() < y[top]
 
 
-def test_rate_dependence_width_follows_speed_and_holds_in_pauses(linear):
+def test_dead_zone_is_the_tao_kokotovic_dead_band(linear):
+    """No motion until |v| > d, then the model of v - d, rising or falling, with no
+    memory of the last reversal (unlike backlash)."""
+    v = np.concatenate([np.arange(0, 1001, 10.0), np.arange(990, -1001, -10.0)])
+    m = build_model(linear, {"dead_zone": {"d_counts": 300.0}})
+    y = m.evaluate(Signals(v=v), model_values(m))
+    expect = 0.01 * np.sign(v) * np.maximum(np.abs(v) - 300.0, 0.0)
+    np.testing.assert_allclose(y, expect)
+    assert np.all(y[np.abs(v) <= 300.0] == 0.0)
+
+
+def test_rate_dependent_thresholds_widen_with_speed_and_relax_at_rest(linear):
     t = np.arange(0, 12, 0.01)
     knots_t = [0, 1, 3, 5, 6, 12]
     knots_v = [0, 0, 1000, 1000, 3000, 3000]  # 500 counts/s, pause, 2000 counts/s, pause
     v = np.interp(t, knots_t, knots_v)
-    eff = CATALOGUE["rate_dependence"]
-    h = eff.half_width_counts(Signals(v=v, t_s=t), np.array([0.1]))
-    mid_slow = (t > 1.5) & (t < 2.5)
-    mid_fast = (t > 5.3) & (t < 5.7)
-    np.testing.assert_allclose(h[mid_slow], 50.0, rtol=1e-6)
-    np.testing.assert_allclose(h[mid_fast], 200.0, rtol=1e-6)
-    np.testing.assert_allclose(h[(t > 7) & (t < 12)], h[(t > 5.5) & (t < 5.7)].mean(), rtol=0.05)
+    eff = CATALOGUE["rate_dependent_thresholds"]
+    sig = Signals(v=v, t_s=t)
+    h = eff.half_width(sig, np.array([0.1]))
+    np.testing.assert_allclose(h[(t > 1.5) & (t < 2.5)], 50.0, rtol=1e-6)
+    np.testing.assert_allclose(h[(t > 5.3) & (t < 5.7)], 200.0, rtol=1e-6)
+    assert np.all(h[(t > 6.2)] == 0.0)  # thresholds fall back at rest
+    m = build_model(linear, {"rate_dependent_thresholds": {"beta_s": 0.1}})
+    y = m.evaluate(sig, model_values(m))
+    # while moving the output lags by the widened threshold, at rest it catches up
+    np.testing.assert_allclose(y[(t > 5.3) & (t < 5.7)], 0.01 * (v - 200.0)[(t > 5.3) & (t < 5.7)])
+    np.testing.assert_allclose(y[t > 6.2], 30.0)
+
+
+def test_rate_dependent_weights_scale_the_output_with_speed(linear):
+    t = np.arange(0, 12, 0.01)
+    v = np.interp(t, [0, 1, 3, 5, 6, 12], [0, 0, 1000, 1000, 3000, 3000])
+    m = build_model(linear, {"rate_dependent_weights": {"gain": 0.2}})
+    y = m.evaluate(Signals(v=v, t_s=t), model_values(m))
+    fast = (t > 5.3) & (t < 5.7)  # the 95th-percentile speed: gain 1.2
+    np.testing.assert_allclose(y[fast], 1.2 * 0.01 * v[fast], rtol=1e-6)
+    slow = (t > 1.5) & (t < 2.5)  # a quarter of that speed
+    np.testing.assert_allclose(y[slow], 1.05 * 0.01 * v[slow], rtol=1e-6)
+    np.testing.assert_allclose(y[t > 6.2], 30.0)
+
+
+def test_log_creep_gains_the_same_per_decade_after_a_step(linear):
+    t = np.arange(0, 400, 0.01)
+    v = np.where(t >= 1.0, 1000.0, 0.0)  # 10 deg step at t = 1 s
+    m = build_model(linear, {"creep_log": {"gamma_per_decade": 0.05, "tau0_s": 0.1}})
+    y = m.evaluate(Signals(v=v, t_s=t), model_values(m))
+    at = [np.interp(1.0 + dt, t, y) for dt in (1.0, 10.0, 100.0)]
+    # 0.05 x 10 deg = 0.5 deg per decade (within the ripple of 2 relaxation times/decade)
+    np.testing.assert_allclose(np.diff(at), 0.5, rtol=0.15)
+    assert np.all(np.diff(y[t > 1.0]) >= 0)
 
 
 def test_axis_coupling_adds_the_other_angle(linear):

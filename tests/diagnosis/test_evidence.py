@@ -139,3 +139,21 @@ def test_markdown_section_from_a_record():
         r for r in md.splitlines() if r.startswith("| creep |") or r.startswith("| axis_coupling |")
     ]
     assert len({r.count("|") for r in rows}) == 1  # skipped rows keep the table's columns
+
+
+def test_verdict_names_the_open_alternatives_with_z_and_experiment():
+    from i2ris_calib.diagnosis.report import step_verdict
+    from i2ris_calib.diagnosis.workflow import Alternative, separating_experiment
+
+    open_ = Alternative("backlash", 0.21, 0.8, 0.21, False, {"width_counts": 90.0})
+    shut = Alternative("creep", 0.35, 6.0, 1e-9, True, {"gain": 0.1, "tau_s": 1.0})
+    text = step_verdict("dead_zone", (open_, shut))
+    assert text.startswith("dead_zone; backlash not excluded, z = 0.8")
+    assert "creep" not in text
+    assert step_verdict("dead_zone", (shut,)).endswith("left open by the held-out cycles")
+    exp = separating_experiment("time_delay", "rate_dependent_thresholds")
+    assert exp and exp == separating_experiment("rate_dependent_thresholds", "time_delay")
+    with_exp = step_verdict(
+        "time_delay", (Alternative("rate_dependent_thresholds", 0.2, 1.1, 0.14, False, {}, exp),)
+    )
+    assert "to separate rate_dependent_thresholds: a slow and a fast ramp" in with_exp

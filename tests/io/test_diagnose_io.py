@@ -11,10 +11,10 @@ import pytest
 from i2ris_calib.cli import main
 
 
-def _synced_csv(path, effect="time_delay", params=None, seed=3):
+def _synced_csv(path, effect="time_delay", params=None, seed=3, n_cycles=8):
     from i2ris_calib.diagnosis.synthetic import make_case
 
-    case = make_case(seed, effect, params or {"tau_s": 0.2}, noise_deg=0.15)
+    case = make_case(seed, effect, params or {"tau_s": 0.2}, noise_deg=0.15, n_cycles=n_cycles)
     s = case.signals
     df = pd.DataFrame(
         {
@@ -288,3 +288,58 @@ def test_one_cycle_is_refused_stating_the_real_minimum(tmp_path, capsys):
     assert rc == 2 and "\n" not in err
     assert "only 1 loading cycle" in err and "at least 2 loading cycles" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_run_diagnose_stage_writes_what_the_report_reads(tmp_path):
+    """`[run] diagnose = true`: one stage per axis and direction under
+    <run>/diagnose/<axis><direction>/; a direction without motion is skipped with
+    its reason, and the report's loader picks the diagnosis up."""
+    from i2ris_calib.config import PipelineConfig
+    from i2ris_calib.diagnosis.config import DiagnosisConfig
+    from i2ris_calib.io.report import load_run
+    from i2ris_calib.io.run import diagnose_direction, session_stages
+
+    run = tmp_path / "run"
+    csv = run / "sync" / "synced.csv"
+    csv.parent.mkdir(parents=True)
+    _synced_csv(csv, n_cycles=4)
+    cfg = PipelineConfig(
+        diagnose=DiagnosisConfig(candidates=("time_delay", "creep"), max_steps=1, max_samples=1500)
+    )
+    diagnose_direction(csv, "yaw", "+", run / "diagnose" / "yaw+", cfg)
+    diagnose_direction(csv, "yaw", "-", run / "diagnose" / "yaw-", cfg)
+    rec = json.loads((run / "diagnose" / "yaw+" / "diagnosis.json").read_text())
+    assert rec["start"] == "auto" and set(rec["paths"]) == {"gpi", "egpi"}
+    assert rec["named_effects"] == ["time_delay"]
+    skipped = json.loads((run / "diagnose" / "yaw-" / "skipped.json").read_text())
+    assert "yaw" in skipped["reason"] and skipped["direction"] == "-"
+    data, _ = load_run(run)
+    assert [d.axis for d in data.diagnoses] == ["yaw+"]
+    assert "time_delay" in data.diagnoses[0].markdown
+    # the stages exist only when asked for, after the fits and before the report
+    session = tmp_path / "session"
+    session.mkdir()
+    names = [s.name for s in session_stages(session, run, PipelineConfig())]
+    assert not any(n.startswith("diagnose") for n in names)
+    on = PipelineConfig(run=type(PipelineConfig().run)(diagnose=True))
+    names = [s.name for s in session_stages(session, run, on)]
+    diag = [n for n in names if n.startswith("diagnose")]
+    assert diag == ["diagnose yaw+", "diagnose yaw-", "diagnose pitch+", "diagnose pitch-"]
+    assert names.index(diag[0]) > names.index("fit pitch") and names[-1] == "report"
+
+
+def test_run_section_is_validated(tmp_path):
+    from i2ris_calib.errors import CalibError
+    from i2ris_calib.io.config_io import load_config
+
+    good = tmp_path / "good.toml"
+    good.write_text("[run]\ndiagnose = true\n")
+    assert load_config(good).run.diagnose is True
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[run]\ndiagnose = "yes"\n')
+    with pytest.raises(CalibError, match="diagnose"):
+        load_config(bad)
+    typo = tmp_path / "typo.toml"
+    typo.write_text("[run]\ndiagnoze = true\n")
+    with pytest.raises(CalibError, match="did you mean 'diagnose'"):
+        load_config(typo)

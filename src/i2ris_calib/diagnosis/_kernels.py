@@ -106,32 +106,3 @@ def first_order_lag(y, t, tau):
         a = 1.0 - np.exp(-(t[k] - t[k - 1]) / tau)
         x[k] = x[k - 1] + a * (y[k] - x[k - 1])
     return x
-
-
-@njit(cache=True)
-def held_speed(speed, threshold):
-    """Peak speed of the current movement, held while the input stops.
-
-    A movement is a run of samples with ``speed > threshold``; within it the
-    output is the running maximum of ``speed``; between movements it keeps the
-    last movement's peak (``0`` before the first).
-
-    Parameters
-    ----------
-    speed : ndarray, shape (n,)
-        Input speed (counts/s), >= 0.
-    threshold : float
-        Speed below which the input counts as stopped (counts/s).
-    """
-    n = speed.shape[0]
-    out = np.empty(n)
-    cur = 0.0
-    moving = False
-    for k in range(n):
-        if speed[k] > threshold:
-            cur = max(cur, speed[k]) if moving else speed[k]
-            moving = True
-        else:
-            moving = False
-        out[k] = cur
-    return out

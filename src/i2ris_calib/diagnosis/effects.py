@@ -13,7 +13,10 @@ the wrapped one exactly (zero width, zero gain, zero delay, knee beyond the
 range); the diagnosis starts candidates there or on a small grid around it.
 
 The catalogue is not in the paper (Yue et al. list yaw-pitch coupling as future
-work); each formula below is our choice and is documented in docs/diagnosis.md.
+work); each entry is the standard form the literature gives the effect's name,
+with references in docs/diagnosis.md. Where a name covers two forms, both are
+entries (``dead_zone`` and ``backlash``; ``rate_dependent_thresholds`` and
+``rate_dependent_weights``; ``creep`` and ``creep_log``).
 """
 
 from __future__ import annotations
@@ -113,15 +116,6 @@ def _span(a: np.ndarray) -> float:
     return s if s > 0 else 1.0
 
 
-def _rate(signals: Signals) -> np.ndarray:
-    """Input rate dv/dt (counts/s), shape (n,), central differences."""
-    v = np.asarray(signals.v, float)
-    t = np.asarray(signals.t_s, float)
-    if v.size < 2:
-        return np.zeros_like(v)
-    return np.gradient(v, t)
-
-
 @dataclass(frozen=True)
 class MultiStageBacklash(Effect):
     """One more backlash stage engaged below a flag point on falling input."""
@@ -162,7 +156,13 @@ class MultiStageBacklash(Effect):
 
 @dataclass(frozen=True)
 class AxisCoupling(Effect):
-    """The other axis's angle and input add linearly to this axis's angle."""
+    """Yaw-pitch coupling: the other axis's angle and its tendon input add linearly.
+
+    ``y_c = y + k_theta theta_other + k_v v_other``: coupling through the other
+    bending angle (the shared backbone bends both ways) and through the other
+    tendon input (its pull loads this axis's sheath), the two paths Yue et al.
+    name as future work. The fitted gains tell which path carries it.
+    """
 
     name: str = "axis_coupling"
     params: tuple[EffectParam, ...] = (
@@ -220,66 +220,134 @@ class TimeDelay(Effect):
 
 
 @dataclass(frozen=True)
-class RateDependence(Effect):
-    """Backlash whose width grows with the speed of the current stroke."""
+class RateDependentThresholds(Effect):
+    """Play thresholds that grow with the input speed (rate-dependent PI).
 
-    name: str = "rate_dependence"
+    Al Janaideh and Krejci's rate-dependent Prandtl-Ishlinskii model raises every
+    play threshold by the same speed term, ``r_i(t) = r_i + beta |dv/dt|``. A play
+    of threshold ``r + c`` equals a play of ``c`` followed by a play of ``r``, so
+    the common term is applied as a play on the input with half-width
+    ``beta * |dv/dt|`` (the speed over the last ``RATE_WINDOW_S``), ahead of the
+    base model's own rate-independent thresholds. The model's threshold-0 part
+    (a linear term ``a v``) has no threshold to widen; as
+    ``a v = a u + a (v - u)`` with ``u`` the played input, it is restored by the
+    term ``linear_deg_per_count * (v - u)``. When the input stops, the thresholds
+    fall back and the output catches up at once (a delay catches up over its delay
+    instead).
+    """
+
+    name: str = "rate_dependent_thresholds"
     params: tuple[EffectParam, ...] = (
         EffectParam(
-            "gain_s",
+            "beta_s",
             0.0,
             0.0,
-            10.0,
+            5.0,
             "s",
-            "backlash half-width (counts) per count/s of stroke speed",
+            "threshold increase (input units) per input unit/s of speed",
+        ),
+        EffectParam(
+            "linear_deg_per_count",
+            0.0,
+            -1.0,
+            1.0,
+            "deg/count",
+            "slope of the rate-independent (threshold-0) part, which does not widen",
         ),
     )
-    meaning: str = "viscous friction: faster strokes leave a wider backlash"
+    meaning: str = (
+        "rate-dependent hysteresis: the play thresholds widen with the input speed "
+        "(viscous friction of the tendon in its sheath)"
+    )
     needs: tuple[str, ...] = ("t_s",)
 
-    def half_width_counts(self, signals: Signals, p: np.ndarray) -> np.ndarray:
-        """Backlash half-width ``h = gain_s * S`` (counts), shape (n,).
+    def half_width(self, signals: Signals, p: np.ndarray) -> np.ndarray:
+        """Half-width ``beta_s * |dv/dt|`` (input units), shape (n,)."""
+        return float(p[0]) * _speed(signals, RATE_WINDOW_S)
 
-        ``S`` is the peak input speed of the current movement (running maximum
-        of the speed over the last 0.2 s, counts/s), held while the input stops
-        (speed below 5 % of its 95th percentile).
-        """
-        from i2ris_calib.diagnosis._kernels import held_speed
-
-        return float(p[0]) * held_speed(*_stroke_speed(signals))
-
-    def transform_input(self, signals, p):
+    def _played(self, signals: Signals, p: np.ndarray) -> np.ndarray:
         from i2ris_calib.diagnosis._kernels import play_varying
 
         v = np.ascontiguousarray(signals.v, dtype=float)
-        return replace(signals, v=play_varying(v, self.half_width_counts(signals, p)))
+        return play_varying(v, self.half_width(signals, p))
+
+    def transform_input(self, signals, p):
+        return replace(signals, v=self._played(signals, p))
+
+    def transform_output(self, y, signals, p):
+        if p[1] == 0.0:
+            return y
+        v = np.asarray(signals.v, dtype=float)
+        return np.asarray(y, float) + float(p[1]) * (v - self._played(signals, p))
 
     def start_grid(self, signals, y_deg):
-        s95 = float(np.quantile(np.abs(_rate(signals)), 0.95)) or 1.0
-        span = _span(signals.v)
-        return [np.array([f * span / s95]) for f in (0.003, 0.007, 0.015, 0.03, 0.06)]
+        slope = _span(y_deg) / _span(signals.v)
+        return [np.array([b, f * slope]) for b in (0.02, 0.05, 0.1, 0.2, 0.4) for f in (0.0, 0.4)]
 
 
-SPEED_WINDOW_S = 0.2
+@dataclass(frozen=True)
+class RateDependentWeights(Effect):
+    """Operator weights that grow (or shrink) with the input speed.
 
-
-def _stroke_speed(signals: Signals) -> tuple[np.ndarray, float]:
-    """Input speed over the last ``SPEED_WINDOW_S`` seconds (counts/s), shape (n,),
-    and the 'moving' threshold (5 % of its 95th percentile).
-
-    ``|v(t) - v(t - w)| / w`` with ``v`` interpolated in time, so the estimate does
-    not depend on the sampling rate (the diagnosis may decimate the signal).
+    The rate-dependent density of a Prandtl-Ishlinskii model (Al Janaideh, Rakheja
+    and Su): ``y = sum_i w_i(dv/dt) F_ri[v]``. With a common speed factor,
+    ``w_i(s) = w_i (1 + g s / S)``, the whole output scales:
+    ``y (1 + g |dv/dt| / S)`` with ``S`` the 95th percentile of the input speed
+    (so ``g`` is the relative gain at a typical fast stroke).
     """
+
+    name: str = "rate_dependent_weights"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "gain",
+            0.0,
+            -0.5,
+            1.0,
+            "1",
+            "relative change of the output at the 95th-percentile input speed",
+        ),
+    )
+    meaning: str = "rate-dependent weights: the output gain changes with the input speed"
+    needs: tuple[str, ...] = ("t_s",)
+
+    def transform_output(self, y, signals, p):
+        s = _speed(signals, RATE_WINDOW_S)
+        ref = float(np.quantile(s, 0.95)) if s.size else 0.0
+        if ref <= 0:
+            return np.asarray(y, float)
+        return np.asarray(y, float) * (1.0 + float(p[0]) * s / ref)
+
+    def start_grid(self, signals, y_deg):
+        return [np.array([g]) for g in (-0.1, 0.05, 0.15, 0.3)]
+
+
+#: Window (s) of the input speed used by the rate-dependent effects.
+RATE_WINDOW_S = 0.1
+
+
+def _speed(signals: Signals, window_s: float) -> np.ndarray:
+    """|dv/dt| (input units/s), shape (n,): the centred difference over ``window_s``,
+    with ``v`` interpolated in time so the estimate does not depend on the sampling
+    rate (the diagnosis may decimate the signal)."""
     t = np.asarray(signals.t_s, float)
     v = np.asarray(signals.v, float)
-    speed = np.abs(v - np.interp(t - SPEED_WINDOW_S, t, v)) / SPEED_WINDOW_S
-    thr = 0.05 * float(np.quantile(speed, 0.95)) if speed.size else 0.0
-    return np.ascontiguousarray(speed), thr
+    if v.size < 2:
+        return np.zeros_like(v)
+    h = 0.5 * window_s
+    hi = np.minimum(t + h, t[-1])
+    lo = np.maximum(t - h, t[0])
+    dt = np.where(hi > lo, hi - lo, 1.0)
+    return np.ascontiguousarray(np.abs(np.interp(hi, t, v) - np.interp(lo, t, v)) / dt)
 
 
 @dataclass(frozen=True)
 class Creep(Effect):
-    """Slow first-order relaxation of part of every output change."""
+    """Slow first-order relaxation of part of every output change.
+
+    ``y_c = (1 - g) y + g L_tau[y]`` with ``L_tau`` a first-order lag: a fraction
+    ``g`` of every output change arrives with time constant ``tau`` (one Kelvin-Voigt
+    element, the standard linear solid of visco-elastic creep).
+    """
 
     name: str = "creep"
     params: tuple[EffectParam, ...] = (
@@ -293,7 +361,7 @@ class Creep(Effect):
         ),
         EffectParam("tau_s", 1.0, 0.3, 100.0, "s", "time constant of the slow part (>= 0.3 s)"),
     )
-    meaning: str = "visco-elastic creep of tendons and sheath while the input holds"
+    meaning: str = "first-order creep: part of every move arrives with one time constant"
     needs: tuple[str, ...] = ("t_s",)
 
     def transform_output(self, y, signals, p):
@@ -307,11 +375,107 @@ class Creep(Effect):
         return [np.array([g, tau]) for g in (0.05, 0.15, 0.3) for tau in (0.4, 0.8, 1.5, 3.0, 6.0)]
 
 
+#: Relaxation times of the logarithmic creep per decade, and its decades.
+LOG_CREEP_PER_DECADE = 2
+LOG_CREEP_DECADES = 4
+
+
+@dataclass(frozen=True)
+class LogCreep(Effect):
+    """Logarithmic creep: after a step the output keeps drifting by a fixed
+    fraction per decade of time.
+
+    The creep law of piezo actuators and polymers (e.g. Jung and Gweon; Changhai
+    and Lining): after an output step ``dy`` at ``t0``, ``y(t) = y1 +
+    gamma dy log10((t - t0) / tau0)``. Written as relaxation times spread evenly
+    in ``log tau`` (``LOG_CREEP_PER_DECADE`` per decade over
+    ``LOG_CREEP_DECADES`` decades from ``tau0``), each carrying
+    ``gamma / LOG_CREEP_PER_DECADE`` of the change:
+    ``y_c = y - gamma / m * sum_j (y - L_tau_j[y])``, so between ``tau0`` and
+    ``10^4 tau0`` the response to a step grows by ``gamma dy`` per decade.
+    """
+
+    name: str = "creep_log"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "gamma_per_decade",
+            0.0,
+            0.0,
+            0.2,
+            "1/decade",
+            "fraction of an output change added per decade of time after it",
+        ),
+        EffectParam("tau0_s", 0.3, 0.05, 10.0, "s", "time from which the drift is logarithmic"),
+    )
+    meaning: str = (
+        "logarithmic creep: the angle keeps drifting after a move, by the same amount "
+        "per decade of time"
+    )
+    needs: tuple[str, ...] = ("t_s",)
+
+    def taus(self, tau0_s: float) -> np.ndarray:
+        """Relaxation times (s), shape (m * decades + 1,)."""
+        m = LOG_CREEP_PER_DECADE
+        return tau0_s * 10.0 ** (np.arange(m * LOG_CREEP_DECADES + 1) / m)
+
+    def transform_output(self, y, signals, p):
+        from i2ris_calib.diagnosis._kernels import first_order_lag
+
+        y = np.ascontiguousarray(y, dtype=float)
+        t = np.ascontiguousarray(signals.t_s, dtype=float)
+        gam = float(p[0]) / LOG_CREEP_PER_DECADE
+        if gam == 0.0:
+            return y
+        lagged = sum(first_order_lag(y, t, float(tau)) for tau in self.taus(float(p[1])))
+        n = self.taus(float(p[1])).size
+        return y - gam * (n * y - lagged)
+
+    def start_grid(self, signals, y_deg):
+        return [np.array([g, tau]) for g in (0.01, 0.03, 0.06) for tau in (0.1, 0.3, 1.0)]
+
+
 @dataclass(frozen=True)
 class DeadZone(Effect):
-    """Input band around each reversal over which the output does not change."""
+    """Dead zone (dead band) on the input: nothing moves until |v| exceeds ``d``.
+
+    The dead-zone nonlinearity of Tao and Kokotovic: ``u = sign(v) max(|v| - d,
+    0)`` (its slope beyond the break point is absorbed by the base model's
+    gains), then the base model's hysteresis of ``u``. Unlike a backlash it
+    depends on the input level, not on the last reversal.
+    """
 
     name: str = "dead_zone"
+    params: tuple[EffectParam, ...] = (
+        EffectParam(
+            "d_counts",
+            0.0,
+            0.0,
+            1e9,
+            "counts",
+            "input magnitude below which the output does not move",
+        ),
+    )
+    meaning: str = (
+        "dead zone (Tao-Kokotovic): the tip does not move until the input exceeds a "
+        "break point (tendon slack at the start of the pull)"
+    )
+
+    def transform_input(self, signals, p):
+        v = np.asarray(signals.v, dtype=float)
+        d = float(p[0])
+        return replace(signals, v=np.sign(v) * np.maximum(np.abs(v) - d, 0.0))
+
+    def start_grid(self, signals, y_deg):
+        span = _span(signals.v)
+        return [np.array([f * span]) for f in (0.02, 0.05, 0.1, 0.15, 0.25)]
+
+
+@dataclass(frozen=True)
+class Backlash(Effect):
+    """Backlash (play): after each reversal the input travels ``width`` before the
+    output follows (Tao and Kokotovic's backlash, a play operator on the input)."""
+
+    name: str = "backlash"
     params: tuple[EffectParam, ...] = (
         EffectParam(
             "width_counts",
@@ -322,7 +486,7 @@ class DeadZone(Effect):
             "input travel after a reversal before the output moves",
         ),
     )
-    meaning: str = "slack in the tendon: after a reversal the input moves, the tip does not"
+    meaning: str = "backlash (play): after a reversal the input moves, the tip does not"
 
     def transform_input(self, signals, p):
         from i2ris_calib.diagnosis._kernels import play_varying
@@ -382,9 +546,12 @@ CATALOGUE: dict[str, Effect] = {
         MultiStageBacklash(),
         AxisCoupling(),
         TimeDelay(),
-        RateDependence(),
+        RateDependentThresholds(),
+        RateDependentWeights(),
         Creep(),
+        LogCreep(),
         DeadZone(),
+        Backlash(),
         Saturation(),
     )
 }

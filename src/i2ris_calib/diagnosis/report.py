@@ -38,10 +38,13 @@ def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
                 "evidence": s.comparison.as_dict(),
                 "location_before": list(s.sentences_before),
                 "candidates": [c.as_dict() for c in s.candidates],
+                "alternatives": [a.as_dict() for a in s.alternatives],
+                "verdict": step_verdict(s.effect, s.alternatives),
                 "figures": {"before": figures[i], "after": figures[i + 1]},
             }
         )
     return {
+        "summary": diagnosis_summary(diag),
         "baseline": diag.baseline.as_dict(),
         "final": diag.final.as_dict(),
         "named_effects": diag.named_effects,
@@ -54,6 +57,50 @@ def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
         "holdout_fraction": float(np.mean(diag.holdout)),
         "notes": list(diag.notes),
         "figures": figures,
+    }
+
+
+def step_verdict(effect: str, alternatives) -> str:
+    """One sentence: the named effect and the alternatives the held-out cycles could
+    not exclude, e.g. ``"dead_zone; backlash not excluded, z = 0.8"``."""
+    open_ = [a for a in alternatives if not a.excluded]
+    if not open_:
+        return f"{effect}; no other candidate is left open by the held-out cycles"
+    parts = [f"{a.effect} not excluded, z = {a.z:.1f}" for a in open_]
+    text = f"{effect}; " + "; ".join(parts)
+    exps = [f"to separate {a.effect}: {a.experiment}" for a in open_ if a.experiment]
+    return text + (" (" + "; ".join(exps) + ")" if exps else "")
+
+
+def diagnosis_summary(diag: Diagnosis) -> str:
+    """The diagnosis in one sentence (the steps' verdicts, or nothing missing)."""
+    if not diag.steps:
+        return (
+            "nothing missing: no candidate improved the held-out error by more than noise explains"
+        )
+    return " Then ".join(step_verdict(s.effect, s.alternatives) + "." for s in diag.steps)
+
+
+def paths_record(auto) -> dict:
+    """``paths`` entry of diagnosis.json for ``--start auto``: each start's answer."""
+    return {
+        kind: {
+            "named_effects": d.named_effects,
+            "summary": diagnosis_summary(d),
+            "baseline": d.baseline.as_dict(),
+            "final": d.final.as_dict(),
+            "steps": [
+                {
+                    "effect": s.effect,
+                    "params": effects_of(s.model_after)[-1][2],
+                    "evidence": s.comparison.as_dict(),
+                    "alternatives": [a.as_dict() for a in s.alternatives],
+                }
+                for s in d.steps
+            ],
+            "notes": list(d.notes),
+        }
+        for kind, d in auto.paths.items()
     }
 
 
@@ -79,7 +126,9 @@ def diagnosis_markdown(rec: dict) -> str:
     lines = [
         f"## Model diagnosis{f' ({axis})' if axis else ''}",
         "",
-        f"Starting model: **{rec.get('start', '?')}**. "
+        f"Starting model: **{rec.get('start_model', rec.get('start', '?'))}**"
+        + (" (--start auto)" if rec.get("start") == "auto" else "")
+        + ". "
         + (
             f"Effects named, in order: **{', '.join(named)}**."
             if named
@@ -87,6 +136,9 @@ def diagnosis_markdown(rec: dict) -> str:
             "by more than noise explains."
         ),
         "",
+        f"**Verdict:** {rec['summary']}" if rec.get("summary") else "",
+        "",
+        *([f"Starting models: {rec['reconciliation']}.", ""] if rec.get("reconciliation") else []),
         "| model | fitted RMSE (deg) | held-out RMSE (deg) | BIC |",
         "|---|---|---|---|",
         f"| start | {_fmt(b['fit_rmse_deg'])} | {_fmt(b['holdout_rmse_deg'])} | {b['bic']:.1f} |",
@@ -114,6 +166,7 @@ def diagnosis_markdown(rec: dict) -> str:
             f"{ev['units_improved']}/{ev['n_units']} held-out strokes improved, "
             f"BIC change {s['delta_bic']:.1f}.",
             "",
+            *([f"{s['verdict']}.", ""] if s.get("verdict") else []),
             "| candidate | fit | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
             "|---|---|---|---|---|---|---|",
         ]

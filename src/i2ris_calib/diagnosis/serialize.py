@@ -88,7 +88,10 @@ def model_from_dict(obj: Mapping) -> Model:
     model = base
     for e in effects:
         try:
-            model = build_model(model, {e["name"]: e.get("params", {})})
+            name, params = e["name"], dict(e.get("params", {}))
+            if name == "dead_zone" and "width_counts" in params:
+                name = "backlash"  # files written before dead_zone became the dead band
+            model = build_model(model, {name: params})
         except (KeyError, TypeError) as exc:
             raise CalibError(f"model file: bad effect record {e!r} ({exc})") from None
     return model

@@ -26,13 +26,20 @@ STRENGTHS: dict[str, tuple[dict[str, float], ...]] = {
     ),
     "axis_coupling": ({"gain_angle": 0.05}, {"gain_angle": 0.1}, {"gain_angle": -0.15}),
     "time_delay": ({"tau_s": 0.06}, {"tau_s": 0.12}, {"tau_s": 0.25}),
-    "rate_dependence": ({"gain_s": 0.06}, {"gain_s": 0.12}, {"gain_s": 0.25}),
+    "rate_dependent_thresholds": ({"beta_s": 0.08}, {"beta_s": 0.15}, {"beta_s": 0.3}),
+    "rate_dependent_weights": ({"gain": 0.08}, {"gain": 0.15}, {"gain": -0.15}),
     "creep": (
         {"gain": 0.1, "tau_s": 0.7},
         {"gain": 0.2, "tau_s": 1.0},
         {"gain": 0.3, "tau_s": 1.5},
     ),
-    "dead_zone": ({"width_counts": 200.0}, {"width_counts": 350.0}, {"width_counts": 550.0}),
+    "creep_log": (
+        {"gamma_per_decade": 0.03, "tau0_s": 0.2},
+        {"gamma_per_decade": 0.05, "tau0_s": 0.3},
+        {"gamma_per_decade": 0.08, "tau0_s": 0.5},
+    ),
+    "dead_zone": ({"d_counts": 300.0}, {"d_counts": 500.0}, {"d_counts": 800.0}),
+    "backlash": ({"width_counts": 200.0}, {"width_counts": 350.0}, {"width_counts": 550.0}),
     "saturation": (
         {"knee_deg": 28.0, "limit_deg": 6.0},
         {"knee_deg": 25.0, "limit_deg": 5.0},

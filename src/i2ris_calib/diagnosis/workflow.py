@@ -160,6 +160,92 @@ class Step:
     candidates: tuple[Candidate, ...]
     analysis_before: dict
     sentences_before: tuple[str, ...]
+    alternatives: tuple[Alternative, ...] = ()
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """A finalist the held-out cycles could not rule out against the named effect.
+
+    Attributes
+    ----------
+    effect : str
+    holdout_rmse_deg : float
+        Its held-out RMSE (deg).
+    z : float
+        Held-out SSE-reduction z of the named effect over it (:func:`sse_reduction_z`);
+        below the ``alpha`` quantile the alternative is *not excluded*.
+    p_value : float
+    excluded : bool
+        True when the named effect is significantly better on the held-out cycles.
+    params : dict
+        Its fitted effect parameters.
+    experiment : str
+        A recording that would separate it from the named effect ("" if none known).
+    """
+
+    effect: str
+    holdout_rmse_deg: float
+    z: float
+    p_value: float
+    excluded: bool
+    params: dict
+    experiment: str = ""
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return dict(self.__dict__)
+
+
+#: Recordings that separate two effects the held-out cycles could not tell apart.
+SEPARATING_EXPERIMENTS: dict[frozenset, str] = {
+    frozenset({"time_delay", "rate_dependent_thresholds"}): (
+        "a slow and a fast ramp to the same level, and a triangle without a hold at the "
+        "top: a delay overshoots a reversal taken at speed and lags by the same time at "
+        "every speed, rate-dependent thresholds hold flat at the reversal"
+    ),
+    frozenset({"time_delay", "creep"}): (
+        "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
+        "delay settles within its delay"
+    ),
+    frozenset({"creep", "creep_log"}): (
+        "holds of 30-60 s: first-order creep settles after a few time constants, "
+        "logarithmic creep gains the same amount every decade of time"
+    ),
+    frozenset({"time_delay", "creep_log"}): (
+        "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
+        "delay settles within its delay"
+    ),
+    frozenset({"dead_zone", "backlash"}): (
+        "a ramp that reverses mid-range and a return to zero: backlash holds the "
+        "output after every reversal, a dead zone only near zero input"
+    ),
+    frozenset({"dead_zone", "multi_stage_backlash"}): (
+        "partial unloading cycles that reverse above and below mid-range: a further "
+        "backlash stage holds on falling input below its flag point, a dead zone holds "
+        "only below its break point, rising or falling"
+    ),
+    frozenset({"backlash", "multi_stage_backlash"}): (
+        "small reversals at several input levels: backlash holds at every reversal, a "
+        "further stage only below its flag point"
+    ),
+    frozenset({"rate_dependent_thresholds", "rate_dependent_weights"}): (
+        "ramps at three speeds to the same level with holds: rate-dependent weights "
+        "change the slope of the loop while moving, rate-dependent thresholds its width"
+    ),
+    frozenset({"time_delay", "rate_dependent_weights"}): (
+        "ramps at three speeds to the same level with holds: a delay shifts the loop in "
+        "time, rate-dependent weights scale it with speed"
+    ),
+    frozenset({"saturation", "rate_dependent_weights"}): (
+        "slow ramps to full scale: saturation flattens the top at any speed"
+    ),
+}
+
+
+def separating_experiment(a: str, b: str) -> str:
+    """A recording that separates effects ``a`` and ``b`` ("" if none is known)."""
+    return SEPARATING_EXPERIMENTS.get(frozenset({a, b}), "")
 
 
 @dataclass(frozen=True)
@@ -638,6 +724,32 @@ def _null_reference(current, cur_m, best: Candidate, d, cfg):
     return (null_model, null_m), note
 
 
+def _alternatives(best: Candidate, finals, d: _Data, cfg) -> tuple[Alternative, ...]:
+    """The other finalists that improved the held-out error, best first, with the
+    held-out z of the named effect over each (``excluded`` when it is significant
+    at ``alpha``)."""
+    out = []
+    others = [
+        c
+        for c in finals
+        if c.effect != best.effect and c.comparison is not None and c.comparison.rel_improvement > 0
+    ]
+    for c in sorted(others, key=lambda c: c.metrics.holdout_rmse_deg):
+        comp = compare((c.model, c.metrics), (best.model, best.metrics), d, cfg)
+        out.append(
+            Alternative(
+                effect=c.effect,
+                holdout_rmse_deg=c.metrics.holdout_rmse_deg,
+                z=comp.z,
+                p_value=comp.p_value,
+                excluded=bool(comp.p_value < cfg.alpha),
+                params=effects_of(c.model)[-1][2],
+                experiment=separating_experiment(best.effect, c.effect),
+            )
+        )
+    return tuple(out)
+
+
 def single_threaded_blas():
     """Context limiting BLAS to one thread (threadpoolctl), a no-op without it.
 
@@ -717,6 +829,7 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
                 current, cur_m = ref
                 continue
         best = _pick(passing, d, cfg)
+        alternatives = _alternatives(best, finals, d, cfg)
         steps.append(
             Step(
                 effect=best.effect,
@@ -728,6 +841,7 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
                 candidates=cands,
                 analysis_before=analysis,
                 sentences_before=sentences,
+                alternatives=alternatives,
             )
         )
         current, cur_m = best.model, best.metrics
@@ -746,3 +860,103 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         decimation=step,
         notes=tuple(notes),
     )
+
+
+@dataclass(frozen=True)
+class AutoDiagnosis:
+    """Diagnoses from several starting models, reconciled into one answer.
+
+    Attributes
+    ----------
+    start : str
+        The starting model of the answer (``"gpi"`` or ``"egpi"``).
+    diagnosis : Diagnosis
+        The answer: the path whose final model has the lower held-out RMSE.
+    paths : dict of str to Diagnosis
+        Every path, by starting model.
+    agree : bool
+        All paths named the same effects.
+    z : float
+        Held-out SSE-reduction z of the answer's final model over the other path's
+        (nan with one path); below the ``alpha`` quantile the other path's answer is
+        not excluded.
+    sentence : str
+        The reconciliation in one sentence.
+    """
+
+    start: str
+    diagnosis: Diagnosis
+    paths: dict
+    agree: bool
+    z: float
+    sentence: str
+
+
+def diagnose_from_starts(
+    data: Dataset,
+    config: DiagnosisConfig | None = None,
+    fit_config=None,
+    starts: tuple[str, ...] = ("gpi", "egpi"),
+    progress=None,
+) -> AutoDiagnosis:
+    """``--start auto``: diagnose from each starting model, reconcile one answer.
+
+    Each start is fitted by the fitting stage (:func:`fit_start_model`) and
+    diagnosed (:func:`diagnose`). The answer is the path whose final model has the
+    lower held-out RMSE; the held-out z-test of it over the other path's final
+    model says whether the other answer is excluded (p < ``alpha``) or not.
+
+    Parameters
+    ----------
+    data : Dataset
+    config : DiagnosisConfig, optional
+    fit_config : FitConfig, optional
+        Settings of the starting fits.
+    starts : tuple of str
+        Starting models (``"gpi"``, ``"egpi"``).
+    progress : callable, optional
+        ``progress(text)`` before each fit.
+    """
+    cfg = config or DiagnosisConfig()
+    paths = {}
+    for kind in starts:
+        if progress:
+            progress(f"fitting {kind}")
+        base = fit_start_model(kind, data, fit_config)
+        paths[kind] = diagnose(
+            base,
+            data,
+            cfg,
+            progress=(lambda x, k=kind: progress(f"{k}: {x}")) if progress else None,
+        )
+    order = sorted(paths, key=lambda k: paths[k].final.holdout_rmse_deg)
+    best = order[0]
+    diag = paths[best]
+    named = {k: tuple(p.named_effects) for k, p in paths.items()}
+    agree = len(set(named.values())) == 1
+
+    def said(k):
+        return ", ".join(named[k]) or "nothing missing"
+
+    if len(order) == 1:
+        return AutoDiagnosis(best, diag, paths, True, float("nan"), f"from {best}: {said(best)}")
+    other = order[1]
+    with single_threaded_blas():
+        d, _, _ = _search_data(data, cfg)
+        a, b = paths[best].final_model, paths[other].final_model
+        ma = metrics_of(a, model_values(a), d, _n_free(a))
+        mb = metrics_of(b, model_values(b), d, _n_free(b))
+        comp = compare((b, mb), (a, ma), d, cfg)
+    if agree:
+        sentence = f"both starts agree: {said(best)} (answer from {best}, lower held-out RMSE)"
+    elif comp.p_value < cfg.alpha:
+        sentence = (
+            f"{said(best)} (from {best}); the {other} start's answer ({said(other)}) is "
+            f"excluded by the held-out cycles, z = {comp.z:.1f}"
+        )
+    else:
+        sentence = (
+            f"{said(best)} (from {best}); the {other} start's answer ({said(other)}) is not "
+            f"excluded, z = {comp.z:.1f}"
+        )
+    return AutoDiagnosis(best, diag, paths, agree, float(comp.z), sentence)

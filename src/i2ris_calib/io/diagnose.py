@@ -16,7 +16,7 @@ from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
 
-STARTS = ("gpi", "egpi")
+STARTS = ("auto", "gpi", "egpi")
 SCHEMA = "i2ris-calib.diagnosis/1"
 
 
@@ -115,7 +115,7 @@ def _save(fig, path: Path) -> None:
 def diagnose_file(
     data: Path,
     axis: str,
-    start: str = "egpi",
+    start: str = "auto",
     out: Path | None = None,
     config=None,
     direction: str = "auto",
@@ -125,36 +125,55 @@ def diagnose_file(
     The diagnosed dataset is :func:`diagnosis_dataset` (the one reader, ``[fit]``
     bands and held-out cycles): ``fit --model-file OUT/final_model.json`` with the
     same file and config refits the final model on exactly these samples.
+    ``start``: ``"gpi"``, ``"egpi"`` or ``"auto"`` (both, reconciled by
+    :func:`~i2ris_calib.diagnosis.workflow.diagnose_from_starts`; both paths in
+    diagnosis.json ``paths``).
+    """
+    from i2ris_calib.config import PipelineConfig
+    from i2ris_calib.diagnosis.workflow import check_dataset
+
+    if start not in STARTS:
+        raise CalibError(f"--start must be auto, gpi or egpi, got '{start}'")
+    cfg = config or PipelineConfig()
+    dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit)
+    check_dataset(dset, cfg.diagnose)
+    return diagnose_dataset(dset, axis, start, out, cfg, sources=[Path(data)])
+
+
+def diagnose_dataset(
+    dset: Dataset,
+    axis: str,
+    start: str,
+    out: Path | None,
+    cfg,
+    sources: list[Path],
+    show_progress: bool = True,
+) -> dict:
+    """Diagnose one dataset and write ``out`` (see module doc); returns diagnosis.json.
+
+    Used by ``diagnose`` (one file) and by ``run`` (``[run] diagnose = true``, every
+    axis and direction of the session).
     """
     from rich.progress import Progress
 
-    from i2ris_calib.config import PipelineConfig
-    from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record
+    from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record, paths_record
     from i2ris_calib.diagnosis.serialize import model_to_dict
-    from i2ris_calib.diagnosis.workflow import (
-        check_dataset,
-        diagnose,
-        fit_start_model,
-        single_threaded_blas,
-    )
+    from i2ris_calib.diagnosis.workflow import diagnose_from_starts, single_threaded_blas
     from i2ris_calib.io.atomic import atomic_dir, write_json, write_text
     from i2ris_calib.io.provenance import provenance
 
-    if start not in STARTS:
-        raise CalibError(f"--start must be gpi or egpi, got '{start}'")
-    cfg = config or PipelineConfig()
     out = Path(out) if out is not None else Path("diagnose_out")
-    dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit)
-    check_dataset(dset, cfg.diagnose)
-    with Progress(transient=True) as bar, single_threaded_blas():
-        task = bar.add_task(f"diagnose {dset.name}: fitting {start}", total=None)
-        base = fit_start_model(start, dset, cfg.fit)
-        diag = diagnose(
-            base,
+    starts = ("gpi", "egpi") if start == "auto" else (start,)
+    with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
+        task = bar.add_task(f"diagnose {dset.name}", total=None)
+        auto = diagnose_from_starts(
             dset,
             cfg.diagnose,
+            cfg.fit,
+            starts=starts,
             progress=lambda name: bar.update(task, description=f"diagnose {dset.name}: {name}"),
         )
+    diag = auto.diagnosis
     models = [diag.start_model] + [s.model_after for s in diag.steps]
     labels = ["start"] + [s.effect for s in diag.steps]
     figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
@@ -163,7 +182,10 @@ def diagnose_file(
         schema=SCHEMA,
         axis=axis,
         start=start,
-        source=str(data),
+        start_model=auto.start,
+        reconciliation=auto.sentence,
+        paths=paths_record(auto),
+        source=", ".join(str(p) for p in sources),
         dataset=dset.name,
         direction=dset.direction,
         abs_input=dset.abs_fitted,
@@ -175,11 +197,11 @@ def diagnose_file(
             "input_noise": dset.bands.noise,
             "derived": list(dset.bands.derived),
         },
-        provenance=provenance([data], cfg),
+        provenance=provenance(sources, cfg),
     )
     with atomic_dir(out) as tmp:
         for i, (m, name) in enumerate(zip(models, figures, strict=True)):
-            title = f"{dset.name}: {' + '.join([start, *labels[1 : i + 1]])}"
+            title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
             _save(_figure(m, dset, dset.holdout, title), tmp / name)
         write_json(tmp / "diagnosis.json", record)
         final = model_to_dict(diag.final_model)

@@ -4,10 +4,19 @@ Stages (each a subpackage of pure functions on arrays and frozen dataclasses):
 ``simulation`` (synthetic sessions), ``tracking`` (ArUco pose -> pitch/yaw),
 ``sync`` (camera clock -> encoder clock), ``hysteresis`` (GPI/EGPI models),
 ``fitting`` (Levenberg-Marquardt), ``diagnosis`` (model-discrepancy workflow),
-``report`` (tables and figures). ``io`` reads and writes files; ``cli`` is the
-thin command-line layer.
+``compensation`` (inverse models), ``report`` (tables and figures). ``io`` reads and
+writes files; ``cli`` is the thin command-line layer.
+
+The Python API (docs/api.md) is importable from here; names load on first use, so
+``import i2ris_calib`` stays cheap::
+
+    from i2ris_calib import i2ris_egpi_model, fit, load_synced
+    data = load_synced("synced.csv", "yaw")[0]      # the yaw+ dataset, whole history
+    res = fit(i2ris_egpi_model(), data)              # data-driven starts, LM
+    print(res.fit_report())
 """
 
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version
 
 try:
@@ -15,4 +24,46 @@ try:
 except PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+#: public name -> module that defines it
+_API = {
+    "gpi_model": "i2ris_calib.hysteresis.models",
+    "i2ris_egpi_model": "i2ris_calib.hysteresis.models",
+    "continuous_egpi_model": "i2ris_calib.hysteresis.models",
+    "egpi_model": "i2ris_calib.hysteresis.models",
+    "Parameter": "i2ris_calib.hysteresis.model",
+    "Signals": "i2ris_calib.hysteresis.model",
+    "Dataset": "i2ris_calib.data.dataset",
+    "make_dataset": "i2ris_calib.data.dataset",
+    "direction_datasets": "i2ris_calib.data.dataset",
+    "fit": "i2ris_calib.fitting.pipeline",
+    "fit_model": "i2ris_calib.fitting.fit",
+    "FitResult": "i2ris_calib.fitting.fit",
+    "FitNote": "i2ris_calib.fitting.fit",
+    "FitConfig": "i2ris_calib.fitting.config",
+    "compensate": "i2ris_calib.compensation",
+    "PipelineConfig": "i2ris_calib.config",
+    "CalibError": "i2ris_calib.errors",
+}
+_IO = {"load_synced": ("i2ris_calib.io.synced", "load_datasets"),
+       "load_config": ("i2ris_calib.io.config_io", "load_config")}  # fmt: skip
+
+__all__ = ["__version__", *_API, *_IO]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        return getattr(import_module(_API[name]), name)
+    if name in _IO:
+        mod, attr = _IO[name]
+        obj = getattr(import_module(mod), attr)
+        if name == "load_synced":
+
+            def load_synced(path, axis, config=None, directions=None):
+                """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
+                from i2ris_calib.fitting.config import FitConfig
+
+                return obj([path], axis, config or FitConfig(), directions)
+
+            return load_synced
+        return obj
+    raise AttributeError(f"module 'i2ris_calib' has no attribute {name!r}")

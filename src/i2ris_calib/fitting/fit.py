@@ -29,6 +29,28 @@ _BIG = 1e6
 
 
 @dataclass(frozen=True)
+class FitNote:
+    """Something the fitter did or found that a user should know, as data.
+
+    Attributes
+    ----------
+    code : str
+        ``"left_bounds"`` (unbounded LM ended outside the bounds; refitted bounded),
+        ``"refit_from_start"`` (ended worse than a start; refitted from it),
+        ``"not_a_minimum"`` (still worse than a start: ``converged`` is False),
+        ``"at_bound"`` (parameters ending on a bound; their stderr is NaN).
+    text : str
+        The sentence also appended to ``message``.
+    params : tuple of str
+        Parameters concerned (``left_bounds``, ``at_bound``).
+    """
+
+    code: str
+    text: str
+    params: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class FitResult:
     """Outcome of :func:`fit_model`.
 
@@ -85,11 +107,112 @@ class FitResult:
     free: tuple[str, ...] = ()
     starts_tried: int = 1
     extra: dict = field(default_factory=dict)
+    notes: tuple[FitNote, ...] = ()
 
     def predict(self, signals: Signals | np.ndarray) -> np.ndarray:
         """Fitted model output (deg) for ``signals``."""
         s = as_signals(signals)
         return self.model.evaluate(s, np.array([p.value for p in self.model.parameters]))
+
+    @property
+    def chisqr(self) -> float:
+        """Residual sum of squares over the fitted samples (deg^2)."""
+        return float(self.metrics.rmse_deg**2 * self.n_samples)
+
+    @property
+    def redchi(self) -> float:
+        """Reduced chi-square ``RSS / (n - k)`` (deg^2): the residual variance; equals
+        the measurement noise variance when the model is right."""
+        dof = self.n_samples - len(self.free)
+        return self.chisqr / dof if dof > 0 else float("nan")
+
+    @property
+    def correlations(self) -> dict[tuple[str, str], float]:
+        """Correlation of every pair of fitted parameters with finite standard errors."""
+        names = [p.name for p in self.model.parameters]
+        idx = [
+            i
+            for i, n in enumerate(names)
+            if n in self.free and np.isfinite(self.stderr[n]) and self.stderr[n] > 0
+        ]
+        out = {}
+        for a, i in enumerate(idx):
+            for j in idx[a + 1 :]:
+                d = np.sqrt(self.covariance[i, i] * self.covariance[j, j])
+                if d > 0:
+                    out[(names[i], names[j])] = float(self.covariance[i, j] / d)
+        return out
+
+    def fit_report(self, min_correl: float = 0.5) -> str:
+        """Plain-text summary like lmfit's: fit statistics, parameters with standard
+        errors and units, correlations above ``min_correl``, notes."""
+        m, h = self.metrics, self.holdout_metrics
+        lines = [
+            f"[[Fit of {self.model.name}]]",
+            f"    converged          = {self.converged} ({self.message})",
+            f"    samples in loss    = {self.n_samples}, free parameters = {len(self.free)}",
+            f"    function evals     = {self.nfev}, starts = {self.starts_tried}",
+            f"    RMSE / max |err|   = {m.rmse_deg:.4g} / {m.max_abs_err_deg:.4g} deg "
+            f"(NRMSE {m.nrmse_pct:.3g} %)",
+            f"    held-out RMSE      = {h.rmse_deg:.4g} deg on {h.n_samples} samples",
+            f"    reduced chi-square = {self.redchi:.4g} deg^2",
+            f"    AIC / BIC          = {self.aic:.5g} / {self.bic:.5g}",
+            "[[Parameters]]",
+        ]
+        for p in self.model.parameters:
+            se = self.stderr.get(p.name, float("nan"))
+            how = (
+                "(fixed)"
+                if p.name not in self.free
+                else (
+                    f"+/- {se:.3g}"
+                    if np.isfinite(se)
+                    else "+/- nan (unidentified, profiled or at a bound)"
+                )
+            )
+            lines.append(
+                f"    {p.name:<8} = {self.params[p.name]:<12.6g} {how:<20} {p.unit:<10} {p.doc}"
+            )
+        cor = sorted(
+            ((k, c) for k, c in self.correlations.items() if abs(c) >= min_correl),
+            key=lambda kc: -abs(kc[1]),
+        )
+        if cor:
+            lines.append(f"[[Correlations]] (|C| >= {min_correl})")
+            lines += [f"    C({a}, {b}) = {c:+.3f}" for (a, b), c in cor]
+        if self.notes:
+            lines.append("[[Notes]]")
+            lines += [f"    {n.code}: {n.text}" for n in self.notes]
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        h = self.holdout_metrics.rmse_deg
+        held = f", held-out {h:.3g}" if np.isfinite(h) else ""
+        return (
+            f"<FitResult {self.model.name}: RMSE {self.metrics.rmse_deg:.3g} deg{held}, "
+            f"{self.n_samples} samples, {len(self.free)} free, "
+            f"{'converged' if self.converged else 'NOT converged'}>"
+        )
+
+    def _repr_html_(self) -> str:
+        """Notebook display: the statistics and the parameter table."""
+        import html
+
+        rows = "".join(
+            f"<tr><td>{html.escape(p.name)}</td><td>{self.params[p.name]:.6g}</td>"
+            f"<td>{'fixed' if p.name not in self.free else format(self.stderr.get(p.name, float('nan')), '.3g')}</td>"
+            f"<td>{html.escape(p.unit)}</td><td>{html.escape(p.doc)}</td></tr>"
+            for p in self.model.parameters
+        )
+        m, h = self.metrics, self.holdout_metrics
+        return (
+            f"<b>FitResult {html.escape(self.model.name)}</b>: "
+            f"{'converged' if self.converged else '<b>NOT converged</b>'}; RMSE "
+            f"{m.rmse_deg:.4g} deg, held-out {h.rmse_deg:.4g} deg, max {m.max_abs_err_deg:.4g} deg, "
+            f"reduced chi-square {self.redchi:.4g}, AIC {self.aic:.5g}, BIC {self.bic:.5g}"
+            "<table><tr><th>name</th><th>value</th><th>stderr</th><th>unit</th><th>meaning</th></tr>"
+            f"{rows}</table>"
+        )
 
 
 class _Counter:
@@ -382,7 +505,7 @@ def _fit_model(
     else:
         best = run(starts[0], max_nfev, first + ("fine", "lm"))
     cost, full, res = best
-    notes = []
+    notes: list[FitNote] = []
     left = _outside(full, lsq_free, lower, upper)
     inside = [
         (c, x) for c, x in known if np.isfinite(c) and not _outside(x, lsq_free, lower, upper)
@@ -393,31 +516,43 @@ def _fit_model(
         # into the bounds (measured: ends far better than trf from a better-scoring start)
         cost, full, res = run(np.clip(full, lower, upper), max_nfev, polish, "trf")
         notes.append(
-            f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded (trf)"
+            FitNote(
+                "left_bounds",
+                f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded (trf)",
+                tuple(names[i] for i in left),
+            )
         )
     if floor is not None and not cost <= floor[0]:
         # worse than a point already reached: refit bounded from that point (trf only
         # accepts steps that lower the cost, so this cannot end worse than it)
         cost, full, res = run(floor[1], max_nfev, polish, "trf")
         notes.append(
-            f"ended worse than a start/screened point (cost {floor[0]:.4g}); refitted bounded (trf) from it"
+            FitNote(
+                "refit_from_start",
+                f"ended worse than a start/screened point (cost {floor[0]:.4g}); refitted bounded (trf) from it",
+            )
         )
     result = _result(
         model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts), lsq_free
     )  # fmt: skip
     if floor is not None and not cost <= floor[0] * (1 + 1e-9):
         result = replace(result, converged=False)
-        notes.append(f"NOT a minimum: cost {cost:.4g} above that of a start ({floor[0]:.4g})")
+        notes.append(
+            FitNote(
+                "not_a_minimum",
+                f"NOT a minimum: cost {cost:.4g} above that of a start ({floor[0]:.4g})",
+            )
+        )
     if not notes:
         return result
     at_bound = (
         [names[i] for i in lsq_free if _on_bound(full[i], lower[i], upper[i])] if left else []
     )
     if at_bound:
-        notes.append(f"at the bound: {', '.join(at_bound)}")
+        notes.append(FitNote("at_bound", f"at the bound: {', '.join(at_bound)}", tuple(at_bound)))
     stderr = result.stderr | dict.fromkeys(at_bound, float("nan"))
-    message = result.message + "".join(f" [{n}]" for n in notes)
-    return replace(result, message=message, stderr=stderr)
+    message = result.message + "".join(f" [{n.text}]" for n in notes)
+    return replace(result, message=message, stderr=stderr, notes=tuple(notes))
 
 
 def _on_bound(x: float, lo: float, hi: float) -> bool:

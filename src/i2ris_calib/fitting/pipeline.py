@@ -18,6 +18,8 @@ from i2ris_calib.fitting.fit import FitResult, fit_model
 from i2ris_calib.fitting.initial import start_values
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import (
+    GPIModel,
+    I2RISEGPIModel,
     ParametricModel,
     continuous_egpi_model,
     gpi_model,
@@ -61,10 +63,10 @@ def build_model(
         raise _unknown_kind(kind)
     db = deadband_for(v, config) if deadband is None else float(deadband)
     m = _FACTORIES[kind](config.n_operators, db, {})
-    if kind == "gpi":
-        return m.with_fixed(fixed=config.fixed_gpi)
-    free = ("v_f",) if config.fit_flag_point and "v_f" not in config.fixed_egpi else ()
-    return m.with_fixed(fixed=config.fixed_egpi, free=free)
+    fixed = set(config.fixed_gpi if kind == "gpi" else config.fixed_egpi)
+    if not config.fit_flag_point and "v_f" in m.names:
+        fixed.add("v_f")
+    return m.with_fixed(fixed=tuple(fixed), free=tuple(n for n in m.names if n not in fixed))
 
 
 def model_from_params(
@@ -301,3 +303,60 @@ def fit_warnings(res: FitResult, v: np.ndarray) -> tuple[str, ...]:
     if not res.converged:
         out.append("not converged: " + res.message)
     return tuple(out)
+
+
+def fit(
+    model: ParametricModel,
+    data: Dataset | tuple[np.ndarray, np.ndarray],
+    config: FitConfig = FitConfig(),
+    *,
+    holdout: np.ndarray | None = None,
+) -> FitResult:
+    """Fit ``model`` to ``data``: the call a notebook user writes.
+
+    Parameters
+    ----------
+    model : ParametricModel
+        Any model (``gpi_model()``, ``i2ris_egpi_model()``, ``continuous_egpi_model()``,
+        a model extended by diagnosed effects); its fixed flags and bounds are kept.
+    data : Dataset or (v, theta_deg)
+        A direction dataset (whole history, loss mask, held-out cycles; see
+        :func:`i2ris_calib.data.make_dataset` / :func:`i2ris_calib.io.synced.load_datasets`),
+        or an input array and an angle array of shape (n,) (NaN angles leave the loss).
+    config : FitConfig
+        Method, starts, seed, robust loss.
+    holdout : ndarray of bool, shape (n,), optional
+        Held-out samples for (v, theta) data; default: whole loading cycles
+        (:func:`split_masks`).
+
+    Returns
+    -------
+    FitResult
+        A new result; ``model`` is not changed. Starts: the model's own values and the
+        data-driven ones (:meth:`guess` for GPI/EGPI models).
+    """
+    if isinstance(data, tuple):
+        v = np.asarray(data[0], dtype=float)
+        signals, theta = Signals(v=v), np.asarray(data[1], dtype=float)
+        hold = split_masks(v, config)[1] if holdout is None else np.asarray(holdout, bool)
+        db = deadband_for(v, config)
+    else:
+        signals, theta, hold, db = data.signals, data.theta_deg, data.holdout, data.bands.deadband
+        v = np.asarray(signals.v, dtype=float)
+    starts = [model.values]
+    theta_fit = np.where(np.isfinite(theta) & ~hold, theta, np.nan)
+    if isinstance(model, (GPIModel, I2RISEGPIModel)) and np.isfinite(theta_fit).sum() > 2:
+        rng = np.random.default_rng(config.seed)
+        starts += start_values(model, v, theta_fit, config.n_starts, rng, db)
+        starts = [_keep_fixed(model, x) for x in starts]
+    return fit_model(
+        model,
+        signals,
+        theta,
+        holdout_mask=hold,
+        starts=starts,
+        method=config.method,
+        max_nfev=config.max_nfev,
+        loss=config.loss,
+        f_scale_deg=config.f_scale_deg,
+    )

@@ -146,6 +146,25 @@ class ParametricModel:
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
+    def guess(
+        self, v: np.ndarray, theta_deg: np.ndarray, deadband: float | None = None
+    ) -> ParametricModel:
+        """A new model whose values are the data-driven start for (v, theta) (GPI and
+        EGPI models: envelope lines from the branches, shape from the angle range, the
+        flag point from the unloading branches; docs/fit.md). Other models: unchanged.
+        Fixed parameters keep their values (except the ``lam`` scale gauge).
+        """
+        from i2ris_calib.fitting.initial import initial_values
+        from i2ris_calib.fitting.pipeline import _keep_fixed, deadband_for
+
+        v = np.asarray(v, dtype=float)
+        if deadband is None:
+            from i2ris_calib.fitting.config import FitConfig
+
+            deadband = deadband_for(v, FitConfig())
+        x = initial_values(self, v, np.asarray(theta_deg, dtype=float), float(deadband))
+        return self.with_values(_keep_fixed(self, x))
+
 
 def as_signals(signals: Signals | np.ndarray) -> Signals:
     """Wrap a bare input array as :class:`Signals`."""
@@ -201,7 +220,15 @@ _OFFSET = dict(lower=-500.0, upper=500.0, unit="deg")
 
 def _density_params(lam, sigma, r1, rn) -> tuple[Parameter, ...]:
     return (
-        _P("lam", lam, 1e-6, 1e3, "1", "density scale lambda (Eq15)"),
+        _P(
+            "lam",
+            lam,
+            1e-6,
+            1e3,
+            "1",
+            "density scale lambda (Eq15); fixed: redundant with the envelope scale",
+            True,
+        ),
         _P("sigma", sigma, 0.0, 20.0, "1/deg", "density decay sigma (Eq15)"),
         _P("r1", r1, 0.0, 100.0, "deg", "smallest non-zero threshold r_1 (Eq14)"),
         _P("rn", rn, 0.0, 100.0, "deg", "largest threshold r_n (Eq14)"),
@@ -246,8 +273,10 @@ class I2RISEGPIModel(ParametricModel):
     ``F_{r,2}``: loading ``gamma_l - r``, unloading ``gamma_r2 + kappa r``;
     ``gamma_l = a1 v + a2``, ``gamma_r1 = a3 v + a4``, ``gamma_r2 = a5 v + a6``;
     ``y = y1`` while loading or above ``v_f``, ``y = y2`` while unloading at ``v <= v_f``.
-    ``v_f`` (counts) is fixed by default and set from the data (see
-    ``fitting.initial.flag_point``); free it to fit it as a 12th parameter.
+    ``v_f`` (counts) is free by default and fitted by a profile search from the
+    data-driven start (``fitting.initial.flag_point``); ``with_fixed(fixed=("v_f",))``
+    keeps the start. ``lam`` is fixed by default: it is exactly redundant with the
+    envelope scale (docs/models.md).
     """
 
     n: int = 30
@@ -290,8 +319,7 @@ def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float)
             -1e7,
             1e7,
             "count",
-            "flag point: unloading switches to y2 at v <= v_f",
-            True,
+            "flag point: unloading switches to y2 at v <= v_f (fitted by profile search)",
         ),
     )
     model = I2RISEGPIModel("egpi", params, n=n, deadband_counts=deadband_counts)

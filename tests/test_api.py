@@ -1,0 +1,86 @@
+"""The Python API a notebook user writes: top-level imports, fit(model, data), FitResult."""
+
+from __future__ import annotations
+
+import doctest
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import i2ris_calib
+from i2ris_calib import (
+    CalibError,
+    FitResult,
+    fit,
+    gpi_model,
+    i2ris_egpi_model,
+    make_dataset,
+)
+from i2ris_calib.hysteresis.presets import loading_trajectory, paper_like_params
+
+SIGMA = 0.1
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def data():
+    rng = np.random.default_rng(11)
+    t, v = loading_trajectory(rng, n_cycles=4, n_samples=2500)
+    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, paper_like_params("yaw+"))
+    return make_dataset("yaw", "+", t, v, y + rng.normal(0, SIGMA, v.size))
+
+
+def test_every_documented_name_imports():
+    for name in i2ris_calib.__all__:
+        assert getattr(i2ris_calib, name) is not None, name
+    with pytest.raises(AttributeError):
+        i2ris_calib.no_such_name  # noqa: B018
+    assert issubclass(CalibError, ValueError)
+
+
+def test_fit_of_a_default_model_reaches_the_noise(data):
+    """`fit(i2ris_egpi_model(), data)`: data-driven starts by default (issue: 0.359 deg)."""
+    res = fit(i2ris_egpi_model(), data)
+    assert isinstance(res, FitResult) and res.converged
+    # tolerance from the noise: held-out RMSE within 10 % of sigma
+    assert res.holdout_metrics.rmse_deg <= 1.1 * SIGMA
+    # reduced chi-square estimates the noise variance (n ~ 1800: within 10 %)
+    assert res.redchi == pytest.approx(SIGMA**2, rel=0.1)
+    assert fit(gpi_model(), data).holdout_metrics.rmse_deg > 2 * res.holdout_metrics.rmse_deg
+
+
+def test_fit_result_reports(data):
+    res = fit(i2ris_egpi_model(), data)
+    r = repr(res)
+    assert len(r) < 200 and "egpi" in r and "converged" in r
+    rep = res.fit_report()
+    for name in res.free:
+        assert f"\n    {name} " in rep
+    assert "<table>" in res._repr_html_()
+    for (a, b), c in res.correlations.items():
+        assert a in res.free and b in res.free and -1.0 - 1e-9 <= c <= 1.0 + 1e-9
+    assert all(
+        n.code in {"left_bounds", "refit_from_start", "not_a_minimum", "at_bound"}
+        for n in res.notes
+    )
+
+
+def test_guess_gives_the_data_driven_start(data):
+    m = i2ris_egpi_model()
+    g = m.guess(data.v, data.theta_deg)
+    assert g is not m and m.value_dict() == i2ris_egpi_model().value_dict()  # not mutated
+
+    # the start is closer to the data than the factory defaults (a start, not a fit)
+    def rms(model):
+        return float(np.sqrt(np.nanmean((model(data.signals) - data.theta_deg) ** 2)))
+
+    assert rms(g) < rms(m)
+
+
+def test_docs_api_examples_run():
+    """docs/api.md's examples run as doctests."""
+    failures, tests = doctest.testfile(
+        str(ROOT / "docs" / "api.md"), module_relative=False, optionflags=doctest.ELLIPSIS
+    )
+    assert tests > 0 and failures == 0

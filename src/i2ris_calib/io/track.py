@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -367,7 +367,8 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     status[~ta["valid"].to_numpy()] = fz.REJECTED
     ref = reference_mask(t, cfg)
     try:
-        M = fz.reference_rotation(res.Q, ref & (status == fz.MEASURED))
+        refit, res = fz.fit_reference(replace(res, status=status), va, vb, ref, t, cfg)
+        M = refit.M
     except ValueError:
         raise CalibError(
             f"no measured frame in the reference window ({cfg.reference_start_s}-"
@@ -390,6 +391,7 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             df[f"yaw_plain_{name}_deg"] = pa[:, 0]
             df[f"pitch_plain_{name}_deg"] = pa[:, 1]
     summary = _summary(df, res, streams, names, M, ref, cfg)
+    summary["reference"].update(reference_record(refit))
     for n in names:
         summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
     summary["view_check"] = views
@@ -458,6 +460,14 @@ def _usable(s: StreamResult, ts: pd.DataFrame) -> np.ndarray:
     c[s.border] = np.nan
     c[~ts["valid"].to_numpy()] = np.nan
     return c
+
+
+def reference_record(refit: fz.ReferenceFit) -> dict:
+    """How the reference roll was set (the ``reference`` record of track.json)."""
+    return {"roll_method": refit.method, "roll_correction_deg": _num(refit.roll_correction_deg),
+            "roll_sd_deg": _num(refit.roll_sd_deg),
+            "camera_rotation_change_deg": _num(refit.camera_rotation_change_deg),
+            "fit_frames": refit.frames, "window_measured_frames": refit.window_frames}  # fmt: skip
 
 
 def reference_mask(t: np.ndarray, cfg: TrackingConfig) -> np.ndarray:

@@ -36,6 +36,9 @@ class TrackingConfig:
     # --- reference (straight) pose -----------------------------------------------
     reference_start_s: float = 0.0  # window start, s after the first frame
     reference_duration_s: float = 0.8  # window length (s); the tip must be straight in it
+    # roll of the reference: "session" = fitted over all frames (no twist in single-axis
+    # bends), "window" = the window mean only (poorly determined, leaks into the angles)
+    reference_roll: Literal["session", "window"] = "session"
     # --- calibrate: the ChArUco board ----------------------------------------------
     charuco_squares: tuple[int, int] = (7, 5)  # squares along x, y
     charuco_square_mm: float = 1.0
@@ -57,6 +60,10 @@ class TrackingConfig:
             raise ValueError("workers must be >= 1")
         if self.reference_duration_s <= 0:
             raise ValueError("reference_duration_s must be > 0")
+        if self.reference_roll not in ("session", "window"):
+            raise ValueError(
+                f"reference_roll must be 'session' or 'window', got {self.reference_roll!r}"
+            )
         if self.ambiguity_ratio < 1.0:
             raise ValueError("ambiguity_ratio must be >= 1")
         if not 0 < self.charuco_marker_mm < self.charuco_square_mm:

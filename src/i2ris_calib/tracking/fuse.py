@@ -14,17 +14,26 @@ The cube is rigid and the cameras are fixed, so
 3. competing minima are resolved by cost, else by temporal continuity (forward
    and backward from unambiguous frames), else the frame is flagged ambiguous.
 
-Angles are ``R_BT = M^T Q`` with ``M`` the mean ``Q`` over the reference window
-(straight pose), as ZYX yaw/pitch/roll (:mod:`.geometry`).
+Angles are ``R_BT = M^T Q`` as ZYX yaw/pitch/roll (:mod:`.geometry`), ``M`` the
+reference: the mean ``Q`` over the reference window (straight pose) fixes yaw =
+pitch = 0; its roll is fitted over the whole session together with ``R_ba``
+(:func:`fit_reference`, :func:`twist_free_fit`), because at the straight pose both
+cameras see the twist about the tool axis only through foreshortening.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from i2ris_calib.tracking.geometry import euler_zyx_deg, mean_rotation, project, rodrigues
+from i2ris_calib.tracking.geometry import (
+    euler_zyx_deg,
+    mean_rotation,
+    project,
+    rodrigues,
+    rotation_angle_deg,
+)
 
 MEASURED, NOT_FOUND, AMBIGUOUS, REJECTED = "measured", "not_found", "ambiguous", "rejected"
 
@@ -68,6 +77,9 @@ class FusionResult:
     n_by_continuity: int  # of those, resolved by temporal continuity
     t_a: np.ndarray | None = None  # (n, 3) cube centre in camera a (mm), NaN where not measured
     t_b: np.ndarray | None = None  # (n, 3) cube centre in camera b (mm), NaN where not measured
+    cov_rot: np.ndarray | None = (
+        None  # (n, 3, 3) covariance of Q's rotation vector (rad^2), camera a
+    )
 
 
 def _trace_cos(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -106,6 +118,45 @@ def _apply(p: np.ndarray, Q, ta, tb):
     return rodrigues(p[:, :3]) @ Q, ta + p[:, 3:6], tb + p[:, 6:9]
 
 
+def _jacobian(Q, ta, tb, R_ba, a: ViewData, b: ViewData, r: np.ndarray) -> np.ndarray:
+    """Forward-difference Jacobian (n, 16, 9) of :func:`_residuals` at ``r`` (px per parameter).
+
+    Parameters: rotation vector left-multiplying ``Q`` (rad, camera a), then the two
+    cube positions (mm).
+    """
+    n = len(Q)
+    scale = np.maximum(np.abs(np.concatenate([ta[:, 2:3], tb[:, 2:3]], axis=1)), 1.0)
+    steps = np.empty((n, 9))
+    steps[:, :3] = 1e-7
+    steps[:, 3:6] = 1e-8 * scale[:, :1]
+    steps[:, 6:9] = 1e-8 * scale[:, 1:]
+    J = np.empty((n, 16, 9))
+    for k in range(9):
+        p = np.zeros((n, 9))
+        p[:, k] = steps[:, k]
+        rk = _residuals(*_apply(p, Q, ta, tb), R_ba, a, b)
+        J[:, :, k] = (rk - r) / steps[:, k : k + 1]
+    return J
+
+
+def rotation_covariance(Q, ta, tb, R_ba, a: ViewData, b: ViewData) -> np.ndarray:
+    """Covariance (n, 3, 3) of each frame's fitted rotation (rad^2, rotation vector in camera a).
+
+    ``sigma^2 (J^T J)^-1`` restricted to the rotation block, with ``sigma^2`` the corner
+    noise pooled over all frames (sum of squared residuals / (16 - 9) per frame).
+    Frames with a singular normal matrix get infinite variances.
+    """
+    r = _residuals(Q, ta, tb, R_ba, a, b)
+    J = _jacobian(Q, ta, tb, R_ba, a, b, r)
+    dof = max(r.shape[0] * (16 - 9), 1)
+    sigma2 = float(np.sum(r * r)) / dof
+    A = np.einsum("nrk,nrl->nkl", J, J)
+    out = np.full((len(Q), 3, 3), np.inf)
+    ok = np.linalg.cond(A) < 1e14
+    out[ok] = sigma2 * np.linalg.inv(A[ok])[:, :3, :3]
+    return out
+
+
 def joint_fit(Q, ta, tb, R_ba, a: ViewData, b: ViewData, iterations: int = 12):
     """Levenberg-Marquardt over (rotation, two cube positions), batched over frames.
 
@@ -125,18 +176,8 @@ def joint_fit(Q, ta, tb, R_ba, a: ViewData, b: ViewData, iterations: int = 12):
     lam = np.full(n, 1e-3)
     r = _residuals(Q, ta, tb, R_ba, a, b)
     cost = np.sum(r * r, axis=1)
-    steps = np.empty((n, 9))
     for _ in range(iterations):
-        scale = np.maximum(np.abs(np.concatenate([ta[:, 2:3], tb[:, 2:3]], axis=1)), 1.0)
-        steps[:, :3] = 1e-7
-        steps[:, 3:6] = 1e-8 * scale[:, :1]
-        steps[:, 6:9] = 1e-8 * scale[:, 1:]
-        J = np.empty((n, 16, 9))
-        for k in range(9):
-            p = np.zeros((n, 9))
-            p[:, k] = steps[:, k]
-            rk = _residuals(*_apply(p, Q, ta, tb), R_ba, a, b)
-            J[:, :, k] = (rk - r) / steps[:, k : k + 1]
+        J = _jacobian(Q, ta, tb, R_ba, a, b, r)
         A = np.einsum("nrk,nrl->nkl", J, J)
         g = np.einsum("nrk,nr->nk", J, r)
         dA = np.einsum("nkk->nk", A)
@@ -224,6 +265,12 @@ def fuse_views(a: ViewData, b: ViewData, times_s: np.ndarray, cfg) -> FusionResu
             Qs[good], ta[good], tb[good], R_ba, _subset(A, good), _subset(B, good), cfg.iterations
         )
     Q[both] = Qs
+    cov = np.full((n, 3, 3), np.nan)
+    good = np.isfinite(cost)
+    if good.any():
+        cov[both[good]] = rotation_covariance(
+            Qs[good], ta[good], tb[good], R_ba, _subset(A, good), _subset(B, good)
+        )
     cen_a = np.full((n, 3), np.nan)
     cen_b = np.full((n, 3), np.nan)
     cen_a[both], cen_b[both] = ta, tb
@@ -234,7 +281,8 @@ def fuse_views(a: ViewData, b: ViewData, times_s: np.ndarray, cfg) -> FusionResu
     Q[status != MEASURED] = np.nan
     cen_a[status != MEASURED] = np.nan
     cen_b[status != MEASURED] = np.nan
-    return FusionResult(Q, rms, status, R_ba, n_comp, n_cont, cen_a, cen_b)
+    cov[status != MEASURED] = np.nan
+    return FusionResult(Q, rms, status, R_ba, n_comp, n_cont, cen_a, cen_b, cov)
 
 
 def _choose(sols, t: np.ndarray, cfg):
@@ -292,6 +340,215 @@ def reference_rotation(Q: np.ndarray, mask: np.ndarray) -> np.ndarray:
 def relative_angles(Q: np.ndarray, M: np.ndarray) -> np.ndarray:
     """Yaw, pitch, roll (n, 3) deg of ``R_BT = M^T Q`` (NaN rows stay NaN)."""
     return euler_zyx_deg(M.T @ Q)
+
+
+@dataclass(frozen=True)
+class ReferenceFit:
+    """The reference rotation, and how its roll (twist about the tool axis) was set.
+
+    Attributes
+    ----------
+    M : ndarray (3, 3)
+        Tip -> camera a rotation of the straight reference pose.
+    R_ba : ndarray (3, 3)
+        Camera b <- camera a rotation fitted together with ``M``.
+    method : str
+        ``session`` (joint fit over the whole session) or ``window`` (mean over the
+        reference window only).
+    roll_correction_deg : float
+        Roll applied to the window mean: ``M = M_window Rx(-roll_correction)`` (deg).
+    roll_sd_deg : float
+        Standard uncertainty of the reference roll (deg): the larger of the
+        least-squares and the block-jackknife figures (NaN for ``window``).
+    camera_rotation_change_deg : float
+        Angle between ``R_ba`` before and after the joint fit (deg).
+    frames : int
+        Frames in the joint fit.
+    window_frames : int
+        Measured frames in the reference window.
+    """
+
+    M: np.ndarray
+    R_ba: np.ndarray
+    method: str
+    roll_correction_deg: float
+    roll_sd_deg: float
+    camera_rotation_change_deg: float
+    frames: int
+    window_frames: int
+
+
+def _rz_ry(y: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``Rz(y) Ry(p)`` batched, (n, 3, 3), angles in rad."""
+    cy, sy, cp, sp = np.cos(y), np.sin(y), np.cos(p), np.sin(p)
+    z = np.zeros_like(y)
+    return np.stack(
+        [
+            np.stack([cy * cp, -sy, cy * sp], -1),
+            np.stack([sy * cp, cy, sy * sp], -1),
+            np.stack([-sp, z, cp], -1),
+        ],
+        -2,
+    )
+
+
+def _twist_free_residuals(g, L, M0, R_ba0, a: ViewData, b: ViewData) -> np.ndarray:
+    """Residuals (n, 16) px of the twist-free model.
+
+    ``g = (e, w_ba)``: reference roll (rad) and camera-rotation update (rotation vector);
+    ``L`` (n, 8): yaw, pitch (rad), cube centre in camera a and b (mm).
+    """
+    from i2ris_calib.tracking.geometry import rot_x
+
+    M = M0 @ rot_x(-g[0])
+    Q = M @ _rz_ry(L[:, 0], L[:, 1])
+    return _residuals(Q, L[:, 2:5], L[:, 5:8], rodrigues(g[1:4]) @ R_ba0, a, b)
+
+
+def twist_free_fit(
+    Q, ta, tb, R_ba, M0, a: ViewData, b: ViewData, times_s, iterations=15, blocks=10
+):
+    """Joint fit of the reference roll, the camera-to-camera rotation and per-frame poses.
+
+    Model: the tip does not twist about its own axis, ``Q_t = M0 Rx(-e) Rz(yaw_t)
+    Ry(pitch_t)``; camera b sees ``R_ba Q_t``. The reference roll ``e`` and the
+    rotation of camera b about the axis both cameras see sideways are each seen only
+    through foreshortening at the straight pose; once the tip bends, the tool axis
+    turns towards a viewing direction, the twist becomes partly an in-plane rotation
+    in that view, and both are determined by all the bent frames together.
+    Levenberg-Marquardt on 4 global + 8 per-frame parameters (Schur complement).
+
+    Parameters
+    ----------
+    Q : ndarray (n, 3, 3)
+        Free-fit tip -> camera a rotations (start), all finite.
+    ta, tb : ndarray (n, 3)
+        Cube centres in camera a and b (mm).
+    R_ba : ndarray (3, 3)
+    M0 : ndarray (3, 3)
+        Reference from the window mean (fixes yaw = pitch = 0).
+    a, b : ViewData over the same n frames.
+    times_s : ndarray (n,)
+        Frame times (s), for the block jackknife.
+
+    Returns
+    -------
+    e_deg : float
+        Reference roll correction (deg).
+    sd_deg : float
+        Its standard uncertainty (deg): max of least-squares and block jackknife.
+    R_ba : ndarray (3, 3)
+        Refitted camera-to-camera rotation.
+    """
+    n = len(Q)
+    ang = euler_zyx_deg(M0.T @ Q)
+    L = np.concatenate([np.radians(ang[:, :2]), ta, tb], axis=1)
+    g = np.zeros(4)
+    r = _twist_free_residuals(g, L, M0, R_ba, a, b)
+    cost = float(np.sum(r * r))
+    lam = 1e-3
+    scale = np.maximum(np.abs(np.concatenate([ta[:, 2:3], tb[:, 2:3]], axis=1)), 1.0)
+    hl = np.concatenate([np.full((n, 2), 1e-7), 1e-8 * np.repeat(scale, 3, axis=1)], axis=1)
+    for _ in range(iterations):
+        Jl = np.empty((n, 16, 8))
+        for k in range(8):
+            d = np.zeros((n, 8))
+            d[:, k] = hl[:, k]
+            Jl[:, :, k] = (_twist_free_residuals(g, L + d, M0, R_ba, a, b) - r) / hl[:, k : k + 1]
+        Jg = np.empty((n, 16, 4))
+        for k in range(4):
+            d = np.zeros(4)
+            d[k] = 1e-7
+            Jg[:, :, k] = (_twist_free_residuals(g + d, L, M0, R_ba, a, b) - r) / 1e-7
+        All = np.einsum("nrk,nrl->nkl", Jl, Jl)
+        Alg = np.einsum("nrk,nrl->nkl", Jl, Jg)
+        bl = np.einsum("nrk,nr->nk", Jl, r)
+        Aggn = np.einsum("nrk,nrl->nkl", Jg, Jg)
+        bgn = np.einsum("nrk,nr->nk", Jg, r)
+        Ainv = np.linalg.inv(
+            All + (lam * np.einsum("nkk->nk", All) + 1e-12)[:, :, None] * np.eye(8)
+        )
+        X = np.einsum("nlk,nlm->nkm", Alg, Ainv)  # Alg^T Ainv, (n, 4, 8)
+        Sn = Aggn - np.einsum("nkm,nmj->nkj", X, Alg)
+        rn = bgn - np.einsum("nkm,nm->nk", X, bl)
+        S, rhs = Sn.sum(0), rn.sum(0)
+        dg = -np.linalg.solve(S + lam * np.diag(np.diag(S)), rhs)
+        dL = -np.einsum("nkl,nl->nk", Ainv, bl + Alg @ dg)
+        r_new = _twist_free_residuals(g + dg, L + dL, M0, R_ba, a, b)
+        c_new = float(np.sum(r_new * r_new))
+        if c_new < cost:
+            g, L, r, done = g + dg, L + dL, r_new, cost - c_new < 1e-9 * cost
+            cost = c_new
+            lam *= 0.3
+            if done:
+                break
+        else:
+            lam *= 10.0
+    # uncertainty of e at the solution: sigma^2 S^-1 and a block jackknife of one GN step
+    sigma2 = cost / max(n * 8 - 4, 1)
+    sd_ls = float(np.sqrt(sigma2 * np.linalg.inv(S)[0, 0]))
+    edges = np.quantile(times_s, np.linspace(0, 1, blocks + 1))
+    blk = np.clip(np.searchsorted(edges, times_s, side="right") - 1, 0, blocks - 1)
+    est = np.array([-np.linalg.solve(S - Sn[blk == k].sum(0), rhs - rn[blk == k].sum(0))[0]
+                    for k in range(blocks)])  # fmt: skip
+    sd_jk = float(np.sqrt((blocks - 1) / blocks * np.sum((est - est.mean()) ** 2)))
+    return float(np.degrees(g[0])), float(np.degrees(max(sd_ls, sd_jk))), rodrigues(g[1:4]) @ R_ba
+
+
+def fit_reference(res: FusionResult, a: ViewData, b: ViewData, window: np.ndarray,
+                  times_s: np.ndarray, cfg, max_frames: int = 4000, max_sd_deg: float = 0.05,
+                  min_bent_frames: int = 30, bent_deg: float = 10.0):  # fmt: skip
+    """The reference rotation (and refitted per-frame poses) from the whole session.
+
+    ``cfg.reference_roll == "window"``: the mean over the measured window frames.
+    ``"session"``: :func:`twist_free_fit` on up to ``max_frames`` measured frames
+    (evenly spread) gives the reference roll and ``R_ba``; the free per-frame fits
+    are then redone with that ``R_ba`` (so the per-frame angles do not assume the
+    twist-free model). Falls back to the window (the tip bent too little) with fewer
+    than ``min_bent_frames`` measured frames bent beyond ``bent_deg`` about either
+    axis, or when the roll's uncertainty exceeds ``max_sd_deg``.
+
+    Returns
+    -------
+    ReferenceFit, FusionResult (updated Q, rms_px, R_ba, centres and covariances)
+
+    Raises
+    ------
+    ValueError
+        No measured frame in the reference window.
+    """
+    from i2ris_calib.tracking.geometry import rot_x, rot_y, rot_z
+
+    meas = res.status == MEASURED
+    M0 = reference_rotation(res.Q, window & meas)
+    n_win = int((window & meas).sum())
+    win = ReferenceFit(M0, res.R_ba, "window", 0.0, float("nan"), 0.0, 0, n_win)
+    idx = np.flatnonzero(meas)
+    bent = np.abs(euler_zyx_deg(M0.T @ res.Q[idx])[:, :2]).max(axis=1) > bent_deg
+    if cfg.reference_roll == "window" or bent.sum() < min_bent_frames:
+        return win, res
+    sub = idx[np.linspace(0, idx.size - 1, min(max_frames, idx.size)).astype(int)]
+    A, B = _subset(a, sub), _subset(b, sub)
+    try:
+        e, sd, R_ba = twist_free_fit(res.Q[sub], res.t_a[sub], res.t_b[sub], res.R_ba, M0, A, B,
+                                     times_s[sub])  # fmt: skip
+    except np.linalg.LinAlgError:
+        return win, res
+    if not (np.isfinite(sd) and sd <= max_sd_deg):
+        return win, res
+    A, B = _subset(a, idx), _subset(b, idx)
+    Q, ta, tb, cost = joint_fit(res.Q[idx], res.t_a[idx], res.t_b[idx], R_ba, A, B, cfg.iterations)
+    newQ, rms = res.Q.copy(), res.rms_px.copy()
+    cen_a, cen_b, cov = res.t_a.copy(), res.t_b.copy(), res.cov_rot.copy()
+    newQ[idx], cen_a[idx], cen_b[idx], rms[idx] = Q, ta, tb, np.sqrt(cost / 16.0)
+    cov[idx] = rotation_covariance(Q, ta, tb, R_ba, A, B)
+    change = float(rotation_angle_deg(res.R_ba, R_ba))
+    # re-zero yaw and pitch on the window (the refit moves the straight pose's distal axis)
+    M = M0 @ rot_x(-np.radians(e))
+    yp = euler_zyx_deg(M.T @ newQ[window & meas]).mean(axis=0)
+    M = M @ rot_z(np.radians(yp[0])) @ rot_y(np.radians(yp[1]))
+    ref = ReferenceFit(M, R_ba, "session", e, sd, change, int(sub.size), n_win)
+    return ref, replace(res, Q=newQ, rms_px=rms, R_ba=R_ba, t_a=cen_a, t_b=cen_b, cov_rot=cov)
 
 
 def common_axis_positions(t_a: np.ndarray, t_b: np.ndarray, R_ba: np.ndarray) -> np.ndarray:

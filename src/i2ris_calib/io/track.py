@@ -21,6 +21,7 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import load_session, session_file
+from i2ris_calib.io.video import input_files
 from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.session import CameraSpec, SessionSpec
 from i2ris_calib.tracking import fuse as fz
@@ -55,8 +56,10 @@ def track_session(session: Path, out: Path | None, config) -> Path:
     cfg: TrackingConfig = config.track
     out = Path(out) if out is not None else session / "track"
     result = track(session, spec, cfg, progress=True)
-    inputs = [session / "session.toml"] + [
-        session_file(session, c.video, "video") for c in spec.cameras.values()
+    inputs = [session / "session.toml"] + [  # an image-sequence video: each of its images
+        f
+        for c in spec.cameras.values()
+        for f in input_files(session_file(session, c.video, "video"))
     ]
     inputs += [session_file(session, c.timestamps, "timestamps") for c in spec.cameras.values()]
     summary = {**result["summary"], "provenance": provenance(inputs, cfg)}

@@ -73,3 +73,20 @@ def test_weak_perspective_model_without_calibration(ci_session, tmp_path):
         err = (m[f"{axis}_deg"] - m[f"{axis}_deg_true"])[ok]
         assert np.sqrt(np.mean(err**2)) <= 0.08, axis
         assert err.abs().max() <= 0.35, axis
+
+
+def test_reference_roll_fitted_with_an_honest_uncertainty(ci_tracked, ci_session):
+    """track.json states the reference roll's uncertainty; the true roll of the reference
+    (the rendered top camera's rotation) lies within 4 stated sd."""
+    import json
+
+    from i2ris_calib.tracking.geometry import euler_zyx_deg
+
+    m, summary = ci_tracked
+    ref = summary["reference"]
+    assert ref["roll_method"] == "session"
+    assert 0 < ref["roll_sd_deg"] < 0.05
+    truth = json.loads((ci_session / "truth" / "truth.json").read_text())
+    R_true = np.asarray(truth["cameras"]["top"]["R_cam_from_base"])
+    roll_err = euler_zyx_deg(R_true.T @ np.asarray(ref["tip_to_top_camera"]))[2]
+    assert abs(roll_err) <= 4 * ref["roll_sd_deg"] + 1e-4, (roll_err, ref["roll_sd_deg"])

@@ -3,6 +3,7 @@
     python benchmarks/bench_tracking.py            # 2-minute 1280x1024 session (slow)
     python benchmarks/bench_tracking.py --quick    # ~25 s of the same scene
     python benchmarks/bench_tracking.py --format mp4 --keep /tmp/bench_mp4
+    python benchmarks/bench_tracking.py --quick --keep /tmp/bq --decode   # + decode-only speed
 
 Scene (preset "benchmark"): 200 px markers, grey-level noise sigma 2, defocus blur,
 3 deg camera misalignment, f = 50000 px (near-orthographic), three occlusions per
@@ -11,6 +12,14 @@ no fusion) errors against the truth, detection figures, and speed per stream:
 frames per second of wall time (two streams in parallel on a shared machine) and
 per CPU-second of the stream's process (decoding + detection + edge refinement on
 one core).
+
+``--decode`` adds decode-only speed per input format (docs/video.md): the first
+``--decode-frames`` frames of the top camera are written as FFV1 .mkv/.avi, MJPG .avi,
+mp4v .mp4, an 8-bit PNG and a 16-bit TIFF sequence, then read back with
+``io.video.iter_frames`` serially (``ahead=0``) and with the decode-ahead thread, with
+FFmpeg's default decoder threads and with one. Figures: frames/s of wall time and
+CPU ms per frame (all threads of this process; the machine may be shared, so wall
+time alone says little).
 
 Targets: RMS <= 0.03 deg, max <= 0.15 deg, zero flips (errors > 1 deg), >= 99 %
 of frames with both markers visible measured, occluded frames flagged, no reported
@@ -53,6 +62,47 @@ def evaluate(session: Path, angles: pd.DataFrame) -> dict:
     out["occluded_flagged"] = float((~ok[~vis]).mean()) if (~vis).any() else float("nan")
     out["status_counts"] = m["status"].value_counts().to_dict()
     return out
+
+
+def decode_speed(video: Path, frames: int, out: Path) -> list[dict]:
+    """Decode-only figures of ``frames`` frames of ``video`` re-encoded in each format."""
+    import cv2
+
+    from i2ris_calib.io.video import iter_frames, open_writer
+
+    imgs = []
+    for img in iter_frames(video):
+        imgs.append(img)
+        if len(imgs) >= frames:
+            break
+    h, w = imgs[0].shape
+    out.mkdir(parents=True, exist_ok=True)
+    inputs = {}
+    for name, suffix, codec in (("FFV1 .mkv", ".mkv", "FFV1"), ("FFV1 .avi", ".avi", "FFV1"),
+                                ("MJPG .avi", ".avi", "MJPG"), ("mp4v .mp4", ".mp4", "mp4v")):  # fmt: skip
+        path = out / f"{codec.lower()}{suffix}"
+        wr = open_writer(path, 30.0, (w, h), codec=codec)
+        for img in imgs:
+            wr.write(img)
+        wr.release()
+        inputs[name] = path
+    for name, suffix, shift in (("PNG 8-bit seq", ".png", 0), ("TIFF 16-bit seq", ".tif", 4)):
+        d = out / f"seq{suffix[1:]}"
+        d.mkdir(exist_ok=True)
+        for k, img in enumerate(imgs):
+            cv2.imwrite(
+                str(d / f"frame_{k:06d}{suffix}"), img.astype(np.uint16) << shift if shift else img
+            )
+        inputs[name] = d
+    rows = []
+    for name, path in inputs.items():
+        for ahead, threads in ((0, 0), (8, 0), (0, 1), (8, 1)):
+            t0, c0 = time.perf_counter(), time.process_time()
+            n = sum(1 for _ in iter_frames(path, ahead=ahead, threads=threads))
+            wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+            rows.append({"format": name, "ahead": ahead, "threads": threads or "default",
+                         "frames": n, "fps_wall": n / wall, "cpu_ms": 1000 * cpu / n})  # fmt: skip
+    return rows
 
 
 #: Cross-axis cases (--cross-axis): (misalignment deg, pinhole focal px, seed) on the
@@ -141,6 +191,9 @@ def main() -> None:
         action="store_true",
         help="also track with ArUco SUBPIX corners (no edge refinement) for comparison",
     )
+    ap.add_argument("--decode", action="store_true", help="also decode-only speed per format")
+    ap.add_argument("--decode-frames", type=int, default=200, help="frames for --decode")
+    ap.add_argument("--no-track", action="store_true", help="skip tracking (with --decode)")
     ap.add_argument(
         "--cross-axis",
         action="store_true",
@@ -167,6 +220,18 @@ def main() -> None:
         render_s = time.perf_counter() - t0
     else:
         render_s = float("nan")
+    if args.decode:
+        import os
+
+        print(f"decode-only, {args.decode_frames} frames of top camera, {os.cpu_count()} CPUs:")
+        tmp = Path(tempfile.mkdtemp(prefix="bench_decode_"))
+        rows = decode_speed(folder / f"top.{args.format}", args.decode_frames, tmp)
+        shutil.rmtree(tmp, ignore_errors=True)
+        for r in rows:
+            print(f"  {r['format']:16s} ahead={r['ahead']} ffmpeg_threads={r['threads']!s:7s} "
+                  f"{r['fps_wall']:7.1f} frames/s wall  {r['cpu_ms']:6.2f} CPU ms/frame")  # fmt: skip
+    if args.no_track:
+        return
     t1 = time.perf_counter()
     res = track(folder, load_session(folder), TrackingConfig(), progress=True)
     track_s = time.perf_counter() - t1
@@ -198,7 +263,8 @@ def main() -> None:
     for name, c in s["cameras"].items():
         print(
             f"stream {name}: {c['frames']} frames, {c['frames_per_s']} frames/s wall, "
-            f"{c['frames_per_cpu_s']} frames/CPU-s (one core), ROI hits {c['roi_hits']}, "
+            f"{c['frames_per_cpu_s']} frames/CPU-s ({1000 * c['cpu_seconds'] / c['frames']:.1f} CPU ms/frame, "
+            f"decode thread included), ROI hits {c['roi_hits']}, "
             f"edge-refined {c['edge_refined']}"
         )
     if args.subpix:

@@ -35,6 +35,9 @@ class EncoderLogSpec:
     value_index: int = 0  # element of value_field when it is an array (JointState.position)
     sync_field: str = "data"  # message field of sync_topic, nonzero = LED on
     time_source: Literal["log", "header"] = "log"  # bag receive time or msg.header.stamp
+    # fastest possible encoder change, counts/s; faster samples that come back are glitches
+    # (replaced by interpolation, recorded in sync.json); 0 = derived from the log itself
+    max_counts_per_s: float = 0.0
 
     def validate(self) -> None:
         """Raise ValueError on values no log can have."""
@@ -45,6 +48,10 @@ class EncoderLogSpec:
             )
         if self.value_index < 0:
             raise ValueError(f"value_index = {self.value_index} must be >= 0")
+        if not (math.isfinite(self.max_counts_per_s) and self.max_counts_per_s >= 0):
+            raise ValueError(
+                f"max_counts_per_s = {self.max_counts_per_s} must be >= 0 (0 = derived from the log)"
+            )
 
 
 @dataclass(frozen=True)

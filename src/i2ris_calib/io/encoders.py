@@ -14,7 +14,7 @@ import pandas as pd
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.session import EncoderLogSpec
-from i2ris_calib.sync.log import EncoderLog, make_encoder_log
+from i2ris_calib.sync.log import EncoderLog, make_encoder_log, time_unit_hint
 
 
 def encoder_log_path(session_dir: str | Path, spec: EncoderLogSpec) -> Path:
@@ -77,12 +77,22 @@ def read_encoder_csv(path: Path, spec: EncoderLogSpec, max_gap_s: float) -> Enco
             )
         values[c] = v
     t = values[spec.time_column] * spec.time_unit_s
+    unit = time_unit_hint(t)
+    if unit is not None:
+        step = float(np.median(np.diff(t)))
+        name = {1e-3: "ms", 1e-6: "us", 1e-9: "ns"}[unit]
+        raise CalibError(
+            f"{path}: '{spec.time_column}' steps by {step:g} s per sample (median, with "
+            f"[encoder] time_unit_s = {spec.time_unit_s:g}), slower than any encoder log: the "
+            f"times look like {name}; set [encoder] time_unit_s = {spec.time_unit_s * unit:g} "
+            "in session.toml"
+        )
     channels = {
         "enc_yaw": (t, values[spec.yaw_column]),
         "enc_pitch": (t, values[spec.pitch_column]),
     }
     flash = (t, values[spec.sync_column]) if spec.sync_column in values else None
-    return make_encoder_log(channels, flash, str(path), max_gap_s)
+    return make_encoder_log(channels, flash, str(path), max_gap_s, spec.max_counts_per_s)
 
 
 def read_encoder_bag(path: Path, spec: EncoderLogSpec, max_gap_s: float) -> EncoderLog:
@@ -114,7 +124,7 @@ def read_encoder_bag(path: Path, spec: EncoderLogSpec, max_gap_s: float) -> Enco
     except (AnyReaderError, FileNotFoundError, OSError) as exc:
         raise CalibError(f"{path}: cannot read the ROS bag ({exc})") from None
     flash = data.pop("sync_flash", None)
-    return make_encoder_log(data, flash, f"{path}", max_gap_s)
+    return make_encoder_log(data, flash, f"{path}", max_gap_s, spec.max_counts_per_s)
 
 
 def _topic_series(reader, path: Path, topic: str, spec: EncoderLogSpec, is_sync: bool):

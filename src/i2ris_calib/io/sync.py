@@ -81,9 +81,9 @@ def sync_summary(clock, table: pd.DataFrame, n_dropped: int, log, t_cam: np.ndar
         "clock": CLOCK,
         "method": clock.method,
         "method_requested": cfg.sync.method,
-        "offset_s": clock.offset_s,
+        "offset_s": clock.offset_at(0.0),
         "drift_ppm": clock.drift_ppm,
-        "offset_stderr_s": clock.offset_stderr_s,
+        "offset_stderr_s": clock.offset_stderr_at(0.0),
         "drift_stderr_ppm": clock.drift_stderr_ppm,
         "t_ref_cam_s": t_ref,
         "offset_at_t_ref_s": clock.offset_at(t_ref),
@@ -92,23 +92,22 @@ def sync_summary(clock, table: pd.DataFrame, n_dropped: int, log, t_cam: np.ndar
         "n_dropped_outside_log": n_dropped,
         "camera_time_range_s": [float(np.min(t_cam)), float(np.max(t_cam))],
         "log_time_range_s": list(log.time_range()),
+        "time_origin_s": {"camera": clock.origin_cam_s, "controller": clock.origin_ctrl_s},
         "evidence": clock.evidence,
     }
 
 
 def xcorr_comparison(angles: pd.DataFrame, log, sync_cfg) -> dict | None:
     """Plain cross-correlation result for comparison (None when it cannot run)."""
-    from i2ris_calib.sync.estimate import axis_series
-    from i2ris_calib.sync.xcorr import clock_from_xcorr
+    from i2ris_calib.sync.estimate import axis_series, estimate_clock
 
-    series = axis_series(angles)
-    if not series:
+    if not axis_series(angles):
         return None
     try:
-        c = clock_from_xcorr(series, log, replace(sync_cfg, method="xcorr"))
+        c = estimate_clock(angles, log, replace(sync_cfg, method="xcorr"))
     except CalibError:
         return None
-    return {"offset_s": c.offset_s, "drift_ppm": c.drift_ppm, "note": c.evidence["note"]}
+    return {"offset_s": c.offset_at(0.0), "drift_ppm": c.drift_ppm, "note": c.evidence["note"]}
 
 
 def sync_session(
@@ -157,7 +156,13 @@ def sync_session(
     summary = sync_summary(clock, table, n_dropped, log, t_cam, cfg)
     summary["n_backward_rejected"] = int(df.attrs.get("n_backward_rejected", 0))
     summary["axis_check"] = axis_check(table)
-    summary["warnings"] = axis_warnings(summary["axis_check"], root)
+    summary["encoder_glitches"] = glitch_summary(log, table)
+    summary["frames_outside_log"] = outside_log_summary(df, clock, log)
+    summary["warnings"] = (
+        axis_warnings(summary["axis_check"], root)
+        + glitch_warnings(summary["encoder_glitches"], log_path)
+        + outside_log_warnings(summary["frames_outside_log"], log_path)
+    )
     for line in summary["warnings"]:
         typer.echo(f"warning: {line}", err=True)
     summary["xcorr_comparison"] = comparison
@@ -165,6 +170,85 @@ def sync_session(
     write_csv(out_dir / "synced.csv", table, float_format="%.6f")
     write_json(out_dir / "sync.json", summary)
     return out_dir
+
+
+GLITCH_ACTION = (
+    "replaced by linear interpolation between the nearest good samples (the series keeps "
+    "every sample; the motor cannot have moved faster than the limit in between)"
+)
+
+
+def glitch_summary(log, table: pd.DataFrame) -> dict:
+    """sync.json ``encoder_glitches``: per channel what the log reader replaced, and the
+    synced frames interpolated from a replaced sample."""
+    out: dict = {"action": GLITCH_ACTION, "n_samples": 0, "channels": {}}
+    t = table["time_s"].to_numpy(dtype=float)
+    for name, g in (log.meta.get("glitches") or {}).items():
+        entry = dict(g)
+        entry["n_frames_affected"] = 0
+        if g["n_samples"]:
+            ch = log.channels[name]
+            bad = np.isin(ch.t_s, np.asarray(g["all_times_s"]))
+            # a frame is affected when it is interpolated from a replaced sample
+            k = np.clip(np.searchsorted(ch.t_s, t, side="right"), 1, ch.t_s.size - 1)
+            entry["n_frames_affected"] = int(np.sum(bad[k - 1] | bad[k]))
+        entry.pop("all_times_s", None)
+        out["channels"][name] = entry
+        out["n_samples"] += int(g["n_samples"])
+    return out
+
+
+def glitch_warnings(glitches: dict, log_path: Path) -> list[str]:
+    """Terminal/sync.json warning per channel with encoder glitches."""
+    lines = []
+    for name, g in glitches["channels"].items():
+        if g["n_samples"]:
+            times = ", ".join(f"{x:.6f}" for x in g["first_times_s"][:3])
+            lines.append(
+                f"{g['n_samples']} encoder glitch sample(s) in {name} of {log_path} (faster than "
+                f"{g['limit_counts_per_s']:.4g} counts/s and back; first at t = {times} s): "
+                f"replaced by interpolation, {g['n_frames_affected']} frame(s) affected "
+                "(set [encoder] max_counts_per_s if the limit is wrong)"
+            )
+    return lines
+
+
+def outside_log_summary(angles: pd.DataFrame, clock, log) -> dict:
+    """Frames whose controller time falls before the log starts or after it ends
+    (left out of synced.csv at the ends of the recording, never extrapolated)."""
+    t_cam = angles["time_s"].to_numpy(dtype=float)
+    t = clock.to_ctrl(t_cam)
+    lo, hi = log.time_range()
+    before, after = t < lo, t > hi
+    frames = angles["frame"].to_numpy()
+
+    def part(mask):
+        if not mask.any():
+            return {"n": 0}
+        k = np.flatnonzero(mask)
+        return {
+            "n": int(k.size),
+            "frames": [int(frames[k[0]]), int(frames[k[-1]])],
+            "camera_time_s": [float(t_cam[k[0]]), float(t_cam[k[-1]])],
+        }
+
+    return {"before_log_start": part(before), "after_log_end": part(after)}
+
+
+def outside_log_warnings(outside: dict, log_path: Path) -> list[str]:
+    """Warning when the log starts after the video or ends before it."""
+    lines = []
+    for key, what in (("before_log_start", "starts"), ("after_log_end", "ends")):
+        p = outside[key]
+        if p["n"]:
+            a, b = p["camera_time_s"]
+            lines.append(
+                f"{p['n']} frame(s) (frames {p['frames'][0]}-{p['frames'][1]}, camera time "
+                f"{a:.3f}-{b:.3f} s) fall outside the encoder log {log_path} (the video "
+                f"{'starts before' if what == 'starts' else 'ends after'} it): not synced, left "
+                "out of synced.csv (never extrapolated)"
+            )
+    return lines
 
 
 def axis_warnings(check: dict, root: Path) -> list[str]:

@@ -70,12 +70,35 @@ def read_synced(path: str | Path, axis: str) -> pd.DataFrame:
             f"{p}: {kind} time_s at line {k + 3} ({t[k]:.6g} -> {t[k + 1]:.6g} s); "
             "time must be strictly increasing (sort the rows and drop duplicates)"
         )
+    for col in (f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])):
+        check_encoder_jumps(t, df[col].to_numpy(), col, p)
     if "status" in df.columns:
         not_measured = df["status"].astype(str).str.strip() != "measured"
         for col in (f"{axis}_deg", f"{other}_deg"):
             if col in df.columns:
                 df.loc[not_measured, col] = np.nan
     return df
+
+
+# --- encoder glitches (issue 9): 'sync' repairs them; a synced CSV made elsewhere is checked
+def check_encoder_jumps(t: np.ndarray, enc: np.ndarray, col: str, p: Path) -> None:
+    """CalibError naming the line of the first encoder sample the motor cannot produce:
+    one that departs from its neighbours and comes back faster than the speed limit
+    derived from the file itself (``sync.log.find_glitches``, ``sync.log.speed_limit``).
+    A step that stays is left alone (synthetic inputs and joined recordings have them).
+    """
+    from i2ris_calib.sync.log import find_glitches, speed_limit
+
+    limit = speed_limit(t, enc)
+    bad = find_glitches(t, enc, limit)
+    if not bad.any():
+        return
+    k = int(np.flatnonzero(bad)[0])
+    raise CalibError(
+        f"{p}: '{col}' = {enc[k]:.6g} at line {k + 2} (t = {t[k]:.6f} s) jumps away and back "
+        f"faster than the motor moves anywhere else in the file (> {limit:.4g} counts/s): an "
+        "encoder glitch? fix or interpolate that row ('i2ris-calib sync' repairs glitches in the log)"
+    )
 
 
 def datasets_from_frame(

@@ -494,12 +494,26 @@ def find_stderr(obj: Mapping[str, Any], name: str) -> Any:
 
 
 def sync_table(sync: Mapping[str, Any]) -> Table:
-    """Clock offset and drift with standard errors, then the method."""
+    """Clock offset and drift with standard errors, then the method; the offset in the
+    middle of the data, encoder glitches replaced and sync warnings when recorded."""
     rows = []
     for name, label, digits in (("offset_s", "offset (s)", 6), ("drift_ppm", "drift (ppm)", 3)):
         val, se = sync.get(name), find_stderr(sync, name)
         rows.append((label, fmt(val, digits), fmt(se, digits)))
     rows.append(("method", fmt(sync.get("method")), ""))
+    if "offset_at_t_ref_s" in sync and "t_ref_cam_s" in sync:
+        rows.append(
+            (
+                f"offset at t_cam = {fmt(sync['t_ref_cam_s'], 3)} s (s)",
+                fmt(sync["offset_at_t_ref_s"], 6),
+                fmt(sync.get("offset_at_t_ref_stderr_s"), 6),
+            )
+        )
+    glitches = sync.get("encoder_glitches")
+    if isinstance(glitches, Mapping):
+        rows.append(("encoder glitches replaced", fmt(glitches.get("n_samples")), ""))
+    for w in sync.get("warnings") or ():
+        rows.append(("warning", str(w), ""))
     return Table(
         header=("quantity", "estimate", "standard error"),
         rows=tuple(rows),

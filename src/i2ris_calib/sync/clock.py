@@ -13,20 +13,32 @@ PPM = 1e-6
 class ClockModel:
     """Camera clock -> controller clock (docs/sync.md convention).
 
+    The clock is held relative to recording-local origins (``origin_cam_s``,
+    ``origin_ctrl_s``; both 0 unless set by :func:`i2ris_calib.sync.estimate.estimate_clock`):
+    ``t_ctrl - origin_ctrl_s = offset_s + (1 + drift_ppm*1e-6) * (t_cam - origin_cam_s)``.
+    Epoch-scale clocks (ROS bags: ~1.7e9 s) would otherwise lose float64 precision
+    and make the (offset, drift) covariance singular. :meth:`offset_at` and
+    :meth:`offset_stderr_at` give the documented offset ``t_ctrl - t_cam`` at any
+    camera time, e.g. ``offset_at(0.0)`` for sync.json's ``offset_s``.
+
     Attributes
     ----------
     offset_s : float
-        Controller time at camera time 0, s.
+        Local controller time at local camera time 0, s (with zero origins: controller
+        time at camera time 0).
     drift_ppm : float
         Rate difference, parts per million (controller seconds per camera second - 1).
     offset_stderr_s, drift_stderr_ppm : float
-        Standard errors (NaN when not estimated; drift stderr is NaN when drift was fixed).
+        Standard errors of ``offset_s`` and ``drift_ppm`` (NaN when not estimated;
+        drift stderr is NaN when drift was fixed).
     cov : ndarray, shape (2, 2)
         Covariance of (offset_s, drift_ppm).
     method : str
         ``event``, ``model`` or ``xcorr``.
     evidence : dict
         Method-specific evidence (matched edges, profiles), JSON-safe.
+    origin_cam_s, origin_ctrl_s : float
+        Recording-local origins of the camera and controller clocks, s.
     """
 
     offset_s: float
@@ -36,20 +48,25 @@ class ClockModel:
     cov: np.ndarray | None = None
     method: str = ""
     evidence: dict = field(default_factory=dict)
+    origin_cam_s: float = 0.0
+    origin_ctrl_s: float = 0.0
 
     def to_ctrl(self, t_cam_s: np.ndarray) -> np.ndarray:
         """Controller-clock times, s, of camera times ``t_cam_s`` (any shape)."""
-        return self.offset_s + (1.0 + self.drift_ppm * PPM) * np.asarray(t_cam_s, dtype=float)
+        local = np.asarray(t_cam_s, dtype=float) - self.origin_cam_s
+        return self.origin_ctrl_s + (self.offset_s + (1.0 + self.drift_ppm * PPM) * local)
 
     def offset_at(self, t_cam_s: float) -> float:
         """Offset ``t_ctrl - t_cam`` at camera time ``t_cam_s``, s."""
-        return float(self.offset_s + self.drift_ppm * PPM * t_cam_s)
+        local = float(t_cam_s) - self.origin_cam_s
+        base = self.origin_ctrl_s - self.origin_cam_s
+        return float(base + (self.offset_s + self.drift_ppm * PPM * local))
 
     def offset_stderr_at(self, t_cam_s: float) -> float:
         """Standard error of :meth:`offset_at`, s (uses the covariance)."""
         if self.cov is None:
             return self.offset_stderr_s
-        j = np.array([1.0, t_cam_s * PPM])
+        j = np.array([1.0, (float(t_cam_s) - self.origin_cam_s) * PPM])
         return float(np.sqrt(max(j @ self.cov @ j, 0.0)))
 
 

@@ -123,15 +123,125 @@ def estimate_clock(
     in ``evidence["auto"]``). ``event`` and ``model`` insist on their method;
     ``xcorr`` is plain cross-correlation (comparison only: biased by hysteresis).
 
+    Every method runs on recording-local times: the first camera time and the first
+    log time are subtracted before any arithmetic and put back in the returned clock
+    (``origin_cam_s``, ``origin_ctrl_s``) and its evidence. Results therefore do not
+    depend on the clocks' epoch (ROS bags stamp ~1.7e9 s: in absolute seconds float64
+    keeps only ~0.2 us and the offset/drift covariance is singular).
+
     Parameters
     ----------
     angles : DataFrame
-        angles.csv (see :func:`check_angles`).
+        angles.csv (see :func:`check_angles`), camera clock, s.
     log : EncoderLog
+        Controller clock, s.
     cfg : SyncConfig
+        ``offset_guess_s`` is ``t_ctrl - t_cam`` on the absolute clocks.
     fit_config : FitConfig, optional
         For the ``model`` method.
     """
+    c0, l0 = time_origins(angles, log)
+    try:
+        local = _estimate_local(
+            shift_angles(angles, c0),
+            log.shifted(-l0),
+            replace(cfg, offset_guess_s=cfg.offset_guess_s - (l0 - c0)),
+            fit_config,
+        )
+    except CalibError as exc:
+        if l0 == c0:
+            raise
+        raise CalibError(
+            f"{exc} [clocks {l0 - c0:.6f} s apart: offsets named here are relative to that]"
+        ) from None
+    return replace(
+        local,
+        origin_cam_s=c0,
+        origin_ctrl_s=l0,
+        evidence=global_evidence(local.evidence, c0, l0),
+    )
+
+
+#: clocks whose first times differ by less than this share one origin (s: a day)
+SHARED_ORIGIN_MAX_S = 1e5
+
+
+def time_origins(angles: pd.DataFrame, log: EncoderLog) -> tuple[float, float]:
+    """(camera origin, controller origin), s.
+
+    The camera origin is the first frame time. Clocks on the same epoch (first log
+    time within :data:`SHARED_ORIGIN_MAX_S` of it) share it, so local offsets
+    ``t_ctrl - t_cam`` (and any message naming one) equal the absolute ones; clocks on
+    different epochs (video from 0, log in ROS time) get the first log time.
+    """
+    cols = [c for c in angles.columns if c == "time_s" or c.startswith("time_s_")]
+    t = np.concatenate([pd.to_numeric(angles[c], errors="coerce").to_numpy(float) for c in cols])
+    c0 = float(np.nanmin(t)) if np.isfinite(t).any() else 0.0
+    l_first = float(log.time_range()[0])
+    return c0, (c0 if abs(l_first - c0) < SHARED_ORIGIN_MAX_S else l_first)
+
+
+def shift_angles(angles: pd.DataFrame, shift_s: float) -> pd.DataFrame:
+    """A copy of ``angles`` with every camera time column (time_s, time_s_<cam>) minus ``shift_s``."""
+    out = angles.copy()
+    for c in out.columns:
+        if c == "time_s" or c.startswith("time_s_"):
+            out[c] = pd.to_numeric(out[c], errors="coerce").to_numpy(float) - shift_s
+    out.attrs = dict(angles.attrs)
+    return out
+
+
+#: evidence keys holding offsets (t_ctrl - t_cam), camera times and controller times
+_OFFSET_KEYS = {
+    "xcorr_offset_s",
+    "prior_offset_at_t_ref_s",
+    "offset_at_t_ref_s",
+    "coarse_offset_s",
+    "global_offset_s",
+    "window_offsets_s",
+}
+_CAM_KEYS = {"t_ref_cam_s", "t_cam_s", "windows_t_cam_s"}
+_CTRL_KEYS = {"t_ctrl_s"}
+
+
+def global_evidence(ev, c0: float, l0: float):
+    """Evidence of a clock estimated on local times, with times and offsets made absolute.
+
+    Offsets gain ``l0 - c0``, camera times ``c0``, controller times ``l0``; an
+    ``offset_s`` beside a ``drift_ppm`` (a clock at local camera time 0) becomes the
+    documented offset at camera time 0.
+    """
+    if isinstance(ev, list):
+        return [global_evidence(v, c0, l0) for v in ev]
+    if not isinstance(ev, dict):
+        return ev
+
+    def add(v, a):
+        if isinstance(v, np.ndarray):
+            return v + a
+        if isinstance(v, list):
+            return [x + a for x in v]
+        return v + a if isinstance(v, float | int) and not isinstance(v, bool) else v
+
+    out = {}
+    for k, v in ev.items():
+        if k in _OFFSET_KEYS:
+            out[k] = add(v, l0 - c0)
+        elif k in _CAM_KEYS:
+            out[k] = add(v, c0)
+        elif k in _CTRL_KEYS:
+            out[k] = add(v, l0)
+        elif k == "offset_s" and "drift_ppm" in ev:
+            out[k] = float((l0 - c0) + (v - ev["drift_ppm"] * 1e-6 * c0))
+        else:
+            out[k] = global_evidence(v, c0, l0)
+    return out
+
+
+def _estimate_local(
+    angles: pd.DataFrame, log: EncoderLog, cfg: SyncConfig, fit_config=None
+) -> ClockModel:
+    """:func:`estimate_clock` on times already made recording-local."""
     method = cfg.method
     reason = ""
     if method in ("auto", "event"):
@@ -202,7 +312,9 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     clock.evidence["event"] = {
         "offset_s": event.offset_s,
         "drift_ppm": event.drift_ppm,
-        "offset_stderr_s": event.offset_stderr_s,
+        "t_ref_cam_s": t_mid,
+        "offset_at_t_ref_s": event.offset_at(t_mid),
+        "offset_at_t_ref_stderr_s": sd,
         "drift_stderr_ppm": event.drift_stderr_ppm,
         "evidence": event.evidence,
     }

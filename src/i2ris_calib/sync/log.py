@@ -15,6 +15,15 @@ from i2ris_calib.errors import CalibError
 
 ENCODER_CHANNELS = ("enc_yaw", "enc_pitch")
 
+#: without ``[encoder] max_counts_per_s`` the motor's speed limit is this many times the
+#: 99th percentile of the log's own per-sample speed (|change| / interval)
+GLITCH_SPEED_FACTOR = 10.0
+#: half-width (samples) of the running median a glitch is measured against: up to this
+#: many consecutive bad samples are recognised as one glitch
+GLITCH_HALF_WINDOW = 5
+#: encoder rates a log can plausibly have, Hz (the documented logs run at 100 Hz-1 kHz)
+PLAUSIBLE_RATE_HZ = (10.0, 100_000.0)
+
 
 @dataclass(frozen=True)
 class Channel:
@@ -56,6 +65,15 @@ class EncoderLog:
         lo = max(float(c.t_s[0]) for c in self.channels.values())
         hi = min(float(c.t_s[-1]) for c in self.channels.values())
         return lo, hi
+
+    def shifted(self, dt_s: float) -> EncoderLog:
+        """The same log with every time plus ``dt_s`` (recording-local clocks)."""
+        return EncoderLog(
+            channels={k: Channel(c.t_s + dt_s, c.values) for k, c in self.channels.items()},
+            flash=None if self.flash is None else Channel(self.flash.t_s + dt_s, self.flash.values),
+            source=self.source,
+            meta=self.meta,
+        )
 
     def interpolate(self, name: str, t_s: np.ndarray) -> np.ndarray:
         """Channel ``name`` linearly interpolated at ``t_s`` (NaN outside its range)."""
@@ -107,26 +125,159 @@ def check_channel(t_s: np.ndarray, values: np.ndarray, name: str, where: str, ma
         )
 
 
+def time_unit_hint(t: np.ndarray) -> float | None:
+    """Factor that would make the sample interval of ``t`` plausible, or None.
+
+    A median interval slower than :data:`PLAUSIBLE_RATE_HZ` allows (e.g. 1 "s" for a
+    1 kHz log whose times are in ms) that becomes plausible when scaled by 1e-3, 1e-6
+    or 1e-9 returns that factor; otherwise None (including logs already plausible).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times as read (s under the configured unit).
+    """
+    dt = np.diff(np.asarray(t, dtype=float))
+    dt = dt[np.isfinite(dt) & (dt > 0)]
+    if dt.size == 0:
+        return None
+    step = float(np.median(dt))
+    lo, hi = 1.0 / PLAUSIBLE_RATE_HZ[1], 1.0 / PLAUSIBLE_RATE_HZ[0]
+    if step <= hi:
+        return None
+    for unit in (1e-3, 1e-6, 1e-9):
+        if lo <= step * unit <= hi:
+            return unit
+    return None
+
+
+def speed_limit(t_s: np.ndarray, values: np.ndarray, configured: float = 0.0) -> float:
+    """Fastest physically possible change of a channel, units/s.
+
+    ``configured`` (> 0, ``[encoder] max_counts_per_s``) is used as given; 0 derives it
+    from the log: :data:`GLITCH_SPEED_FACTOR` times the larger of the 99th percentile
+    of the per-sample speed |dv|/dt and one quantum (the smallest change, at most 1
+    count) per median interval. A handful of glitches cannot move a percentile of a
+    long log; a motor at rest has the quantum as its floor.
+    """
+    if configured > 0:
+        return float(configured)
+    dt = np.diff(t_s)
+    dv = np.abs(np.diff(values))
+    if dt.size == 0:
+        return float("inf")
+    moving = dv[dv > 0]
+    quantum = min(1.0, float(np.min(moving))) if moving.size else 1.0
+    typical = max(float(np.quantile(dv / dt, 0.99)), quantum / float(np.median(dt)))
+    return GLITCH_SPEED_FACTOR * typical
+
+
+def find_glitches(t_s: np.ndarray, values: np.ndarray, limit_per_s: float) -> np.ndarray:
+    """Samples no motor can produce: far from their neighbours' median, and back again.
+
+    Sample ``i`` is a glitch when it departs from the median of the
+    ``2*GLITCH_HALF_WINDOW + 1`` samples around it by more than the motor can move
+    in that window (``limit_per_s`` times half its duration). Real motion, however
+    fast, is monotone over such a window or turns smoothly, so its median follows it;
+    a spike (a sensor glitch, a bad field, 2147483647) does not.
+
+    Parameters
+    ----------
+    t_s, values : ndarray, shape (n,)
+        Sample times (s, strictly increasing) and values of one channel.
+    limit_per_s : float
+        Speed limit, units/s (:func:`speed_limit`).
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+    """
+    from scipy.ndimage import median_filter
+
+    n = values.size
+    w = GLITCH_HALF_WINDOW
+    if n < 2 * w + 1 or not np.isfinite(limit_per_s):
+        return np.zeros(n, dtype=bool)
+    med = median_filter(values, size=2 * w + 1, mode="nearest")
+    idx = np.arange(n)
+    span = t_s[np.minimum(idx + w, n - 1)] - t_s[np.maximum(idx - w, 0)]
+    return np.abs(values - med) > limit_per_s * 0.5 * span
+
+
+def repair_glitches(t_s: np.ndarray, values: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """``values`` with the ``bad`` samples replaced by linear interpolation between the
+    nearest good samples in time (the series keeps every sample: nothing is spliced)."""
+    if not bad.any():
+        return values
+    out = values.copy()
+    out[bad] = np.interp(t_s[bad], t_s[~bad], values[~bad])
+    return out
+
+
+def check_jumps(t_s, values, limit_per_s: float, name: str, where: str) -> None:
+    """CalibError when consecutive samples differ by more than the motor can move.
+
+    Run after :func:`repair_glitches`: what is left is a jump that stays (an encoder
+    reset or re-homing, a counter wrap), which no interpolation can repair.
+    """
+    speed = np.abs(np.diff(values)) / np.diff(t_s)
+    if not (speed > limit_per_s).any():
+        return
+    i = int(np.flatnonzero(speed > limit_per_s)[0])
+    raise CalibError(
+        f"{where}: '{name}' jumps from {values[i]:.6g} to {values[i + 1]:.6g} between "
+        f"t = {t_s[i]:.6f} and {t_s[i + 1]:.6f} s (sample {i + 1}) and stays there: "
+        f"{speed[i]:.4g}/s, faster than the motor moves ({limit_per_s:.4g}/s); an encoder "
+        "reset? split the log at the jump, or set [encoder] max_counts_per_s in session.toml "
+        "if the motor really moves this fast"
+    )
+
+
 def make_encoder_log(
     channels: dict[str, tuple[np.ndarray, np.ndarray]],
     flash: tuple[np.ndarray, np.ndarray] | None,
     source: str,
     max_gap_s: float,
+    max_counts_per_s: float = 0.0,
 ) -> EncoderLog:
     """Validated :class:`EncoderLog` from raw (times, values) pairs.
 
     Gaps are checked on the encoder channels only (the flash channel may be logged
     on change); every channel must be strictly increasing in time.
+
+    Encoder glitches (samples faster than the motor can move and back,
+    :func:`find_glitches`; speed limit ``max_counts_per_s`` counts/s, 0 = derived from
+    the log, :func:`speed_limit`) are replaced by linear interpolation between their
+    good neighbours and recorded in ``meta["glitches"]`` (per channel: count, first
+    times and values, the limit). They are interpolated rather than left as missing
+    samples because the hysteresis models carry state and need an input at every
+    frame; the motor cannot have moved faster than the limit in between, so the
+    interpolation is within the limit times the gap of the truth. A jump that does
+    not come back is a CalibError (:func:`check_jumps`).
     """
     built = {}
+    glitches = {}
     for name, (t, v) in channels.items():
         t = np.asarray(t, dtype=float)
         v = np.asarray(v, dtype=float)
         check_channel(t, v, name, source, max_gap_s)
-        built[name] = Channel(t, v)
+        limit = speed_limit(t, v, max_counts_per_s)
+        bad = find_glitches(t, v, limit)
+        fixed = repair_glitches(t, v, bad)
+        check_jumps(t, fixed, limit, name, source)
+        k = np.flatnonzero(bad)
+        glitches[name] = {
+            "n_samples": int(k.size),
+            "first_times_s": t[k[:5]].tolist(),
+            "first_values": v[k[:5]].tolist(),
+            "all_times_s": t[k].tolist(),
+            "limit_counts_per_s": limit,
+            "limit_source": "configured" if max_counts_per_s > 0 else "derived",
+        }
+        built[name] = Channel(t, fixed)
     fl = None
     if flash is not None:
         t, v = (np.asarray(a, dtype=float) for a in flash)
         check_channel(t, v, "sync_flash", source, np.inf)
         fl = Channel(t, (v != 0).astype(float))
-    return EncoderLog(channels=built, flash=fl, source=source)
+    return EncoderLog(channels=built, flash=fl, source=source, meta={"glitches": glitches})

@@ -11,6 +11,7 @@ LOSSY_ADDED_DEG).
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 import shutil
@@ -31,13 +32,15 @@ from i2ris_calib.io.video import describe, iter_frames, open_reader, open_writer
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.tracking.config import TrackingConfig
 
-#: Lossy formats add compression error in quadrature to the tracking floor of the
-#: lossless reference: RMS(lossy - lossless angles) <= LOSSY_ADDED_DEG and RMS vs truth
-#: <= sqrt(ref**2 + LOSSY_ADDED_DEG**2). Measured added error on seeds 5, 7, 11 (MJPG,
-#: mp4v): at most ~0.04 deg per axis (docs/video.md); the limit is 1.5x that.
-LOSSY_ADDED_DEG = 0.06
+#: Lossy formats add compression error to the tracking error of the lossless
+#: reference: RMS(lossy - lossless angles) <= LOSSY_ADDED_DEG and RMS vs truth
+#: <= hypot(ref RMS, LOSSY_ADDED_DEG). Measured RMS(lossy - lossless) on seeds 5, 7, 11
+#: (MJPG, mp4v): 0.017-0.048 deg per axis (docs/video.md); the limit is 1.7x the largest.
+LOSSY_ADDED_DEG = 0.08
 #: No lossy-format angle may be further than this from the truth (deg).
 LOSSY_MAX_DEG = 0.5
+#: 12-bit TIFF frames (within 1 grey level of the reference): RMS(angles - reference).
+TIF12_ADDED_DEG = 0.012
 #: Measured fraction of the lossless run that a lossy format must reach.
 LOSSY_MEASURED = 0.98
 
@@ -67,8 +70,10 @@ def _session_copy(base: Path, dst: Path, names: dict[str, str]) -> Path:
     return dst
 
 
-def _frames(base: Path, cam: str) -> list[np.ndarray]:
-    return list(iter_frames(base / f"{cam}.mkv"))
+@functools.lru_cache(maxsize=2)
+def _frames(base: Path, cam: str) -> tuple[np.ndarray, ...]:
+    """The reference FFV1 frames of one camera (decoded once per module)."""
+    return tuple(iter_frames(base / f"{cam}.mkv"))
 
 
 def write_video(base: Path, dst: Path, suffix: str, codec: str) -> Path:
@@ -169,7 +174,11 @@ def test_tif_sequence_16bit_scaled(base, lossless, tmp_path):
     assert sum("top_frames" in k for k in inputs) == len(seq.files)  # every image hashed
     sc = score(s, pd.read_csv(out / "angles.csv"))
     assert sc["measured_of_visible"] >= LOSSY_MEASURED * lossless["measured_of_visible"]
-    for axis in ("yaw", "pitch"):
+    a, b = sc["angles"], lossless["angles"]
+    both = ((a["status"] == "measured") & (b["status"] == "measured")).to_numpy()
+    for axis in ("yaw", "pitch"):  # measured (seeds 5, 7, 11): 0.004-0.006 deg, 1.0-1.1x
+        d = (a[f"{axis}_deg"] - b[f"{axis}_deg"]).to_numpy()[both]
+        assert np.sqrt(np.mean(d**2)) <= TIF12_ADDED_DEG
         assert sc[f"{axis}_rms"] <= 1.2 * lossless[f"{axis}_rms"] + 0.002
 
 

@@ -295,7 +295,8 @@ def test_sequence_order_is_numeric(tmp_path):
         (["frame_000000.png", "frame_000001.tif"], "mixed image types"),
         (["top_000000.png", "side_000001.png"], "different name prefixes"),
         (["frame_a.png"], "no frame number"),
-        ([], "no .png/.tif images"),
+        ([], "no .png/.tif/.jpg/.bmp images"),
+        (["frame_000000.jpg", "frame_000001.png"], "mixed image types"),
     ],
 )
 def test_sequence_errors(tmp_path, names, match):

@@ -2,7 +2,7 @@
 
 A camera's ``video`` in session.toml may name a folder of numbered images (docs/video.md):
 every file ``<prefix><number>.<ext>`` with one prefix and one extension (``.png``,
-``.tif``/``.tiff``), 8 or 16 bit grey (colour is converted to grey). Frames are ordered
+``.tif``/``.tiff``; also ``.jpg``/``.bmp``), 8 or 16 bit grey (colour is converted to grey). Frames are ordered
 by the number, which must count up by one (a missing number is a lost frame: the
 sequence is refused, since the timestamp file has one row per frame).
 
@@ -26,7 +26,8 @@ import numpy as np
 from i2ris_calib.errors import CalibError
 
 #: Image suffixes accepted in a sequence folder.
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff")
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
+_ALIASES = {".tiff": ".tif", ".jpeg": ".jpg"}
 _NAME = re.compile(r"^(?P<prefix>.*?)(?P<num>\d+)$")
 
 
@@ -60,10 +61,10 @@ def find_sequence(folder: Path) -> ImageSequence:
     images = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
     if not images:
         raise CalibError(
-            f"{folder}: no .png/.tif images (an image-sequence video is a folder of "
+            f"{folder}: no .png/.tif/.jpg/.bmp images (an image-sequence video is a folder of "
             "frame_000000.png, frame_000001.png, ...: see docs/video.md)"
         )
-    suffixes = {p.suffix.lower().replace(".tiff", ".tif") for p in images}
+    suffixes = {_ALIASES.get(p.suffix.lower(), p.suffix.lower()) for p in images}
     if len(suffixes) > 1:
         raise CalibError(
             f"{folder}: mixed image types {sorted(suffixes)} (keep one type per camera folder)"

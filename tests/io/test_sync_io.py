@@ -223,6 +223,6 @@ def test_rendered_ci_session_event_is_honest_and_auto_refines(tmp_path, capsys):
         if method == "event":
             assert abs(err_mid) <= 2.5 * js["offset_at_t_ref_stderr_s"], err_mid
         else:
-            assert js["method"] == "model" and "event" in js["evidence"], js["evidence"]
+            assert js["method"] == "event+model" and "event" in js["evidence"], js["evidence"]
             assert abs(err_mid) <= 5e-3
             assert abs(js["offset_s"] - truth["offset_s"]) <= 5e-3

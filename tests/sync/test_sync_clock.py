@@ -67,3 +67,43 @@ def test_encoder_log_interpolates_and_refuses_to_extrapolate():
 def test_encoder_log_validation(t, msg):
     with pytest.raises(CalibError, match=msg):
         make_encoder_log({"enc_yaw": (t, np.zeros(4))}, None, "log.csv", max_gap_s=2.0)
+
+
+def _clk(o, sd_o, d, sd_d, method="event"):
+    from i2ris_calib.sync.clock import clock_model
+
+    fitted = np.isfinite(sd_d)
+    cov = np.diag([sd_o**2, sd_d**2 if fitted else 0.0])
+    return clock_model(o, d, cov, method, {"t_ref_cam_s": 0.0}, bool(fitted))
+
+
+def test_auto_combination_is_the_product_of_likelihoods():
+    """Event (0.500 s +- 2 ms, 100 +- 50 ppm) x model (0.503 s +- 1 ms, 80 +- 10 ppm):
+    precision-weighted means, variances 1 / (sum of precisions)."""
+    from i2ris_calib.sync.estimate import combine_clocks
+
+    clk, info = combine_clocks(_clk(0.5, 2e-3, 100, 50), _clk(0.503, 1e-3, 80, 10, "model"), 0.0)
+    assert clk.method == "event+model" and info["reason"] == "combined"
+    w_e, w_m = 1 / 2e-3**2, 1 / 1e-3**2
+    assert clk.offset_s == pytest.approx((w_e * 0.5 + w_m * 0.503) / (w_e + w_m), abs=1e-12)
+    assert clk.offset_stderr_s == pytest.approx((w_e + w_m) ** -0.5, rel=1e-9)
+    wd_e, wd_m = 1 / 50**2, 1 / 10**2
+    assert clk.drift_ppm == pytest.approx((wd_e * 100 + wd_m * 80) / (wd_e + wd_m), rel=1e-9)
+    assert clk.drift_stderr_ppm == pytest.approx((wd_e + wd_m) ** -0.5, rel=1e-9)
+    # an event without drift: the drift is the model's alone
+    clk, _ = combine_clocks(_clk(0.5, 2e-3, 0, np.nan), _clk(0.503, 1e-3, 80, 10, "model"), 0.0)
+    assert clk.drift_ppm == pytest.approx(80) and clk.drift_stderr_ppm == pytest.approx(10)
+
+
+def test_auto_keeps_the_event_when_the_model_disagrees_or_is_flat():
+    from i2ris_calib.sync.estimate import combine_clocks
+
+    event = _clk(0.5, 1e-3, 100, 50)
+    clk, info = combine_clocks(event, _clk(0.505, 1e-3, 80, 10, "model"), 0.0)  # 3.5 sd apart
+    assert (
+        clk is None
+        and info["z"] == pytest.approx(5e-3 / np.sqrt(2e-6))
+        and "sd from" in info["reason"]
+    )
+    clk, info = combine_clocks(event, _clk(0.5005, np.nan, 80, 10, "model"), 0.0)
+    assert clk is None and "no usable curvature" in info["reason"]

@@ -73,7 +73,8 @@ def test_golden_and_scan_find_a_parabola_minimum():
 
 def test_auto_refines_a_coarse_event_with_the_model():
     """Short exposure, 100 Hz sampled LED log, 2 flashes: the event alone is good to a
-    few ms; auto searches the model profile inside its +-4 sd."""
+    few ms; auto searches the model profile inside its +-4 sd and combines the two
+    (product of likelihoods: between them, more certain than either)."""
     case = make_sync_case(
         seed=2,
         backlash_deg=6.0,
@@ -86,8 +87,18 @@ def test_auto_refines_a_coarse_event_with_the_model():
     cfg = SyncConfig(log_edge_at="midpoint", exposure_s=0.01)
     event = estimate_clock(case.angles, case.log, replace(cfg, method="event"))
     auto = estimate_clock(case.angles, case.log, cfg)
-    assert auto.method == "model" and "too coarse" in auto.evidence["auto"]
+    assert auto.method == "event+model" and "too coarse" in auto.evidence["auto"]
     t_ref = auto.evidence["t_ref_cam_s"]
+    comb = auto.evidence["combination"]
+    o_e, o_m = comb["event_offset_at_t_ref_s"], comb["model_offset_at_t_ref_s"]
+    assert o_e == pytest.approx(event.offset_at(t_ref), abs=1e-9)
+    assert min(o_e, o_m) <= auto.offset_at(t_ref) <= max(o_e, o_m)
+    sd_auto = auto.offset_stderr_at(t_ref)
+    assert sd_auto < min(
+        comb["event_offset_at_t_ref_stderr_s"], comb["model_offset_at_t_ref_stderr_s"]
+    )
+    # seed 2 (measured): event -6.0 ms (sd 5.0), model -1.2 (1.3), combined -1.7 (1.2)
+    assert abs(_mid_error_s(auto, case)) < abs(_mid_error_s(event, case))
     # the model stays inside the event's +-4 sd window and meets the 5 ms requirement
     assert abs(auto.offset_at(t_ref) - event.offset_at(t_ref)) <= 4 * event.offset_stderr_at(t_ref)
     assert abs(_mid_error_s(auto, case)) <= 5e-3  # the no-precise-event requirement

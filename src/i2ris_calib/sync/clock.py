@@ -34,7 +34,8 @@ class ClockModel:
     cov : ndarray, shape (2, 2)
         Covariance of (offset_s, drift_ppm).
     method : str
-        ``event``, ``model`` or ``xcorr``.
+        ``event``, ``model``, ``xcorr`` or ``event+model`` (``auto``: a coarse event
+        combined with the model).
     evidence : dict
         Method-specific evidence (matched edges, profiles), JSON-safe.
     origin_cam_s, origin_ctrl_s : float

@@ -34,8 +34,9 @@ class SyncConfig:
     use_falling_edges: bool = True  # use LED-off edges as well as LED-on edges
     max_edge_residual_s: float = 0.02  # a camera edge farther than this from its log edge: no match
     min_drift_span_s: float = 5.0  # fit drift only if the matched edges span this long
-    # auto: an event clock coarser than this (offset sd, s) is refined by the model profile
-    # within the event's +-4 sd (0 = never)
+    # auto: an event clock coarser than this (offset sd, s) is combined with the model profile
+    # searched within the event's +-4 sd (product of likelihoods; the event alone when they
+    # disagree; 0 = never)
     auto_refine_stderr_s: float = 0.0005
 
     # --- offset search (model and xcorr)

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.sync.clock import ClockModel
+from i2ris_calib.sync.clock import ClockModel, clock_model
 from i2ris_calib.sync.config import SyncConfig
 from i2ris_calib.sync.events import Edge, camera_edges, clock_from_events, log_edges
 from i2ris_calib.sync.joint import clock_from_model
@@ -276,16 +276,24 @@ def _estimate_local(
     return clock
 
 
+#: ``auto``: the model's offset more than this many combined sd from the event's is a
+#: disagreement, and the event is kept
+DISAGREE_SD = 3.0
+
+
 def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncConfig, fit_config):
-    """``auto`` with a coarse sync event: refine it with the hysteresis model.
+    """``auto`` with a coarse sync event: combine it with the hysteresis model.
 
     When the event's offset standard error (middle of the recording) exceeds
     ``cfg.auto_refine_stderr_s`` and an axis moves, the model profile is searched
-    within the event's +-4 standard errors (method ``model``, the event kept in
-    ``evidence["event"]``). If the model's minimum sits on that window's edge (model
-    and event disagree) or the model cannot run, the event clock is returned. When the
-    profile is too flat for a standard error, the model's clock is kept with the
-    event's covariance.
+    within the event's +-4 standard errors and the two clocks are combined as
+    evidence (:func:`combine_clocks`: the product of their Gaussian likelihoods in
+    (offset at the model's reference time, drift); method ``event+model``, both
+    inputs in ``evidence["event"]`` / ``evidence["combination"]``). The event clock
+    is returned unchanged when the model cannot run, its minimum sits on the window's
+    edge, its profile is too flat for a standard error, or the two disagree by more
+    than :data:`DISAGREE_SD` combined sd: the combination is never less certain than
+    the event, and a model that contradicts the event is not trusted over it.
     """
     series = axis_series(angles)
     t_mid = float(np.mean(angles["time_s"].to_numpy(dtype=float)))
@@ -293,23 +301,17 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     if cfg.auto_refine_stderr_s <= 0 or not series or not sd > cfg.auto_refine_stderr_s:
         return event
     try:
-        clock = clock_from_model(frame_series(angles), log, cfg, fit_config, prior=event)
+        model = clock_from_model(frame_series(angles), log, cfg, fit_config, prior=event)
     except CalibError as exc:
         event.evidence["auto"] = f"event kept; model refinement failed: {exc}"
         return event
-    note = ""
-    if not np.isfinite(clock.offset_stderr_s):  # flat profile: keep the event's uncertainty
-        clock = replace(
-            clock,
-            cov=event.cov,
-            offset_stderr_s=event.offset_stderr_s,
-            drift_stderr_ppm=event.drift_stderr_ppm,
-        )
-        note = (
-            "; the model profile has no usable curvature there, so the standard errors "
-            "are the event's"
-        )
-    clock.evidence["event"] = {
+    t_c = float(model.evidence.get("t_ref_cam_s", t_mid))
+    combined, info = combine_clocks(event, model, t_c)
+    if combined is None:
+        event.evidence["auto"] = f"event kept: {info['reason']}"
+        event.evidence["combination"] = info
+        return event
+    combined.evidence["event"] = {
         "offset_s": event.offset_s,
         "drift_ppm": event.drift_ppm,
         "t_ref_cam_s": t_mid,
@@ -318,11 +320,81 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
         "drift_stderr_ppm": event.drift_stderr_ppm,
         "evidence": event.evidence,
     }
-    clock.evidence["auto"] = (
+    combined.evidence["combination"] = info
+    combined.evidence["auto"] = (
         f"sync event too coarse (offset sd {sd * 1e3:.2f} ms > auto_refine_stderr_s): "
-        "hysteresis-model profile searched within its +-4 sd" + note
+        "combined with the hysteresis-model profile searched within its +-4 sd "
+        "(product of the two likelihoods)"
     )
-    return clock
+    return combined
+
+
+def _gaussian_at(clock: ClockModel, t_c: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mean (offset at ``t_c``, drift) and precision matrix (2, 2) of a clock; a drift
+    that was not fitted carries no information (zero precision)."""
+    jac = np.array([[1.0, t_c * 1e-6], [0.0, 1.0]])
+    cov = jac @ np.asarray(clock.cov, dtype=float) @ jac.T
+    mean = np.array([clock.offset_at(t_c), clock.drift_ppm])
+    if np.isfinite(clock.drift_stderr_ppm) and cov[1, 1] > 0:
+        return mean, np.linalg.inv(cov)
+    return mean, np.array([[1.0 / cov[0, 0], 0.0], [0.0, 0.0]])
+
+
+def combine_clocks(
+    event: ClockModel, model: ClockModel, t_c: float
+) -> tuple[ClockModel | None, dict]:
+    """Product of the event's and the model's clock likelihoods (Gaussian in offset at
+    camera time ``t_c`` and drift), or None when they disagree.
+
+    Returns
+    -------
+    clock : ClockModel or None
+        The combined clock (method ``event+model``, the model's evidence), None when
+        the model's offset sd is not finite or the offsets at ``t_c`` differ by more
+        than :data:`DISAGREE_SD` times the sd of their difference.
+    info : dict
+        Both offsets at ``t_c`` with their sd, the z of their difference, the reason.
+    """
+    o_e, s_e = event.offset_at(t_c), event.offset_stderr_at(t_c)
+    o_m, s_m = model.offset_at(t_c), model.offset_stderr_at(t_c)
+    z = abs(o_m - o_e) / float(np.hypot(s_e, s_m)) if np.isfinite(s_m) else float("nan")
+    info = {
+        "t_ref_cam_s": t_c,
+        "event_offset_at_t_ref_s": o_e,
+        "event_offset_at_t_ref_stderr_s": s_e,
+        "model_offset_at_t_ref_s": o_m,
+        "model_offset_at_t_ref_stderr_s": s_m,
+        "model_drift_ppm": model.drift_ppm,
+        "model_drift_stderr_ppm": model.drift_stderr_ppm,
+        "z": z,
+    }
+    if not (np.isfinite(s_m) and s_m > 0):
+        info["reason"] = "the model profile has no usable curvature (no standard error)"
+        return None, info
+    if z > DISAGREE_SD:
+        info["reason"] = (
+            f"the model's offset is {z:.1f} combined sd from the event's (> {DISAGREE_SD:g})"
+        )
+        return None, info
+    m_e, p_e = _gaussian_at(event, t_c)
+    m_m, p_m = _gaussian_at(model, t_c)
+    prec = p_e + p_m
+    if prec[1, 1] > 0:
+        cov_c = np.linalg.inv(prec)
+        mean = cov_c @ (p_e @ m_e + p_m @ m_m)
+        drift_fitted = True
+    else:  # neither fitted the drift: offset only, drift held at 0
+        cov_c = np.array([[1.0 / prec[0, 0], 0.0], [0.0, 0.0]])
+        mean = np.array([cov_c[0, 0] * (p_e[0, 0] * m_e[0] + p_m[0, 0] * m_m[0]), 0.0])
+        drift_fitted = False
+    back = np.array([[1.0, -t_c * 1e-6], [0.0, 1.0]])
+    cov = back @ cov_c @ back.T
+    info["reason"] = "combined"
+    clock = clock_model(
+        mean[0] - mean[1] * 1e-6 * t_c, mean[1], cov, "event+model", dict(model.evidence),
+        drift_fitted,
+    )  # fmt: skip
+    return clock, info
 
 
 def synced_table(

@@ -207,10 +207,10 @@ def errors(clk, case) -> dict:
     return {
         "z_mid": err_mid / clk.offset_stderr_at(t_mid),
         "mid_err_ms": err_mid * 1e3,
-        "offset_err_ms": (clk.offset_s - case.offset_s) * 1e3,
+        "offset_err_ms": (clk.offset_at(0.0) - case.offset_s) * 1e3,
         "max_clock_err_ms": float(np.max(np.abs(clk.to_ctrl(t) - true_ctrl))) * 1e3,
         "drift_err_ppm": clk.drift_ppm - case.drift_ppm,
-        "offset_sd_ms": clk.offset_stderr_s * 1e3,
+        "offset_sd_ms": clk.offset_stderr_at(0.0) * 1e3,
         "drift_sd_ppm": clk.drift_stderr_ppm,
     }
 

@@ -152,9 +152,14 @@ def fit_kind(
                 starts.append(model.vector(other.params))
     if starts is not None:
         starts = [_keep_fixed(model, x) for x in starts]
+    return _fit_configured(model, s, theta, holdout, starts, config)
+
+
+def _fit_configured(model, signals, theta, holdout, starts, config: FitConfig) -> FitResult:
+    """:func:`fit_model` with the method, limits and loss of ``config``."""
     return fit_model(
         model,
-        s,
+        signals,
         theta,
         holdout_mask=holdout,
         starts=starts,
@@ -349,14 +354,4 @@ def fit(
         rng = np.random.default_rng(config.seed)
         starts += start_values(model, v, theta_fit, config.n_starts, rng, db)
         starts = [_keep_fixed(model, x) for x in starts]
-    return fit_model(
-        model,
-        signals,
-        theta,
-        holdout_mask=hold,
-        starts=starts,
-        method=config.method,
-        max_nfev=config.max_nfev,
-        loss=config.loss,
-        f_scale_deg=config.f_scale_deg,
-    )
+    return _fit_configured(model, signals, theta, hold, starts, config)

@@ -14,9 +14,6 @@ Prints the confusion table (hidden effect x first named effect) and:
 - the same figures per effect;
 - wall and CPU time of a diagnosis of 10k samples (target <= 30 s on 2 cores).
 
-``--suite own``: the catalogue's own generator
-(:mod:`i2ris_calib.diagnosis.synthetic`, EGPI base, ``--start egpi``).
-
 Usage::
 
     python benchmarks/bench_diagnosis.py              # 52 cases + the 10k timing

@@ -163,8 +163,10 @@ def test_direction_dataset_is_the_whole_history(tmp_path):
     from i2ris_calib.fitting.config import FitConfig
     from i2ris_calib.io.diagnose import diagnosis_dataset
 
-    t = np.arange(0, 30, 0.1)
-    enc = np.where(t < 10, 300 * t, np.where(t < 20, -200 * (t - 10), 0.0))  # +, -, rest
+    # out to +3000 and back, out to -2000 and back (ramps, no jumps: read_synced refuses
+    # encoder jumps faster than the motor moves), then a rest at 0
+    t = np.arange(0, 50, 0.1)
+    enc = np.round(np.interp(t, [0, 10, 20, 30, 40, 50], [0, 3000, 0, -2000, 0, 0]))
     csv = tmp_path / "s.csv"
     pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": 0.01 * enc, "status": "measured"}).to_csv(
         csv, index=False
@@ -173,16 +175,22 @@ def test_direction_dataset_is_the_whole_history(tmp_path):
     assert minus.name == "yaw-" and minus.abs_fitted and minus.n_samples == t.size
     np.testing.assert_array_equal(minus.v, np.maximum(-enc, 0.0))
     mine = minus.in_direction
-    assert mine[(enc < -10)].all() and not mine[enc > 10].any()
-    assert mine[t >= 20].all()  # the rest after the "-" excursion belongs to it
+    zb = minus.bands.zero_band
+    assert mine[(enc < -zb)].all() and not mine[enc > zb].any()
+    assert mine[t >= 40].all()  # the rest after the "-" excursion belongs to it
     np.testing.assert_allclose(minus.theta_deg[mine], np.abs(0.01 * enc[mine]))
     assert np.isnan(minus.theta_deg[~mine]).all()
     plus = diagnosis_dataset(csv, "yaw", "+", FitConfig())
     assert plus.name == "yaw+" and plus.n_samples == t.size and plus.v.max() == enc.max()
     np.testing.assert_array_equal(plus.in_direction, ~minus.in_direction)
-    # "+": t < 10 s and the sample at 10 s (enc = 0, after the + excursion); "-" the
-    # rest, with the final rest: auto takes the larger one
-    assert (plus.rows["in_direction"], minus.rows["in_direction"]) == (101, 199)
+    # "+": the + excursion and the zero-band samples after it (up to the start of the
+    # "-" one); "-": the rest, with the final rest: auto takes the larger one
+    first_minus = int(np.flatnonzero(enc < -zb)[0])
+    assert (
+        plus.in_direction[: first_minus - 1].all() or plus.in_direction[1 : first_minus - 1].all()
+    )
+    assert plus.rows["in_direction"] < minus.rows["in_direction"]
+    assert plus.rows["in_direction"] + minus.rows["in_direction"] == t.size
     assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw-"
     pd.DataFrame({"time_s": t, "enc_yaw": -enc, "yaw_deg": -0.01 * enc}).to_csv(csv, index=False)
     assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw+"

@@ -30,6 +30,10 @@ class RunConfig:
 
     diagnose: bool = False
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on a non-boolean value."""
         if not isinstance(self.diagnose, bool):

@@ -58,3 +58,16 @@ def test_invalid_toml_is_one_line_error(tmp_path):
         load_config(p)
     with pytest.raises(CalibError, match="config file not found"):
         load_config(tmp_path / "nope.toml")
+
+
+def test_configs_are_validated_on_construction():
+    """Not only when loaded from TOML: an invalid value fails where it is made."""
+    from i2ris_calib.fitting.config import FitConfig
+    from i2ris_calib.report.config import ReportConfig
+
+    with pytest.raises(ValueError, match="trf"):
+        FitConfig(loss="huber")
+    with pytest.raises(ValueError):
+        FitConfig(n_operators=0)
+    with pytest.raises(ValueError, match="figure_dpi"):
+        ReportConfig(figure_dpi=5)

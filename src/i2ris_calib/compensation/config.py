@@ -35,6 +35,10 @@ class CompensateConfig:
     model: str = ""
     max_counts_per_s: float = 0.0
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         if self.model not in _KINDS:

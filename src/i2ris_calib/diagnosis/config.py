@@ -70,6 +70,10 @@ class DiagnosisConfig:
     choose_by: str = "holdout"
     seed: int = 0
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         from i2ris_calib.diagnosis.effects import CATALOGUE

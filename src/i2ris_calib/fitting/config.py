@@ -73,6 +73,10 @@ class FitConfig:
     loss: str = "linear"
     f_scale_deg: float = 0.5
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         if self.method not in _METHODS:

@@ -25,6 +25,10 @@ class ReportConfig:
     max_plot_points: int = 20000
     detection_window_s: float = 1.0
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         if not 30 <= self.figure_dpi <= 600:

@@ -85,6 +85,10 @@ class SimulationConfig:
     # --- hidden effects (applied by i2ris_calib.diagnosis.effects) ----------------
     effects: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         self._validate_numbers()

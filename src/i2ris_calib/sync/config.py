@@ -58,6 +58,10 @@ class SyncConfig:
 
     seed: int = 0  # reserved for randomised starts of the model fits
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         positive = {

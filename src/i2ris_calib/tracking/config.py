@@ -48,6 +48,10 @@ class TrackingConfig:
     # --- output -------------------------------------------------------------------
     plain: bool = True  # also write single-camera IPPE top-solution angles (comparison)
 
+    def __post_init__(self) -> None:
+        """Validated on construction, not only when loaded from TOML."""
+        self.validate()
+
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
         if self.corner_win_size_px < 1 or self.corner_max_iterations < 1:

@@ -237,8 +237,14 @@ def fit_files(
     if saved is not None:
         kinds = (*kinds, "diagnosed")
     fit_config = config.fit
+    created = not Path(out).exists()
     out = check_output_dir(out, ("predictions.csv", "fit.json"))
-    datasets = load_datasets(paths, axis, fit_config)
+    try:
+        datasets = load_datasets(paths, axis, fit_config)
+    except CalibError:
+        if created:  # a folder made only to check it can be written: leave nothing behind
+            out.rmdir()
+        raise
     console = Console(stderr=True)
     with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
         task = bar.add_task("fitting", total=len(datasets) * len(kinds))

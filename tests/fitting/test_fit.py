@@ -201,3 +201,30 @@ def test_robust_loss_resists_outliers(egpi_data, seed):
     assert robust < NOISE and robust < plain
     with pytest.raises(ValueError, match="trf"):
         FitConfig(loss="huber").validate()
+
+
+@pytest.mark.parametrize("shift", [-0.026, -0.005, 0.0, 0.006, 0.027])
+def test_flag_point_profile_never_makes_the_fit_worse(shift):
+    """The fine v_f profile tries the interval holding the current value and the ones
+    just beyond its +-1 % window, and never returns a worse point (regression: it could
+    step from the right interval to a neighbour, 0.14 -> 127 deg^2 on a rendered session).
+    Coarse sampling (125 counts per sample, two phases 40 counts apart) makes intervals
+    that reach beyond the window; shifts -0.026, -0.005, 0.006, 0.027 failed before."""
+    from i2ris_calib.fitting.fit import _Counter, _refine_profiled
+    from i2ris_calib.hysteresis.models import as_signals
+
+    rng = np.random.default_rng(3)
+    truth = paper_like_params("yaw+")
+    up = np.linspace(0, 6000, 49)
+    up2 = np.clip(up + 40, 0, 6000)
+    v = np.concatenate([up, up[::-1][1:], up2[1:], up2[::-1][1:]])
+    model = i2ris_egpi_model(deadband_counts=2.0)
+    theta = model.evaluate_dict(v, truth) + rng.normal(0, NOISE, v.size)
+    counter = _Counter(model, as_signals(v), theta, np.isfinite(theta))
+    x = model.vector(truth | {"v_f": truth["v_f"] + shift * 6000})
+    lower = np.array([p.lower for p in model.parameters])
+    upper = np.array([p.upper for p in model.parameters])
+    pidx = [model.names.index("v_f")]
+    before = counter.cost(x)
+    after = counter.cost(_refine_profiled(counter, x, pidx, v, lower, upper, wide=False))
+    assert after <= before * (1 + 1e-12)

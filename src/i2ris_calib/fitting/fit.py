@@ -305,8 +305,10 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
     ``wide``: a grid over +-20 % of the input range in 1 % steps around the current
     value. Always then: the exact step - the cost only changes where v_f crosses an
     input value of a fitted sample, so every midpoint between consecutive distinct
-    fitted input values within +-1 % of the range is tried, and among equal best
-    costs the middle candidate is kept (the centre of the interval the data allow).
+    fitted input values within +-1 % of the range (and one more on each side, so the
+    interval holding the current value is a candidate) is tried, and among equal best
+    costs the middle candidate is kept (the centre of the interval the data allow). The
+    result is never worse than the current value.
     """
     span = float(np.ptp(v))
     vals = np.unique(v[counter.used])
@@ -317,7 +319,11 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
             best, _ = _profile(counter, full, idx, grid)
             full = full.copy()
             full[idx] = best
-        near = vals[np.abs(vals - full[idx]) <= 0.01 * span]
+        # the fitted input values within +-1 % of the range, and one more on each side:
+        # the interval holding the current value is always among the candidates
+        k0 = int(np.searchsorted(vals, full[idx] - 0.01 * span, "left"))
+        k1 = int(np.searchsorted(vals, full[idx] + 0.01 * span, "right"))
+        near = vals[max(k0 - 1, 0) : min(k1 + 1, vals.size)]
         if near.size < 2:
             continue
         cands = 0.5 * (near[1:] + near[:-1])
@@ -326,6 +332,8 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
         for j, c in enumerate(cands):
             trial[idx] = c
             costs[j] = counter.cost(trial)
+        if costs.min() > counter.cost(full) * (1 + 1e-12):
+            continue  # never worse than where it is
         tied = np.flatnonzero(costs <= costs.min() * (1 + 1e-12))
         run = tied[np.concatenate(([0], np.flatnonzero(np.diff(tied) > 1) + 1))[0] :]
         run = run[: np.argmax(np.diff(np.append(run, run[-1] + 2)) > 1) + 1]
@@ -357,7 +365,7 @@ def _reoptimised_profile(counter, full, pidx, lsq_free, v, lower, upper, how, nf
                 continue
             cand, _ = _lsq(counter, trial, lsq_free, lower, upper, how, nfev, ftol)
             c = counter.cost(cand)
-            if c < best_cost:
+            if c < best_cost * (1 - 1e-9):  # a real improvement, not rounding
                 best_cost, best = c, cand
     return best
 

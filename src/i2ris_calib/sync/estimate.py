@@ -58,15 +58,7 @@ def check_angles(angles: pd.DataFrame, where: str) -> pd.DataFrame:
 
 def axis_series(angles: pd.DataFrame) -> list[AxisSeries]:
     """Measured frames (status ``measured``, finite angle) of each axis."""
-    out = []
-    measured = angles["status"].astype(str).to_numpy() == "measured"
-    t = angles["time_s"].to_numpy(dtype=float)
-    for axis, col, channel in AXES:
-        th = pd.to_numeric(angles[col], errors="coerce").to_numpy(dtype=float)
-        ok = measured & np.isfinite(th)
-        if ok.sum() >= 8:
-            out.append(AxisSeries(axis, channel, t[ok], th[ok]))
-    return out
+    return _series(angles, whole_history=False)
 
 
 def frame_series(angles: pd.DataFrame) -> list[AxisSeries]:
@@ -76,6 +68,12 @@ def frame_series(angles: pd.DataFrame) -> list[AxisSeries]:
     frame history; unmeasured frames only leave the loss. An axis needs >= 8 measured
     frames.
     """
+    return _series(angles, whole_history=True)
+
+
+def _series(angles: pd.DataFrame, whole_history: bool) -> list[AxisSeries]:
+    """Per axis with >= 8 measured frames: every frame (NaN angle where not measured)
+    when ``whole_history``, else the measured frames only."""
     out = []
     measured = angles["status"].astype(str).to_numpy() == "measured"
     t = angles["time_s"].to_numpy(dtype=float)
@@ -83,7 +81,10 @@ def frame_series(angles: pd.DataFrame) -> list[AxisSeries]:
         th = pd.to_numeric(angles[col], errors="coerce").to_numpy(dtype=float)
         ok = measured & np.isfinite(th)
         if ok.sum() >= 8:
-            out.append(AxisSeries(axis, channel, t, np.where(ok, th, np.nan)))
+            if whole_history:
+                out.append(AxisSeries(axis, channel, t, np.where(ok, th, np.nan)))
+            else:
+                out.append(AxisSeries(axis, channel, t[ok], th[ok]))
     return out
 
 

@@ -54,17 +54,20 @@ def _views(scene, yaws, pitches, noise, rng):
             Rc = cam.R_cb @ R
             tc = cam.R_cb @ (R @ np.array([cfg.pivot_mm, 0, 0])) + cam.t_cb
             c.append(project(cam.K, Rc, tc, X) + rng.normal(0, noise, (4, 2)))
-        c = np.array(c)
-        Rct = np.empty((len(c), 2, 3, 3))
-        tct = np.empty((len(c), 2, 3))
-        for k in range(len(c)):
-            Rm, tm, _ = ippe_candidates(c[k], cam.K, cfg.marker_size_mm)
-            for j in range(2):
-                Rct[k, j], tct[k, j] = tip_pose_from_marker(
-                    cam.view, Rm[j], tm[j], cfg.cube_size_mm
-                )
-        views.append(fz.ViewData(c, cam.K, X, Rct, tct))
+        views.append(view_data(np.array(c), cam, cfg, X))
     return views
+
+
+def view_data(c: np.ndarray, cam, cfg, X: np.ndarray) -> fz.ViewData:
+    """ViewData of one camera from its corners ``c`` (frames, 4, 2): both IPPE
+    solutions per frame turned into tip poses (shared by the tracking tests)."""
+    Rct = np.empty((len(c), 2, 3, 3))
+    tct = np.empty((len(c), 2, 3))
+    for k in range(len(c)):
+        Rm, tm, _ = ippe_candidates(c[k], cam.K, cfg.marker_size_mm)
+        for j in range(2):
+            Rct[k, j], tct[k, j] = tip_pose_from_marker(cam.view, Rm[j], tm[j], cfg.cube_size_mm)
+    return fz.ViewData(c, cam.K, X, Rct, tct)
 
 
 def test_fusion_recovers_angles_from_projected_corners(scene):

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_edges_fuse import view_data
 
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.simulation.scene import make_cameras
@@ -17,7 +18,6 @@ from i2ris_calib.tracking.geometry import (
     project,
     tip_rotation,
 )
-from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
 
 NOISE_PX = 0.02  # corner noise; the edge corners are 0.005-0.04 px off on rendered markers
 
@@ -41,15 +41,7 @@ def _views(cfg, cams, yaws, pitches, rng):
             for y, p in zip(yaws, pitches, strict=True)
         ])  # fmt: skip
         c = c + rng.normal(0, NOISE_PX, c.shape)
-        Rct = np.empty((len(c), 2, 3, 3))
-        tct = np.empty((len(c), 2, 3))
-        for k in range(len(c)):
-            Rm, tm, _ = ippe_candidates(c[k], cam.K, cfg.marker_size_mm)
-            for j in range(2):
-                Rct[k, j], tct[k, j] = tip_pose_from_marker(
-                    cam.view, Rm[j], tm[j], cfg.cube_size_mm
-                )
-        views.append(fz.ViewData(c, cam.K, X, Rct, tct))
+        views.append(view_data(c, cam, cfg, X))
     return views
 
 

@@ -197,6 +197,11 @@ class Alternative:
         return dict(self.__dict__)
 
 
+_LONG_HOLDS = (
+    "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
+    "delay settles within its delay"
+)
+
 #: Recordings that separate two effects the held-out cycles could not tell apart.
 SEPARATING_EXPERIMENTS: dict[frozenset, str] = {
     frozenset({"time_delay", "rate_dependent_thresholds"}): (
@@ -204,18 +209,12 @@ SEPARATING_EXPERIMENTS: dict[frozenset, str] = {
         "top: a delay overshoots a reversal taken at speed and lags by the same time at "
         "every speed, rate-dependent thresholds hold flat at the reversal"
     ),
-    frozenset({"time_delay", "creep"}): (
-        "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
-        "delay settles within its delay"
-    ),
+    frozenset({"time_delay", "creep"}): _LONG_HOLDS,
     frozenset({"creep", "creep_log"}): (
         "holds of 30-60 s: first-order creep settles after a few time constants, "
         "logarithmic creep gains the same amount every decade of time"
     ),
-    frozenset({"time_delay", "creep_log"}): (
-        "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
-        "delay settles within its delay"
-    ),
+    frozenset({"time_delay", "creep_log"}): _LONG_HOLDS,
     frozenset({"dead_zone", "backlash"}): (
         "a ramp that reverses mid-range and a return to zero: backlash holds the "
         "output after every reversal, a dead zone only near zero input"

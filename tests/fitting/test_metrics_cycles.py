@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
-from i2ris_calib.fitting.metrics import metrics
+from i2ris_calib.fitting.metrics import information_criteria, metrics
 from i2ris_calib.hysteresis.presets import loading_trajectory
 
 
@@ -74,3 +74,15 @@ def test_holdout_holds_out_as_many_cycles_as_asked():
     cycles = np.repeat(np.arange(4), 10)
     held = np.unique(cycles[holdout_mask(cycles, 0.5)])
     assert held.size == 2 and 0 not in held
+
+
+def test_information_criteria_gaussian_formulas():
+    rss, n, k = 12.5, 400, 7
+    aic, bic = information_criteria(rss, n, k)
+    assert aic == pytest.approx(n * math.log(rss / n) + 2 * k, rel=1e-12)
+    assert bic == pytest.approx(n * math.log(rss / n) + k * math.log(n), rel=1e-12)
+    # one more parameter that does not lower the RSS costs 2 (AIC) and ln n (BIC)
+    aic2, bic2 = information_criteria(rss, n, k + 1)
+    assert aic2 - aic == pytest.approx(2.0) and bic2 - bic == pytest.approx(math.log(n))
+    # an exact fit stays finite
+    assert all(math.isfinite(x) for x in information_criteria(0.0, n, k))

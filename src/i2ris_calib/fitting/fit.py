@@ -20,7 +20,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, metrics
+from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
 from i2ris_calib.hysteresis.model import Model, Signals
 from i2ris_calib.hysteresis.models import as_signals
 
@@ -71,7 +71,8 @@ class FitResult:
         Eq25-27 on the held-out samples (all NaN when none).
     aic, bic : float
         Gaussian information criteria ``n ln(RSS/n) + 2k`` and ``n ln(RSS/n) + k ln n``
-        over the n fitted samples, k free parameters.
+        over the n fitted samples, k free parameters
+        (:func:`~i2ris_calib.fitting.metrics.information_criteria`).
     converged : bool
         Optimiser reported convergence (not the evaluation limit) with a finite cost.
     message : str
@@ -615,7 +616,7 @@ def _result(
     ]
     if outside:
         message += f" [outside bounds: {', '.join(outside)}; use method 'trf' for a bounded fit]"
-    ln = n * np.log(rss / n) if rss > 0 else -np.inf
+    aic, bic = information_criteria(rss, n, k)
     return FitResult(
         model=fitted,
         params=dict(zip(names, map(float, full), strict=True)),
@@ -624,8 +625,8 @@ def _result(
         residuals=resid,
         metrics=metrics(theta, y, used),
         holdout_metrics=metrics(theta, y, hold) if hold.any() else NAN_METRICS,
-        aic=float(ln + 2 * k),
-        bic=float(ln + k * np.log(n)),
+        aic=aic,
+        bic=bic,
         converged=converged,
         message=message,
         nfev=int(nfev),

@@ -1,4 +1,4 @@
-"""Error metrics exactly as the paper's Eq25-27."""
+"""Error metrics exactly as the paper's Eq25-27, and the Gaussian information criteria."""
 
 from __future__ import annotations
 
@@ -76,3 +76,28 @@ def metrics(
     tss = float(np.sum((theta[ok] - theta[ok].mean()) ** 2))
     ev = 1.0 - float(np.sum(err**2)) / tss if tss > 0 else float("nan")
     return Metrics(rmse, nrmse, float(np.max(np.abs(err))), int(ok.sum()), ev)
+
+
+def information_criteria(rss: float, n: int, k: int) -> tuple[float, float]:
+    """Gaussian AIC and BIC of a least-squares fit.
+
+    ``AIC = n ln(RSS/n) + 2k`` and ``BIC = n ln(RSS/n) + k ln n`` (the constant terms
+    of the Gaussian log-likelihood dropped, so only differences between fits on the
+    same samples mean anything).
+
+    Parameters
+    ----------
+    rss : float
+        Residual sum of squares over the fitted samples (deg^2). A zero RSS is taken
+        as 1e-300 so the criteria stay finite.
+    n : int
+        Number of fitted samples (> 0).
+    k : int
+        Number of free parameters.
+
+    Returns
+    -------
+    aic, bic : float
+    """
+    ln = n * np.log(max(float(rss), 1e-300) / n)
+    return float(ln + 2 * k), float(ln + k * np.log(n))

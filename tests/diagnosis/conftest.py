@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from i2ris_calib.hysteresis.model import Parameter, Signals
+from i2ris_calib.hysteresis.models import i2ris_egpi_model
+from i2ris_calib.hysteresis.presets import paper_like_params
 
 
 @dataclass(frozen=True)
@@ -40,7 +42,4 @@ def linear() -> LinearModel:
 @pytest.fixture
 def egpi():
     """The paper-like yaw+ EGPI (truth values)."""
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.hysteresis.presets import paper_like_params
-
     return i2ris_egpi_model(**paper_like_params("yaw+"))

@@ -17,6 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2ris_calib.data.dataset import input_bands, make_dataset
+from i2ris_calib.fitting.config import FitConfig
+
 RATE_HZ = 30.0
 
 #: Effect -> (weak, strong) strength of its own parameter (see :func:`apply_effect`).
@@ -273,9 +276,6 @@ def suite(full: bool = True) -> list[tuple[str | None, float, float, int]]:
 def case_as_dataset(case: IndependentCase):
     """The ``"+"`` :class:`~i2ris_calib.data.Dataset` that ``fit`` and ``diagnose``
     would build from the case's synced CSV (bands derived, default held-out cycles)."""
-    from i2ris_calib.data.dataset import input_bands, make_dataset
-    from i2ris_calib.fitting.config import FitConfig
-
     cfg = FitConfig()
     return make_dataset(
         "yaw",

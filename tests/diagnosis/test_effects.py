@@ -15,10 +15,11 @@ from i2ris_calib.diagnosis.effects import (
     build_model,
     effects_of,
     model_values,
+    other_axis_moves,
 )
 from i2ris_calib.diagnosis.synthetic import excitation
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.model import Model, Parameter, Signals
 
 
 def _signals(seed: int = 0) -> Signals:
@@ -60,6 +61,23 @@ def test_with_values_round_trip_and_stacking(egpi):
     assert effects_of(m)[-1][2]["tau_s"] == 1.0  # original unchanged
     twice = add_effect(add_effect(egpi, "backlash", {"width_counts": 10.0}), "backlash")
     assert twice.parameters[-1].name == "backlash_2.width_counts"
+
+
+def test_extended_model_is_callable_and_values_mean_what_they_mean_for_the_base(egpi):
+    """``values`` is the whole current vector (base first), as for a ParametricModel,
+    and calling the model evaluates it there."""
+    m = build_model(egpi, {"time_delay": {"tau_s": 0.1}, "creep": {"gain": 0.2, "tau_s": 1.0}})
+    assert m.values.shape == (len(egpi.parameters) + 3,)
+    np.testing.assert_array_equal(m.values[: len(egpi.parameters)], egpi.values)
+    np.testing.assert_array_equal(m.values[-3:], [0.1, 0.2, 1.0])
+    assert m.value_dict()["creep.tau_s"] == 1.0
+    t = np.arange(0.0, 20.0, 1 / 30)
+    v = 3000.0 * (1 - np.cos(2 * np.pi * t / 10.0))
+    sig = Signals(v=v, t_s=t)
+    np.testing.assert_array_equal(m(sig), m.evaluate(sig, model_values(m)))
+    assert not np.allclose(m(sig), egpi(sig))  # the effects act
+    # the effect's declared parameters are the models' one Parameter type
+    assert all(isinstance(p, Parameter) for p in CATALOGUE["creep"].params)
 
 
 def test_build_model_rejects_bad_names_and_values(egpi):
@@ -212,8 +230,6 @@ def test_play_output_stays_within_the_band(vals, h):
 
 
 def test_coupling_needs_the_other_axis_to_move():
-    from i2ris_calib.diagnosis.effects import other_axis_moves
-
     t = np.arange(0, 10, 0.1)
     noise = np.random.default_rng(1).normal(0, 0.2, t.size)
     assert not other_axis_moves(Signals(v=t, v_other=np.zeros_like(t), theta_other_deg=noise))

@@ -5,9 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from i2ris_calib.data.dataset import make_dataset
 from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
-from i2ris_calib.diagnosis.workflow import autocovariance, sse_reduction_z
+from i2ris_calib.diagnosis.report import diagnosis_markdown, step_verdict
+from i2ris_calib.diagnosis.results import Alternative, separating_experiment
+from i2ris_calib.diagnosis.stats import autocovariance, sse_reduction_z
+from i2ris_calib.fitting.cycles import cycle_index
 from i2ris_calib.hysteresis.model import Signals
 
 
@@ -49,9 +53,6 @@ def test_z_test_detects_a_real_improvement():
 def test_units_are_the_held_out_cycles_of_the_one_segmentation():
     """Units come from fitting.cycles (the cycles the held-out mask was drawn from):
     2 held-out cycles of 6 are 2 units, halved until there are at least 6."""
-    from i2ris_calib.data.dataset import make_dataset
-    from i2ris_calib.fitting.cycles import cycle_index
-
     t = np.arange(0, 60, 0.05)
     v = np.round(3000 * (1 - np.cos(2 * np.pi * t / 10)))
     data = make_dataset("yaw", "+", t, v, 0.005 * v, holdout_fraction=0.34)
@@ -91,8 +92,6 @@ def test_residual_analysis_locates_branch_rate_and_lag():
 
 
 def test_markdown_section_from_a_record():
-    from i2ris_calib.diagnosis.report import diagnosis_markdown
-
     m = {"fit_rmse_deg": 0.2, "holdout_rmse_deg": 0.21, "bic": -10.0, "n_free": 12}
     ev = {
         "rel_improvement": 0.5,
@@ -142,9 +141,6 @@ def test_markdown_section_from_a_record():
 
 
 def test_verdict_names_the_open_alternatives_with_z_and_experiment():
-    from i2ris_calib.diagnosis.report import step_verdict
-    from i2ris_calib.diagnosis.workflow import Alternative, separating_experiment
-
     open_ = Alternative("backlash", 0.21, 0.8, 0.21, False, {"width_counts": 90.0})
     shut = Alternative("creep", 0.35, 6.0, 1e-9, True, {"gain": 0.1, "tau_s": 1.0})
     text = step_verdict("dead_zone", (open_, shut))

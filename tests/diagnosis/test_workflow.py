@@ -16,7 +16,13 @@ import pytest
 
 from i2ris_calib.data.dataset import make_dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.synthetic import STRENGTHS, case_dataset, make_case
+from i2ris_calib.diagnosis.effects import model_values
+from i2ris_calib.diagnosis.synthetic import (
+    STRENGTHS,
+    case_dataset,
+    make_case,
+    make_two_direction_case,
+)
 from i2ris_calib.diagnosis.workflow import check_dataset, diagnose, fit_start_model
 from i2ris_calib.errors import CalibError
 
@@ -34,7 +40,9 @@ def _run(seed, effect, params=None, noise=0.2, signals=None, **cfg):
 def test_hidden_delay_is_named_recovered_and_gap_closes():
     case, d = _run(13, "time_delay", {"tau_s": 0.2}, noise=0.1, max_steps=2)
     assert d.named_effects == ["time_delay"]
-    assert abs(d.final_model.values[0] - 0.2) < 0.02  # one sample at 30 Hz is 0.033 s
+    assert (
+        abs(d.final_model.value_dict()["time_delay.tau_s"] - 0.2) < 0.02
+    )  # one sample at 30 Hz is 0.033 s
     # held-out RMSE down to the noise level (0.1 deg) within 25 %
     assert d.final.holdout_rmse_deg < 1.25 * case.noise_deg
     assert d.baseline.holdout_rmse_deg > 2 * d.final.holdout_rmse_deg
@@ -150,9 +158,6 @@ def test_too_few_samples_state_the_sample_minimum():
 def test_two_direction_case_is_the_minus_truth_over_the_whole_history():
     """The benchmark's signed case: the "-" dataset's angle is the "-" truth driven by
     max(-enc, 0) over every sample, to within the noise, on the "-" samples only."""
-    from i2ris_calib.diagnosis.effects import model_values
-    from i2ris_calib.diagnosis.synthetic import make_two_direction_case
-
     for seed in (1, 2):
         case = make_two_direction_case(seed, "time_delay", {"tau_s": 0.1}, noise_deg=0.1)
         minus = case_dataset(case, direction="-")

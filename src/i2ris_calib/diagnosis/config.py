@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from i2ris_calib.diagnosis.effects import CATALOGUE
+
 
 @dataclass(frozen=True)
 class DiagnosisConfig:
@@ -76,8 +78,6 @@ class DiagnosisConfig:
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""
-        from i2ris_calib.diagnosis.effects import CATALOGUE
-
         bad = [c for c in self.candidates if c not in CATALOGUE]
         if bad:
             raise ValueError(f"candidates: unknown effect(s) {bad}; valid: {', '.join(CATALOGUE)}")

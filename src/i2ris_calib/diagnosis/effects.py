@@ -27,20 +27,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model, Parameter, Signals
-
-
-@dataclass(frozen=True)
-class EffectParam:
-    """Declaration of one effect parameter (bounds, default, unit, meaning)."""
-
-    name: str
-    default: float
-    lower: float
-    upper: float
-    unit: str
-    doc: str
+from i2ris_calib.hysteresis.models import as_signals
 
 
 @dataclass(frozen=True)
@@ -51,8 +41,9 @@ class Effect:
     ----------
     name : str
         Catalogue name, e.g. ``"time_delay"``.
-    params : tuple of EffectParam
-        Declared parameters, in the order of the effect's value vector.
+    params : tuple of Parameter
+        Declared parameters, in the order of the effect's value vector; each
+        ``value`` is the neutral value (the effect does nothing there).
     meaning : str
         One-line physical meaning.
     needs : tuple of str
@@ -60,13 +51,13 @@ class Effect:
     """
 
     name: str = ""
-    params: tuple[EffectParam, ...] = ()
+    params: tuple[Parameter, ...] = ()
     meaning: str = ""
     needs: tuple[str, ...] = ()
 
     def neutral(self) -> np.ndarray:
         """Parameter vector for which the effect does nothing, shape (p,)."""
-        return np.array([p.default for p in self.params], dtype=float)
+        return np.array([p.value for p in self.params], dtype=float)
 
     def transform_input(self, signals: Signals, p: np.ndarray) -> Signals:
         """Signals fed to the wrapped model (identity unless overridden)."""
@@ -121,28 +112,27 @@ class MultiStageBacklash(Effect):
     """One more backlash stage engaged below a flag point on falling input."""
 
     name: str = "multi_stage_backlash"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "v_flag_counts",
             0.0,
             -1e9,
             1e9,
-            "counts",
-            "input below which the stage's slack is taken up on a falling branch",
+            unit="counts",
+            doc="input below which the stage's slack is taken up on a falling branch",
         ),
-        EffectParam(
+        Parameter(
             "width_counts",
             0.0,
             0.0,
             1e9,
-            "counts",
-            "slack of the stage: input travel during which the output holds",
+            unit="counts",
+            doc="slack of the stage: input travel during which the output holds",
         ),
     )
     meaning: str = "a further backlash stage with its own flag point (EGPI-like switching)"
 
     def transform_input(self, signals, p):
-        from i2ris_calib.diagnosis._kernels import staged_backlash
 
         v = np.ascontiguousarray(signals.v, dtype=float)
         return replace(signals, v=staged_backlash(v, float(p[0]), float(p[1])))
@@ -165,22 +155,22 @@ class AxisCoupling(Effect):
     """
 
     name: str = "axis_coupling"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "gain_angle",
             0.0,
             -2.0,
             2.0,
-            "deg/deg",
-            "angle added per degree of the other axis's angle",
+            unit="deg/deg",
+            doc="angle added per degree of the other axis's angle",
         ),
-        EffectParam(
+        Parameter(
             "gain_input_deg_per_count",
             0.0,
             -1.0,
             1.0,
-            "deg/count",
-            "angle added per count of the other axis's input",
+            unit="deg/count",
+            doc="angle added per count of the other axis's input",
         ),
     )
     meaning: str = "cross-talk: the other axis's bending or tendon pull moves this axis"
@@ -204,8 +194,8 @@ class TimeDelay(Effect):
     """A pure delay between input and output."""
 
     name: str = "time_delay"
-    params: tuple[EffectParam, ...] = (
-        EffectParam("tau_s", 0.0, 0.0, 5.0, "s", "delay of the output behind the input"),
+    params: tuple[Parameter, ...] = (
+        Parameter("tau_s", 0.0, 0.0, 5.0, unit="s", doc="delay of the output behind the input"),
     )
     meaning: str = "transport delay (tendon wave, controller or logging latency)"
     needs: tuple[str, ...] = ("t_s",)
@@ -237,22 +227,22 @@ class RateDependentThresholds(Effect):
     """
 
     name: str = "rate_dependent_thresholds"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "beta_s",
             0.0,
             0.0,
             5.0,
-            "s",
-            "threshold increase (input units) per input unit/s of speed",
+            unit="s",
+            doc="threshold increase (input units) per input unit/s of speed",
         ),
-        EffectParam(
+        Parameter(
             "linear_deg_per_count",
             0.0,
             -1.0,
             1.0,
-            "deg/count",
-            "slope of the rate-independent (threshold-0) part, which does not widen",
+            unit="deg/count",
+            doc="slope of the rate-independent (threshold-0) part, which does not widen",
         ),
     )
     meaning: str = (
@@ -266,7 +256,6 @@ class RateDependentThresholds(Effect):
         return float(p[0]) * _speed(signals, RATE_WINDOW_S)
 
     def _played(self, signals: Signals, p: np.ndarray) -> np.ndarray:
-        from i2ris_calib.diagnosis._kernels import play_varying
 
         v = np.ascontiguousarray(signals.v, dtype=float)
         return play_varying(v, self.half_width(signals, p))
@@ -297,14 +286,14 @@ class RateDependentWeights(Effect):
     """
 
     name: str = "rate_dependent_weights"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "gain",
             0.0,
             -0.5,
             1.0,
-            "1",
-            "relative change of the output at the 95th-percentile input speed",
+            unit="1",
+            doc="relative change of the output at the 95th-percentile input speed",
         ),
     )
     meaning: str = "rate-dependent weights: the output gain changes with the input speed"
@@ -350,22 +339,23 @@ class Creep(Effect):
     """
 
     name: str = "creep"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "gain",
             0.0,
             0.0,
             0.6,
-            "1",
-            "fraction of an output change that arrives slowly",
+            unit="1",
+            doc="fraction of an output change that arrives slowly",
         ),
-        EffectParam("tau_s", 1.0, 0.3, 100.0, "s", "time constant of the slow part (>= 0.3 s)"),
+        Parameter(
+            "tau_s", 1.0, 0.3, 100.0, unit="s", doc="time constant of the slow part (>= 0.3 s)"
+        ),
     )
     meaning: str = "first-order creep: part of every move arrives with one time constant"
     needs: tuple[str, ...] = ("t_s",)
 
     def transform_output(self, y, signals, p):
-        from i2ris_calib.diagnosis._kernels import first_order_lag
 
         y = np.ascontiguousarray(y, dtype=float)
         t = np.ascontiguousarray(signals.t_s, dtype=float)
@@ -396,16 +386,18 @@ class LogCreep(Effect):
     """
 
     name: str = "creep_log"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "gamma_per_decade",
             0.0,
             0.0,
             0.2,
-            "1/decade",
-            "fraction of an output change added per decade of time after it",
+            unit="1/decade",
+            doc="fraction of an output change added per decade of time after it",
         ),
-        EffectParam("tau0_s", 0.3, 0.05, 10.0, "s", "time from which the drift is logarithmic"),
+        Parameter(
+            "tau0_s", 0.3, 0.05, 10.0, unit="s", doc="time from which the drift is logarithmic"
+        ),
     )
     meaning: str = (
         "logarithmic creep: the angle keeps drifting after a move, by the same amount "
@@ -419,7 +411,6 @@ class LogCreep(Effect):
         return tau0_s * 10.0 ** (np.arange(m * LOG_CREEP_DECADES + 1) / m)
 
     def transform_output(self, y, signals, p):
-        from i2ris_calib.diagnosis._kernels import first_order_lag
 
         y = np.ascontiguousarray(y, dtype=float)
         t = np.ascontiguousarray(signals.t_s, dtype=float)
@@ -445,14 +436,14 @@ class DeadZone(Effect):
     """
 
     name: str = "dead_zone"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "d_counts",
             0.0,
             0.0,
             1e9,
-            "counts",
-            "input magnitude below which the output does not move",
+            unit="counts",
+            doc="input magnitude below which the output does not move",
         ),
     )
     meaning: str = (
@@ -476,20 +467,19 @@ class Backlash(Effect):
     output follows (Tao and Kokotovic's backlash, a play operator on the input)."""
 
     name: str = "backlash"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "width_counts",
             0.0,
             0.0,
             1e9,
-            "counts",
-            "input travel after a reversal before the output moves",
+            unit="counts",
+            doc="input travel after a reversal before the output moves",
         ),
     )
     meaning: str = "backlash (play): after a reversal the input moves, the tip does not"
 
     def transform_input(self, signals, p):
-        from i2ris_calib.diagnosis._kernels import play_varying
 
         v = np.ascontiguousarray(signals.v, dtype=float)
         h = np.full(v.shape, 0.5 * float(p[0]))
@@ -505,22 +495,22 @@ class Saturation(Effect):
     """Output flattening beyond a knee (applied to |angle|, sign kept)."""
 
     name: str = "saturation"
-    params: tuple[EffectParam, ...] = (
-        EffectParam(
+    params: tuple[Parameter, ...] = (
+        Parameter(
             "knee_deg",
             1e6,
             0.0,
             1e6,
-            "deg",
-            "|angle| above which the output starts to flatten",
+            unit="deg",
+            doc="|angle| above which the output starts to flatten",
         ),
-        EffectParam(
+        Parameter(
             "limit_deg",
             10.0,
             0.01,
             1e3,
-            "deg",
-            "largest |angle| reachable beyond the knee",
+            unit="deg",
+            doc="largest |angle| reachable beyond the knee",
         ),
     )
     meaning: str = "the tip runs out of travel: tendon stretch or joint stops near the end"
@@ -571,7 +561,10 @@ class EffectModel:
     """A model extended by one effect; satisfies the Model protocol.
 
     Parameters of the wrapped model come first, then the effect's, named
-    ``"<label>.<param>"`` (e.g. ``"time_delay.tau_s"``).
+    ``"<label>.<param>"`` (e.g. ``"time_delay.tau_s"``). Like a
+    :class:`~i2ris_calib.hysteresis.models.ParametricModel` it is callable
+    (``model(signals)`` is the angle at its current values) and ``values`` is the
+    current vector of *all* its parameters, shape (p,).
 
     Attributes
     ----------
@@ -579,8 +572,8 @@ class EffectModel:
         The wrapped model (a base model or another EffectModel).
     effect : Effect
         The catalogue entry.
-    values : tuple of float
-        The effect's parameter values, shape (p_effect,).
+    effect_values : tuple of float
+        The effect's own parameter values, shape (p_effect,).
     label : str
         Prefix of the effect's parameter names (the effect name, suffixed
         ``_2``, ``_3``... when the same effect is stacked twice).
@@ -590,7 +583,7 @@ class EffectModel:
 
     inner: Model
     effect: Effect
-    values: tuple[float, ...]
+    effect_values: tuple[float, ...]
     label: str = ""
     fixed: tuple[bool, ...] = ()
 
@@ -608,18 +601,28 @@ class EffectModel:
         label = self.label or self.effect.name
         fixed = self.fixed or (False,) * len(self.effect.params)
         own = tuple(
-            Parameter(
-                name=f"{label}.{p.name}",
-                value=float(v),
-                lower=p.lower,
-                upper=p.upper,
-                fixed=bool(f),
-                unit=p.unit,
-                doc=p.doc,
-            )
-            for p, v, f in zip(self.effect.params, self.values, fixed, strict=True)
+            replace(p, name=f"{label}.{p.name}", value=float(v), fixed=bool(f))
+            for p, v, f in zip(self.effect.params, self.effect_values, fixed, strict=True)
         )
         return tuple(self.inner.parameters) + own
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names in vector order."""
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def values(self) -> np.ndarray:
+        """Current values of all parameters (wrapped model's first), shape (p,)."""
+        return np.array([p.value for p in self.parameters], dtype=float)
+
+    def value_dict(self) -> dict[str, float]:
+        """``{name: value}`` of the current parameters."""
+        return {p.name: float(p.value) for p in self.parameters}
+
+    def __call__(self, signals: Signals | np.ndarray) -> np.ndarray:
+        """Angle (deg), shape (n,), at the model's current values."""
+        return self.evaluate(as_signals(signals), self.values)
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Angle (deg), shape (n,): the wrapped model on transformed signals, then
@@ -631,12 +634,13 @@ class EffectModel:
         return self.effect.transform_output(y, signals, peff)
 
     def with_values(self, values: np.ndarray) -> EffectModel:
+        """A new model whose parameter values are ``values``, shape (p,)."""
         values = np.asarray(values, dtype=float)
         m = self.n_inner
         return replace(
             self,
             inner=self.inner.with_values(values[:m]),
-            values=tuple(float(x) for x in values[m:]),
+            effect_values=tuple(float(x) for x in values[m:]),
         )
 
 
@@ -656,7 +660,9 @@ def effects_of(model: Model) -> list[tuple[str, str, dict[str, float]]]:
     """Effects of ``model`` innermost first, as (effect name, label, {param: value})."""
     out = []
     while isinstance(model, EffectModel):
-        vals = {p.name: float(v) for p, v in zip(model.effect.params, model.values, strict=True)}
+        vals = {
+            p.name: float(v) for p, v in zip(model.effect.params, model.effect_values, strict=True)
+        }
         out.append((model.effect.name, model.label or model.effect.name, vals))
         model = model.inner
     return out[::-1]
@@ -686,7 +692,7 @@ def add_effect(model: Model, name: str, values: Mapping[str, float] | None = Non
             raise CalibError(f"effect '{name}': unknown parameter '{key}' ({hint})")
     vec = []
     for p in effect.params:
-        v = float(values.get(p.name, p.default))
+        v = float(values.get(p.name, p.value))
         if not (p.lower <= v <= p.upper) or not np.isfinite(v):
             raise CalibError(
                 f"effect '{name}': {p.name} = {v} outside [{p.lower}, {p.upper}] {p.unit}"
@@ -696,7 +702,7 @@ def add_effect(model: Model, name: str, values: Mapping[str, float] | None = Non
     label, k = name, 2
     while label in used:
         label, k = f"{name}_{k}", k + 1
-    return EffectModel(inner=model, effect=effect, values=tuple(vec), label=label)
+    return EffectModel(inner=model, effect=effect, effect_values=tuple(vec), label=label)
 
 
 def build_model(base: Model, effects: Mapping[str, Mapping[str, float]]) -> Model:

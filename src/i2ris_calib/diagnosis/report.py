@@ -1,6 +1,6 @@
 """The diagnosis as a JSON-ready record and as a Markdown report section.
 
-Both are pure functions of a :class:`~i2ris_calib.diagnosis.workflow.Diagnosis`;
+Both are pure functions of a :class:`~i2ris_calib.diagnosis.results.Diagnosis`;
 the io layer writes them (``diagnosis.json``, ``diagnosis.md``).
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of
-from i2ris_calib.diagnosis.workflow import Diagnosis
+from i2ris_calib.diagnosis.results import Diagnosis
 
 
 def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:

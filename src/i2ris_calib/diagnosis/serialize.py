@@ -21,6 +21,7 @@ from dataclasses import replace
 from i2ris_calib.diagnosis.effects import base_of, build_model, effects_of
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
 
 SCHEMA = "i2ris-calib.model/1"
 
@@ -54,8 +55,6 @@ def model_to_dict(model: Model) -> dict:
 
 def base_from_dict(rec: Mapping) -> Model:
     """The GPI/EGPI base model described by ``rec`` (the ``base`` entry)."""
-    from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
-
     try:
         kind, params = rec["kind"], dict(rec["params"])
         n = int(rec.get("n", 30))

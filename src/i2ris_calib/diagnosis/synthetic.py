@@ -13,8 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2ris_calib.data.dataset import direction_of_samples, input_bands, make_dataset
 from i2ris_calib.diagnosis.effects import build_model, model_values
+from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.models import i2ris_egpi_model
+from i2ris_calib.hysteresis.presets import paper_like_params
 
 #: Hidden-effect parameter sets per effect, weakest first (input 0..6000 counts,
 #: angle ~0..37 deg, speeds 300-2000 counts/s).
@@ -129,9 +133,6 @@ def make_case(
     noise_deg : float
         White measurement noise (deg) on both axes.
     """
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.hysteresis.presets import paper_like_params
-
     rng = np.random.default_rng(seed)
     t, v = excitation(rng, n_cycles=n_cycles)
     v_other = np.round(3000.0 + 2800.0 * np.sin(2 * np.pi * t / 37.0 + rng.uniform(0, 2 * np.pi)))
@@ -163,10 +164,6 @@ def make_two_direction_case(
     plus noise. ``signals.v`` is the signed input; ``truth`` is the ``"-"`` truth (in
     the ``"-"`` dataset's convention, the angle is ``-theta``).
     """
-    from i2ris_calib.data.dataset import direction_of_samples, input_bands
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.hysteresis.presets import paper_like_params
-
     rng = np.random.default_rng(seed)
     t, v = excitation(rng, n_cycles=n_cycles)
     moving = v > 0
@@ -201,8 +198,6 @@ def case_dataset(case: Case, fit_config=None, axis: str = "yaw", direction: str 
     The input of :func:`make_case` never goes negative, so every sample is in its
     ``"+"`` dataset; :func:`make_two_direction_case` has both.
     """
-    from i2ris_calib.data.dataset import input_bands, make_dataset
-    from i2ris_calib.fitting.config import FitConfig
 
     cfg = fit_config or FitConfig()
     s = case.signals

@@ -11,10 +11,23 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from rich.progress import Progress
 
+from i2ris_calib.config import PipelineConfig
 from i2ris_calib.data.dataset import Dataset
+from i2ris_calib.diagnosis.blas import single_threaded_blas
+from i2ris_calib.diagnosis.cycles import loading_mask
+from i2ris_calib.diagnosis.data import check_dataset
+from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record, paths_record
+from i2ris_calib.diagnosis.serialize import model_to_dict
+from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.io.atomic import atomic_dir, atomic_path, write_json, write_text
+from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.synced import load_datasets
 
 STARTS = ("auto", "gpi", "egpi")
 SCHEMA = "i2ris-calib.diagnosis/1"
@@ -32,8 +45,6 @@ def diagnosis_dataset(path: str | Path, axis: str, direction: str, fit_config) -
     ``[fit] signed = true``), or ``"auto"``: the dataset with more in-direction
     samples (``"+"`` on a tie).
     """
-    from i2ris_calib.io.synced import load_datasets
-
     if direction not in DIRECTIONS:
         raise CalibError(f"--direction must be auto, +, - or ±, got '{direction}'")
     if direction in ("+", "-") and fit_config.signed:
@@ -53,24 +64,18 @@ def _figure(model: Model, data: Dataset, holdout: np.ndarray, title: str):
     The model runs over the whole history; residuals and the model line are drawn
     on the dataset's own samples only (NaN elsewhere, so no line crosses a gap).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from i2ris_calib.diagnosis.cycles import loading_mask
-    from i2ris_calib.diagnosis.effects import model_values
-
     signals = data.signals
     theta = np.asarray(data.theta_deg, float)
-    y = model.evaluate(signals, model_values(model))
+    y = model(signals)
     y_mine = np.where(data.in_direction, y, np.nan)
     res = theta - y
     t = np.asarray(signals.t_s, float)
     v = np.asarray(signals.v, float)
     rate = np.gradient(v, t)
     unit = "input"
-    fig, ax = plt.subplots(2, 2, figsize=(10, 7), constrained_layout=True)
+    fig = Figure(figsize=(10, 7), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots(2, 2)
     ax[0, 0].plot(t, res, lw=0.6, color="0.2")
     ax[0, 0].fill_between(
         t,
@@ -102,14 +107,9 @@ def _figure(model: Model, data: Dataset, holdout: np.ndarray, title: str):
     return fig
 
 
-def _save(fig, path: Path) -> None:
-    import matplotlib.pyplot as plt
-
-    from i2ris_calib.io.atomic import atomic_path
-
+def _save(fig: Figure, path: Path) -> None:
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=90)
-    plt.close(fig)
 
 
 def diagnose_file(
@@ -129,9 +129,6 @@ def diagnose_file(
     :func:`~i2ris_calib.diagnosis.workflow.diagnose_from_starts`; both paths in
     diagnosis.json ``paths``).
     """
-    from i2ris_calib.config import PipelineConfig
-    from i2ris_calib.diagnosis.workflow import check_dataset
-
     if start not in STARTS:
         raise CalibError(f"--start must be auto, gpi or egpi, got '{start}'")
     cfg = config or PipelineConfig()
@@ -154,14 +151,6 @@ def diagnose_dataset(
     Used by ``diagnose`` (one file) and by ``run`` (``[run] diagnose = true``, every
     axis and direction of the session).
     """
-    from rich.progress import Progress
-
-    from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record, paths_record
-    from i2ris_calib.diagnosis.serialize import model_to_dict
-    from i2ris_calib.diagnosis.workflow import diagnose_from_starts, single_threaded_blas
-    from i2ris_calib.io.atomic import atomic_dir, write_json, write_text
-    from i2ris_calib.io.provenance import provenance
-
     out = Path(out) if out is not None else Path("diagnose_out")
     starts = ("gpi", "egpi") if start == "auto" else (start,)
     with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():

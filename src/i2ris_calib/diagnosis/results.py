@@ -1,0 +1,280 @@
+"""Result types of the diagnosis: scores, held-out comparisons, candidates, steps,
+alternatives and the diagnosis itself, plus the recordings that separate two
+effects the held-out cycles could not tell apart.
+
+All are frozen dataclasses without behaviour beyond JSON-ready views; the search
+that fills them is :mod:`i2ris_calib.diagnosis.workflow`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from i2ris_calib.diagnosis.effects import effects_of
+from i2ris_calib.hysteresis.model import Model
+
+
+@dataclass(frozen=True)
+class ModelScore:
+    """Fit quality of one model on the search data: fitted and held-out RMSE, BIC.
+
+    Not the paper's Eq25-27 set (:class:`i2ris_calib.fitting.metrics.Metrics`): the
+    diagnosis compares models by held-out RMSE and BIC on the same samples.
+
+    Attributes
+    ----------
+    fit_rmse_deg, holdout_rmse_deg : float
+        RMSE (deg, Eq25) on the fitted and on the held-out samples.
+    bic : float
+        ``n ln(SSE/n) + k ln n`` on the fitted samples of the search signal
+        (:func:`i2ris_calib.fitting.metrics.information_criteria`).
+    n_free : int
+        Free parameters k.
+    """
+
+    fit_rmse_deg: float
+    holdout_rmse_deg: float
+    bic: float
+    n_free: int
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return {
+            "fit_rmse_deg": self.fit_rmse_deg,
+            "holdout_rmse_deg": self.holdout_rmse_deg,
+            "bic": self.bic,
+            "n_free": self.n_free,
+        }
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Evidence that ``after`` is better than ``before`` on held-out data.
+
+    Attributes
+    ----------
+    rel_improvement : float
+        ``1 - RMSE_after / RMSE_before`` on the held-out samples.
+    z : float
+        Held-out SSE reduction over its standard deviation under "the before
+        model is adequate" (see :func:`sse_reduction_z`).
+    p_value : float
+        One-sided normal p-value of ``z``.
+    units_improved, n_units : int
+        Held-out units (loading cycles, halved until there are at least 6) whose
+        mean squared error fell, out of all: descriptive, not the test.
+    delta_bic : float
+        BIC(after) - BIC(before) on the fitted samples (negative = better).
+    significant : bool
+        All three criteria met.
+    """
+
+    rel_improvement: float
+    z: float
+    p_value: float
+    units_improved: int
+    n_units: int
+    delta_bic: float
+    significant: bool
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return dict(self.__dict__)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One fitted candidate effect at one step."""
+
+    effect: str
+    model: Model | None
+    metrics: ModelScore | None
+    comparison: Comparison | None
+    skipped: str | None = None
+    nfev: int = 0
+    stage: str = "warm"
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict (parameters of the effect only)."""
+        if self.skipped:
+            return {"effect": self.effect, "skipped": self.skipped}
+        return {
+            "effect": self.effect,
+            "params": effects_of(self.model)[-1][2],
+            "metrics": self.metrics.as_dict(),
+            "evidence": self.comparison.as_dict(),
+            "fit": self.stage,
+            "nfev": self.nfev,
+        }
+
+
+@dataclass(frozen=True)
+class Step:
+    """One added effect, with the evidence and the residual analyses."""
+
+    effect: str
+    model_before: Model
+    model_after: Model
+    before: ModelScore
+    after: ModelScore
+    comparison: Comparison
+    candidates: tuple[Candidate, ...]
+    analysis_before: dict
+    sentences_before: tuple[str, ...]
+    alternatives: tuple[Alternative, ...] = ()
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """A finalist the held-out cycles could not rule out against the named effect.
+
+    Attributes
+    ----------
+    effect : str
+    holdout_rmse_deg : float
+        Its held-out RMSE (deg).
+    z : float
+        Held-out SSE-reduction z of the named effect over it (:func:`sse_reduction_z`);
+        below the ``alpha`` quantile the alternative is *not excluded*.
+    p_value : float
+    excluded : bool
+        True when the named effect is significantly better on the held-out cycles.
+    params : dict
+        Its fitted effect parameters.
+    experiment : str
+        A recording that would separate it from the named effect ("" if none known).
+    """
+
+    effect: str
+    holdout_rmse_deg: float
+    z: float
+    p_value: float
+    excluded: bool
+    params: dict
+    experiment: str = ""
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return dict(self.__dict__)
+
+
+_LONG_HOLDS = (
+    "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
+    "delay settles within its delay"
+)
+
+#: Recordings that separate two effects the held-out cycles could not tell apart.
+SEPARATING_EXPERIMENTS: dict[frozenset, str] = {
+    frozenset({"time_delay", "rate_dependent_thresholds"}): (
+        "a slow and a fast ramp to the same level, and a triangle without a hold at the "
+        "top: a delay overshoots a reversal taken at speed and lags by the same time at "
+        "every speed, rate-dependent thresholds hold flat at the reversal"
+    ),
+    frozenset({"time_delay", "creep"}): _LONG_HOLDS,
+    frozenset({"creep", "creep_log"}): (
+        "holds of 30-60 s: first-order creep settles after a few time constants, "
+        "logarithmic creep gains the same amount every decade of time"
+    ),
+    frozenset({"time_delay", "creep_log"}): _LONG_HOLDS,
+    frozenset({"dead_zone", "backlash"}): (
+        "a ramp that reverses mid-range and a return to zero: backlash holds the "
+        "output after every reversal, a dead zone only near zero input"
+    ),
+    frozenset({"dead_zone", "multi_stage_backlash"}): (
+        "partial unloading cycles that reverse above and below mid-range: a further "
+        "backlash stage holds on falling input below its flag point, a dead zone holds "
+        "only below its break point, rising or falling"
+    ),
+    frozenset({"backlash", "multi_stage_backlash"}): (
+        "small reversals at several input levels: backlash holds at every reversal, a "
+        "further stage only below its flag point"
+    ),
+    frozenset({"rate_dependent_thresholds", "rate_dependent_weights"}): (
+        "ramps at three speeds to the same level with holds: rate-dependent weights "
+        "change the slope of the loop while moving, rate-dependent thresholds its width"
+    ),
+    frozenset({"time_delay", "rate_dependent_weights"}): (
+        "ramps at three speeds to the same level with holds: a delay shifts the loop in "
+        "time, rate-dependent weights scale it with speed"
+    ),
+    frozenset({"saturation", "rate_dependent_weights"}): (
+        "slow ramps to full scale: saturation flattens the top at any speed"
+    ),
+}
+
+
+def separating_experiment(a: str, b: str) -> str:
+    """A recording that separates effects ``a`` and ``b`` ("" if none is known)."""
+    return SEPARATING_EXPERIMENTS.get(frozenset({a, b}), "")
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose`.
+
+    Attributes
+    ----------
+    start_model, final_model : Model
+        Polished starting model and the final extended model (fitted values).
+    baseline, final : ModelScore
+    steps : tuple of Step
+        Effects added, in order.
+    last_candidates : tuple of Candidate
+        Candidates of the final (unsuccessful) round: why the search stopped.
+    analysis_final : dict
+        Residual analysis of the final model; ``sentences_final`` its summary.
+    holdout : ndarray of bool, shape (n,)
+        Held-out samples of the full signal that count (the dataset's held-out
+        cycles, in direction, angle measured).
+    decimation : int
+        Step between the samples used in the search.
+    """
+
+    start_model: Model
+    final_model: Model
+    baseline: ModelScore
+    final: ModelScore
+    steps: tuple[Step, ...]
+    last_candidates: tuple[Candidate, ...]
+    analysis_final: dict
+    sentences_final: tuple[str, ...]
+    holdout: np.ndarray
+    decimation: int
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def named_effects(self) -> list[str]:
+        """Effect names in the order they were added (empty if nothing is missing)."""
+        return [s.effect for s in self.steps]
+
+
+@dataclass(frozen=True)
+class AutoDiagnosis:
+    """Diagnoses from several starting models, reconciled into one answer.
+
+    Attributes
+    ----------
+    start : str
+        The starting model of the answer (``"gpi"`` or ``"egpi"``).
+    diagnosis : Diagnosis
+        The answer: the path whose final model has the lower held-out RMSE.
+    paths : dict of str to Diagnosis
+        Every path, by starting model.
+    agree : bool
+        All paths named the same effects.
+    z : float
+        Held-out SSE-reduction z of the answer's final model over the other path's
+        (nan with one path); below the ``alpha`` quantile the other path's answer is
+        not excluded.
+    sentence : str
+        The reconciliation in one sentence.
+    """
+
+    start: str
+    diagnosis: Diagnosis
+    paths: dict
+    agree: bool
+    z: float
+    sentence: str

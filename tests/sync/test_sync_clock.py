@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.sync.clock import ClockModel, clock_from_offsets
+from i2ris_calib.sync.clock import ClockModel, clock_from_offsets, clock_model
+from i2ris_calib.sync.estimate import combine_clocks
 from i2ris_calib.sync.log import make_encoder_log
 
 
@@ -70,7 +71,6 @@ def test_encoder_log_validation(t, msg):
 
 
 def _clk(o, sd_o, d, sd_d, method="event"):
-    from i2ris_calib.sync.clock import clock_model
 
     fitted = np.isfinite(sd_d)
     cov = np.diag([sd_o**2, sd_d**2 if fitted else 0.0])
@@ -80,7 +80,6 @@ def _clk(o, sd_o, d, sd_d, method="event"):
 def test_auto_combination_is_the_product_of_likelihoods():
     """Event (0.500 s +- 2 ms, 100 +- 50 ppm) x model (0.503 s +- 1 ms, 80 +- 10 ppm):
     precision-weighted means, variances 1 / (sum of precisions)."""
-    from i2ris_calib.sync.estimate import combine_clocks
 
     clk, info = combine_clocks(_clk(0.5, 2e-3, 100, 50), _clk(0.503, 1e-3, 80, 10, "model"), 0.0)
     assert clk.method == "event+model" and info["reason"] == "combined"
@@ -96,7 +95,6 @@ def test_auto_combination_is_the_product_of_likelihoods():
 
 
 def test_auto_keeps_the_event_when_the_model_disagrees_or_is_flat():
-    from i2ris_calib.sync.estimate import combine_clocks
 
     event = _clk(0.5, 1e-3, 100, 50)
     clk, info = combine_clocks(event, _clk(0.505, 1e-3, 80, 10, "model"), 0.0)  # 3.5 sd apart

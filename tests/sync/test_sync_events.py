@@ -9,18 +9,13 @@ from hypothesis import strategies as st
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.sync.config import SyncConfig
+from i2ris_calib.sync.edgetime import exposure_windows
 from i2ris_calib.sync.estimate import video_edges
-from i2ris_calib.sync.events import (
-    Edge,
-    camera_edges,
-    clock_from_events,
-    exposure_windows,
-    lit_fraction,
-    log_edges,
-    match_edges,
-    subframe_edge_time,
-)
+from i2ris_calib.sync.events import clock_from_events
+from i2ris_calib.sync.flash import CameraEdge, camera_edges, lit_fraction, subframe_edge_time
 from i2ris_calib.sync.log import Channel
+from i2ris_calib.sync.logedges import LogEdge, log_edges
+from i2ris_calib.sync.matching import match_edges
 from i2ris_calib.sync.synthetic import make_sync_case
 
 FLASHES = ((0.5, 0.4), (30.0, 0.6), (58.0, 0.3))
@@ -121,18 +116,23 @@ def test_camera_edges_found_with_small_contrast():
     assert camera_edges(t, g, "top", SyncConfig(flash_min_contrast_gray=20.0)) == []
 
 
+def _cam_edge(t_s: float, rising: bool) -> CameraEdge:
+    """A camera edge known to 0.1 ms (matching looks only at times, sd and kind)."""
+    frames = np.array([t_s - 1 / 60, t_s + 1 / 60])
+    frac = np.array([0.0, 1.0]) if rising else np.array([1.0, 0.0])
+    return CameraEdge(t_s, 1e-4, rising, "top", frames, frac, 0.01, (1 / 30,))
+
+
 def test_periodic_flashes_are_ambiguous():
     """Equal flashes every 5 s seen over only part of the log: two offsets fit equally."""
     period, n = 5.0, 8
     log = [
-        Edge(10.0 + k * period + dt, 1e-4, r, "log")
+        LogEdge.at(10.0 + k * period + dt, r, 1e-4)
         for k in range(n)
         for dt, r in ((0, True), (0.2, False))
     ]
     cam = [
-        Edge(2.0 + k * period + dt, 1e-4, r, "top")
-        for k in range(3)
-        for dt, r in ((0, True), (0.2, False))
+        _cam_edge(2.0 + k * period + dt, r) for k in range(3) for dt, r in ((0, True), (0.2, False))
     ]
     with pytest.raises(CalibError, match="equally well"):
         match_edges(cam, log, SyncConfig())

@@ -5,8 +5,11 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
+from i2ris_calib.io.session import load_session
 from i2ris_calib.io.simulate import build_session
+from i2ris_calib.io.track import track
 from i2ris_calib.simulation.presets import preset_config
+from i2ris_calib.tracking.config import TrackingConfig
 
 
 @pytest.fixture(scope="session")
@@ -20,9 +23,6 @@ def ci_session(tmp_path_factory):
 @pytest.fixture(scope="session")
 def ci_tracked(ci_session):
     """(angles DataFrame merged with truth_frames.csv, summary) of the CI session."""
-    from i2ris_calib.io.session import load_session
-    from i2ris_calib.io.track import track
-    from i2ris_calib.tracking.config import TrackingConfig
 
     res = track(ci_session, load_session(ci_session), TrackingConfig())
     truth = pd.read_csv(ci_session / "truth" / "truth_frames.csv")

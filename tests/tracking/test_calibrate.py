@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
+from i2ris_calib.cli import main
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.calibrate import read_camera_yaml, write_camera_yaml
 from i2ris_calib.tracking.calibrate import CharucoSpec, calibrate_from_views, charuco_board
@@ -15,7 +17,6 @@ PX_PER_MM = 100
 
 
 def _views(spec: CharucoSpec, n: int = 8):
-    import cv2
 
     board = charuco_board(spec)
     tex = board.generateImage((spec.squares_x * PX_PER_MM, spec.squares_y * PX_PER_MM))
@@ -84,9 +85,6 @@ def test_bad_yaml_is_a_clear_error(tmp_path):
 
 
 def test_calibrate_cli_from_images_and_ros_conversion(tmp_path):
-    import cv2
-
-    from i2ris_calib.cli import main
 
     paths = []
     for k, img in enumerate(_views(CharucoSpec())):

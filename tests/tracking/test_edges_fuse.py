@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -10,13 +11,14 @@ from i2ris_calib.simulation.render import FrameRenderer
 from i2ris_calib.simulation.scene import make_cameras, make_cube, true_marker_corners
 from i2ris_calib.tracking import fuse as fz
 from i2ris_calib.tracking.config import TrackingConfig
-from i2ris_calib.tracking.geometry import face_corner_points_tip, project, tip_rotation
+from i2ris_calib.tracking.detect import MarkerDetector
+from i2ris_calib.tracking.fuse import _choose
+from i2ris_calib.tracking.geometry import face_corner_points_tip, project, rodrigues, tip_rotation
 from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
 
 
 @pytest.fixture(scope="module")
 def scene():
-    import cv2
 
     cfg = preset_config("ci", width_px=400, height_px=320, marker_size_px=110.0, noise_sigma=0.0)
     cams = make_cameras(cfg, np.random.default_rng(3))
@@ -27,7 +29,6 @@ def scene():
 
 @pytest.mark.parametrize("yaw,pitch", [(0.0, 0.0), (17.0, 0.0), (0.0, -28.0), (-33.0, 6.0)])
 def test_edge_corners_are_within_five_hundredths_of_a_pixel(scene, yaw, pitch):
-    from i2ris_calib.tracking.detect import MarkerDetector
 
     cfg, cams, cube = scene
     for cam in cams:
@@ -95,7 +96,6 @@ def test_missing_view_gives_not_found_and_nan(scene):
 
 
 def test_equal_cost_minima_resolved_by_continuity_else_ambiguous():
-    from i2ris_calib.tracking.fuse import _choose
 
     n = 6
     t = np.arange(n) / 30.0
@@ -131,7 +131,6 @@ def test_equal_cost_minima_resolved_by_continuity_else_ambiguous():
 def test_common_axis_positions_constant_for_a_rigid_rig(rng):
     """u_b.t_b - u_a.t_a is the rigid rig's constant; a move along u (what swapped view
     labels cause) shows up one to one, a move along either camera's depth does not."""
-    from i2ris_calib.tracking.geometry import rodrigues
 
     R_ba = rodrigues(np.array([np.pi / 2, 0.0, 0.0]) + rng.normal(0, 0.05, 3))
     t_a = rng.normal(0, 1.0, (50, 3)) + [0, 0, 200.0]

@@ -7,7 +7,16 @@ measured. Measured on this fixture when written: RMS 0.023 / 0.031 deg, max 0.10
 
 from __future__ import annotations
 
+import json
+import shutil
+
 import numpy as np
+import pandas as pd
+
+from i2ris_calib.io.session import load_session
+from i2ris_calib.io.track import track
+from i2ris_calib.tracking.config import TrackingConfig
+from i2ris_calib.tracking.geometry import euler_zyx_deg
 
 
 def test_fused_angles_match_truth(ci_tracked):
@@ -49,13 +58,6 @@ def test_weak_perspective_model_without_calibration(ci_session, tmp_path):
     """Same session, cameras declared weak-perspective (no K). The render is a pinhole
     with f = 20000 px; measured when written: RMS 0.023 / 0.019 deg, max 0.11 / 0.07
     deg, so the same tolerances as the pinhole model apply (RMS <= 0.08, max <= 0.35)."""
-    import shutil
-
-    import pandas as pd
-
-    from i2ris_calib.io.session import load_session
-    from i2ris_calib.io.track import track
-    from i2ris_calib.tracking.config import TrackingConfig
 
     s = tmp_path / "s"
     shutil.copytree(ci_session, s)
@@ -78,9 +80,6 @@ def test_weak_perspective_model_without_calibration(ci_session, tmp_path):
 def test_reference_roll_fitted_with_an_honest_uncertainty(ci_tracked, ci_session):
     """track.json states the reference roll's uncertainty; the true roll of the reference
     (the rendered top camera's rotation) lies within 4 stated sd."""
-    import json
-
-    from i2ris_calib.tracking.geometry import euler_zyx_deg
 
     m, summary = ci_tracked
     ref = summary["reference"]

@@ -21,6 +21,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from i2ris_calib.errors import CalibError
@@ -101,7 +102,6 @@ def find_sequence(folder: Path) -> ImageSequence:
 
 def read_image(path: Path) -> np.ndarray:
     """One frame as stored (uint8 or uint16, grey or colour); CalibError if unreadable."""
-    import cv2
 
     img = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if img is None:
@@ -136,7 +136,6 @@ def to_uint8(img: np.ndarray, bits: int) -> np.ndarray:
 
     Values above ``2**bits - 1`` saturate at 255.
     """
-    import cv2
 
     scale = 255.0 / float(2**bits - 1)
     return cv2.convertScaleAbs(img, alpha=scale)  # rounds and saturates

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import typer
+from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json
@@ -18,6 +19,13 @@ from i2ris_calib.io.encoders import encoder_log_path, read_encoder_log
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import SESSION_FILE, load_session
 from i2ris_calib.sync.axes import axis_check
+from i2ris_calib.sync.estimate import (
+    axis_series,
+    check_angles,
+    check_overlap,
+    estimate_clock,
+    synced_table,
+)
 
 SCHEMA = "i2ris-calib.sync/1"
 CLOCK = "t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam"
@@ -31,7 +39,6 @@ def read_angles(path: Path) -> pd.DataFrame:
     reset; their number is in ``df.attrs["n_backward_rejected"]`` (sync.json). A time
     that goes backwards on a frame not flagged so is still refused.
     """
-    from i2ris_calib.sync.estimate import check_angles
 
     if not path.is_file():
         raise CalibError(
@@ -99,7 +106,6 @@ def sync_summary(clock, table: pd.DataFrame, n_dropped: int, log, t_cam: np.ndar
 
 def xcorr_comparison(angles: pd.DataFrame, log, sync_cfg) -> dict | None:
     """Plain cross-correlation result for comparison (None when it cannot run)."""
-    from i2ris_calib.sync.estimate import axis_series, estimate_clock
 
     if not axis_series(angles):
         return None
@@ -131,9 +137,6 @@ def sync_session(
     Path
         The output folder.
     """
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
-    from i2ris_calib.sync.estimate import check_overlap, estimate_clock, synced_table
 
     root = Path(session)
     spec = load_session(root)

@@ -13,20 +13,30 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pandas as pd
 import typer
+from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json
+from i2ris_calib.io.calibrate import read_camera_yaml
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import load_session, session_file
-from i2ris_calib.io.video import input_files
+from i2ris_calib.io.video import header_frame_count, input_files, iter_frames
 from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.session import CameraSpec, SessionSpec
 from i2ris_calib.tracking import fuse as fz
 from i2ris_calib.tracking.config import TrackingConfig
-from i2ris_calib.tracking.pose import CameraIntrinsics, weak_perspective_intrinsics
+from i2ris_calib.tracking.detect import MarkerDetector, aruco_dictionary, touches_border
+from i2ris_calib.tracking.geometry import face_corner_points_tip
+from i2ris_calib.tracking.pose import (
+    CameraIntrinsics,
+    ippe_candidates,
+    tip_pose_from_marker,
+    weak_perspective_intrinsics,
+)
 
 #: Above this fraction of out-of-order timestamps the file is refused (not flagged).
 MAX_NON_MONOTONIC = 0.05
@@ -180,7 +190,6 @@ def read_timestamps(path: Path) -> pd.DataFrame:
 
 def check_calibration(session: Path, name: str, cam: CameraSpec) -> None:
     """A pinhole camera's calibration file exists and parses (before any decoding)."""
-    from i2ris_calib.io.calibrate import read_camera_yaml
 
     if cam.model != "pinhole":
         return
@@ -196,7 +205,6 @@ def intrinsics(
     session: Path, cam: CameraSpec, shape: tuple[int, int], cfg: TrackingConfig
 ) -> CameraIntrinsics:
     """Camera model of one camera: pinhole from its calibration file, or weak perspective."""
-    from i2ris_calib.io.calibrate import read_camera_yaml
 
     h, w = shape
     if cam.model == "weak_perspective":
@@ -228,10 +236,6 @@ def detect_stream(
     video: Path, dictionary: str, marker_id: int, cfg: TrackingConfig
 ) -> StreamResult:
     """Decode one video and detect its marker in every frame (runs in a worker)."""
-    import cv2
-
-    from i2ris_calib.io.video import iter_frames
-    from i2ris_calib.tracking.detect import MarkerDetector, touches_border
 
     cv2.setNumThreads(1)
     det = MarkerDetector(dictionary, marker_id, cfg)
@@ -262,10 +266,6 @@ def detect_stream(
 
 def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: bool) -> dict:
     """Detect in every camera stream, in parallel processes when ``cfg.workers > 1``."""
-    from rich.progress import Progress
-
-    from i2ris_calib.io.video import header_frame_count
-    from i2ris_calib.tracking.detect import aruco_dictionary
 
     aruco_dictionary(spec.marker.dictionary)  # fail early on a bad name
     total = sum(max(header_frame_count(v), 1) for v in videos.values())
@@ -314,8 +314,6 @@ def _view(
     corners_raw: np.ndarray, intr: CameraIntrinsics, view: str, spec: SessionSpec
 ) -> fz.ViewData:
     """Undistorted corners and IPPE candidates of one camera at the fused frames."""
-    from i2ris_calib.tracking.geometry import face_corner_points_tip
-    from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
 
     c = intr.undistort(corners_raw)
     n = len(c)

@@ -25,9 +25,12 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.io import frames
+from i2ris_calib.io.frames import to_uint8
 
 #: Codec chosen by :func:`open_writer` from the suffix (simulator output, tests).
 FOURCC = {".mkv": "FFV1", ".avi": "FFV1", ".mp4": "mp4v"}
@@ -53,7 +56,6 @@ def sync_log_level() -> None:
     running a command, but a library or test may have imported cv2 earlier. Without the
     variable nothing is changed.
     """
-    import cv2
 
     name = os.environ.get("OPENCV_LOG_LEVEL", "").strip().upper()
     levels = {
@@ -83,7 +85,6 @@ def open_writer(path: Path, fps: float, size_wh: tuple[int, int], codec: str | N
     codec : str, optional
         Four-character code (e.g. ``"MJPG"``, ``"FFV1"``), overriding the suffix.
     """
-    import cv2
 
     sync_log_level()
     code = codec or FOURCC.get(Path(path).suffix.lower())
@@ -120,7 +121,6 @@ def open_reader(path: Path, threads: int = 0):
         (frames come out (h, w)); other streams deliver BGR (h, w, 3). Use
         :func:`as_gray` on every frame.
     """
-    import cv2
 
     sync_log_level()
     p = Path(path)
@@ -144,16 +144,12 @@ def open_reader(path: Path, threads: int = 0):
 
 def stream_is_grey(cap) -> bool:
     """Whether the opened stream's codec pixel format is single-channel grey."""
-    import cv2
 
     return fourcc_text(cap.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT)) in GREY_PIXEL_FORMATS
 
 
 def describe(path: Path) -> dict:
     """Codec, pixel format, size and header frame count of a video file or sequence."""
-    import cv2
-
-    from i2ris_calib.io import frames
 
     p = Path(path)
     if p.is_dir():
@@ -189,7 +185,6 @@ def as_gray(frame: np.ndarray, bits: int = 16) -> np.ndarray:
         Significant bits of a uint16 frame: grey levels ``0 .. 2**bits - 1`` map
         linearly onto ``0 .. 255`` (:func:`i2ris_calib.io.frames.to_uint8`). Ignored for uint8.
     """
-    import cv2
 
     if frame.ndim == 3:
         if frame.shape[2] == 1:
@@ -200,7 +195,6 @@ def as_gray(frame: np.ndarray, bits: int = 16) -> np.ndarray:
             frame = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
     if frame.dtype == np.uint8:
         return frame
-    from i2ris_calib.io.frames import to_uint8
 
     return to_uint8(frame, bits)
 
@@ -219,7 +213,6 @@ def _decode_file(path: Path, threads: int) -> Iterator[np.ndarray]:
 
 
 def _raw_frames(path: Path, threads: int) -> Iterator[np.ndarray]:
-    from i2ris_calib.io import frames
 
     p = Path(path)
     _check_file(p)
@@ -303,7 +296,6 @@ def iter_frames(
     ndarray (h, w) uint8
     CalibError if no frame decodes.
     """
-    from i2ris_calib.io import frames
 
     p = Path(path)
     if bits is None and p.is_dir():
@@ -327,9 +319,6 @@ def iter_frames(
 
 def header_frame_count(path: Path) -> int:
     """Frame count claimed by the container header, or the number of sequence images (-1 if unknown)."""
-    import cv2
-
-    from i2ris_calib.io import frames
 
     p = Path(path)
     if p.is_dir():
@@ -344,7 +333,6 @@ def header_frame_count(path: Path) -> int:
 
 def input_files(path: Path) -> list[Path]:
     """The files a video input consists of: the file itself, or a sequence's images."""
-    from i2ris_calib.io import frames
 
     p = Path(path)
     return list(frames.find_sequence(p).files) if p.is_dir() else [p]

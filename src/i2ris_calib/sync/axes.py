@@ -10,7 +10,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-AXES = (("yaw", "yaw_deg", "enc_yaw", "enc_pitch"), ("pitch", "pitch_deg", "enc_pitch", "enc_yaw"))
+from i2ris_calib.data.dataset import AXES as AXIS_NAMES
+from i2ris_calib.data.dataset import other_axis
+
+#: (axis, angle column, encoder column) of each bending axis in angles.csv / synced.csv:
+#: the one definition the sync stage uses
+AXES = tuple((a, f"{a}_deg", f"enc_{a}") for a in AXIS_NAMES)
 #: rows between the two ends of a step
 LAG = 3
 #: an angle "follows the other motor" when |step correlation| with it exceeds this ...
@@ -54,7 +59,8 @@ def axis_check(table: pd.DataFrame) -> dict:
     measured = table["status"].astype(str).to_numpy() == "measured"
     out: dict = {}
     swapped = []
-    for axis, ang, own, other in AXES:
+    for axis, ang, own in AXES:
+        other = f"enc_{other_axis(axis)}"
         th = pd.to_numeric(table[ang], errors="coerce").to_numpy(float)
         e_own = pd.to_numeric(table[own], errors="coerce").to_numpy(float)
         e_other = pd.to_numeric(table[other], errors="coerce").to_numpy(float)

@@ -10,7 +10,7 @@ frame is either constant (0 or 1) or linear in ``u``, so ``sse`` is
 Keeping it in that form makes the likelihood exact at any resolution: no time grid,
 however short the exposure or small the noise.
 
-Two operations are used by the clock estimate (:mod:`i2ris_calib.sync.events`):
+Two operations are used by the clock estimate (:mod:`i2ris_calib.sync.posterior`):
 
 - :func:`edge_moments`: the evidence ``Z = integral exp(-sse/2) du`` (flat prior on the
   edge time) and the mean and variance of the edge time. A partly lit frame gives a
@@ -30,6 +30,7 @@ from scipy.special import erf, erfcx
 
 _REF = {"start": 0.0, "middle": 0.5, "end": 1.0}
 _SQRT_PI = float(np.sqrt(np.pi))
+TIME_FLOOR_S = 1e-5  # smallest standard deviation given to any edge time, s
 
 
 @dataclass(frozen=True)

@@ -12,11 +12,14 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.sync.axes import AXES
 from i2ris_calib.sync.clock import ClockModel, clock_model
 from i2ris_calib.sync.config import SyncConfig
-from i2ris_calib.sync.events import Edge, camera_edges, clock_from_events, log_edges
+from i2ris_calib.sync.events import clock_from_events
+from i2ris_calib.sync.flash import CameraEdge, camera_edges
 from i2ris_calib.sync.joint import clock_from_model
 from i2ris_calib.sync.log import ENCODER_CHANNELS, EncoderLog
+from i2ris_calib.sync.logedges import log_edges
 from i2ris_calib.sync.xcorr import AxisSeries, clock_from_xcorr
 
 ANGLE_COLUMNS = ("frame", "time_s", "yaw_deg", "pitch_deg", "status")
@@ -30,7 +33,6 @@ SYNCED_COLUMNS = (
     "frame",
     "time_cam_s",
 )
-AXES = (("yaw", "yaw_deg", "enc_yaw"), ("pitch", "pitch_deg", "enc_pitch"))
 
 
 def check_angles(angles: pd.DataFrame, where: str) -> pd.DataFrame:
@@ -102,7 +104,7 @@ def flash_cameras(angles: pd.DataFrame, cfg: SyncConfig) -> list[str]:
     return cams
 
 
-def video_edges(angles: pd.DataFrame, cfg: SyncConfig) -> list[Edge]:
+def video_edges(angles: pd.DataFrame, cfg: SyncConfig) -> list[CameraEdge]:
     """LED edges seen in every flash camera; a camera's own frame times are taken from
     ``time_s_<camera>`` when angles.csv has that column, else from ``time_s``."""
     edges = []

@@ -28,12 +28,16 @@ state, and a spliced input would show them fake steps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from i2ris_calib.data.dataset import Bands, direction_datasets, direction_input, input_bands
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.config import FitConfig
+from i2ris_calib.fitting.cycles import cycle_index
+from i2ris_calib.fitting.fit import PROFILE_PARAMS, fit_model
+from i2ris_calib.fitting.pipeline import build_model, fit_kind
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
 from i2ris_calib.sync.config import SyncConfig
 from i2ris_calib.sync.log import EncoderLog
@@ -229,8 +233,6 @@ class OffsetProfile:
         return starts
 
     def _fit(self, offset_c_s: float) -> tuple[float, list]:
-        from i2ris_calib.fitting.fit import fit_model
-        from i2ris_calib.fitting.pipeline import build_model, fit_kind
 
         total, results = 0.0, []
         cfg = self.fit_config
@@ -314,7 +316,6 @@ def start_as_fit(
     kind: str, v: np.ndarray, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None
 ):
     """:class:`StartEval` of ``values`` on (v, theta): the fallback when a refit is worse."""
-    from i2ris_calib.fitting.pipeline import build_model
 
     model = build_model(kind, v, fit_config, deadband).with_values(values)
     free = tuple(p.name for p in model.parameters if not p.fixed)
@@ -434,7 +435,6 @@ def noise_sd(residuals: list[np.ndarray]) -> float:
 def _param_jacobian(model, v: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d(model output)/d(free least-squares parameters), shape (m, q), central differences
     (the profiled flag point ``v_f`` excluded: the output is piecewise constant in it)."""
-    from i2ris_calib.fitting.fit import PROFILE_PARAMS
 
     cols = []
     for i, p in enumerate(model.parameters):
@@ -464,7 +464,6 @@ def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3
         kept); ``cycle`` is the loading-cycle number of each frame
         (:func:`i2ris_calib.fitting.cycles.cycle_index` of the direction's input).
     """
-    from i2ris_calib.fitting.cycles import cycle_index
 
     out = []
     for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
@@ -613,7 +612,6 @@ def drift_gauss_newton(
     ``A_i r_i``, ``Omega`` by Newey-West and by loading-cycle clusters (residual
     autocorrelation, as :func:`offset_stderr`).
     """
-    from i2ris_calib.fitting.cycles import cycle_index
 
     fits = profile.fits(offset_c_s)
     o, d = offset_c_s, drift_ppm
@@ -685,7 +683,6 @@ def cycle_offsets(
         Offsets as ``t_ctrl - t_cam`` at ``t_g`` (the clock's offset at ``t_c`` moved
         along the drift).
     """
-    from i2ris_calib.fitting.cycles import cycle_index
 
     ts, os_, sds = [], [], []
     for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
@@ -761,9 +758,6 @@ def clock_from_model(
         With the offset profile (offsets at ``t_c``, RSS) and the uncertainty terms
         (:func:`offset_stderr`) as evidence.
     """
-    from dataclasses import replace
-
-    from i2ris_calib.fitting.config import FitConfig
 
     fit_config = replace(fit_config or FitConfig(), holdout_fraction=0.0)
     t_c = float(np.mean(np.concatenate([s.t_cam_s for s in series])))

@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from i2ris_calib.errors import CalibError
 
@@ -192,7 +193,6 @@ def find_glitches(t_s: np.ndarray, values: np.ndarray, limit_per_s: float) -> np
     -------
     ndarray of bool, shape (n,)
     """
-    from scipy.ndimage import median_filter
 
     n = values.size
     w = GLITCH_HALF_WINDOW

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.hysteresis.models import density, i2ris_egpi_model, thresholds
+from i2ris_calib.hysteresis.presets import loading_trajectory, random_i2ris_egpi_params
 from i2ris_calib.sync.log import EncoderLog, make_encoder_log
 
 
@@ -55,8 +57,6 @@ def egpi_truth_params(rng: np.random.Generator, backlash_deg: float) -> dict[str
     offsets follow the recipe (loading from rest starts at ~0 deg, both families meet
     at v = 0). 0 gives a hysteresis-free (linear) truth.
     """
-    from i2ris_calib.hysteresis.models import density, thresholds
-    from i2ris_calib.hysteresis.presets import random_i2ris_egpi_params
 
     p = random_i2ris_egpi_params(rng)
     r = thresholds(p["r1"], p["rn"], 30)
@@ -131,8 +131,6 @@ def make_sync_case(
     t_ctrl = t_ctrl0 + np.arange(int((duration_s * drift + 2.0) * log_rate_hz)) / log_rate_hz
     t_ctrl += rng.uniform(0, 0.2 / log_rate_hz, t_ctrl.size)  # small logging jitter
     t_ctrl = np.sort(t_ctrl)
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.hysteresis.presets import loading_trajectory
 
     t_traj, v_traj = loading_trajectory(
         rng, n_cycles=n_cycles, rate_hz=1000.0, speed_counts_s=speed_counts_s, pause_s=pause_s

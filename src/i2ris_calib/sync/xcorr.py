@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import correlate, correlation_lags, savgol_filter
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
@@ -66,7 +67,6 @@ def coarse_xcorr_offset(series: list[AxisSeries], log: EncoderLog, cfg: SyncConf
     correlated by FFT over the whole search range (:func:`offset_search_range`);
     the peak is refined by a parabola through its neighbours.
     """
-    from scipy.signal import correlate, correlation_lags
 
     fs = cfg.xcorr_rate_hz
     lo, hi = offset_search_range(series, log, cfg)
@@ -111,7 +111,6 @@ def smooth_derivative(x: np.ndarray, dt_s: float, smooth_s: float) -> np.ndarray
     The same symmetric filter is applied to angle and encoder, so it adds no delay
     between them; it only suppresses the noise that differentiation amplifies.
     """
-    from scipy.signal import savgol_filter
 
     n = max(int(round(smooth_s / dt_s)) | 1, 5)
     if x.size <= n:

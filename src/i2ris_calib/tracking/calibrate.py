@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.tracking.detect import aruco_dictionary
 
 
 @dataclass(frozen=True)
@@ -40,9 +42,6 @@ class Intrinsics:
 
 def charuco_board(spec: CharucoSpec):
     """The ``cv2.aruco.CharucoBoard`` of ``spec``."""
-    import cv2
-
-    from i2ris_calib.tracking.detect import aruco_dictionary
 
     return cv2.aruco.CharucoBoard(
         (spec.squares_x, spec.squares_y),
@@ -54,7 +53,6 @@ def charuco_board(spec: CharucoSpec):
 
 def board_points(board, gray: np.ndarray, min_corners: int = 6):
     """Matched (object (k, 3), image (k, 2)) ChArUco corners of one view, or None."""
-    import cv2
 
     det = cv2.aruco.CharucoDetector(board)
     cc, ids, _, _ = det.detectBoard(gray)
@@ -71,7 +69,6 @@ def calibrate_from_views(
 
     Raises CalibError when fewer than 3 views show enough corners.
     """
-    import cv2
 
     board = charuco_board(spec)
     objs, imgs = [], []

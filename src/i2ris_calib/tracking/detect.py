@@ -8,12 +8,15 @@ outermost pixels and APRILTAG is about +0.5 px off (docs/tracking.md).
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.tracking.config import TrackingConfig
+from i2ris_calib.tracking.edges import refine_corners_by_edges
 
 _REFINE = {"edges": "CORNER_REFINE_SUBPIX", "none": "CORNER_REFINE_NONE", "subpix": "CORNER_REFINE_SUBPIX",
            "contour": "CORNER_REFINE_CONTOUR", "apriltag": "CORNER_REFINE_APRILTAG"}  # fmt: skip
@@ -21,11 +24,9 @@ _REFINE = {"edges": "CORNER_REFINE_SUBPIX", "none": "CORNER_REFINE_NONE", "subpi
 
 def aruco_dictionary(name: str):
     """``cv2.aruco.Dictionary`` for a name such as ``DICT_4X4_50``; CalibError if unknown."""
-    import cv2
 
     if not name.startswith("DICT_") or not hasattr(cv2.aruco, name):
         valid = [n for n in dir(cv2.aruco) if n.startswith("DICT_")]
-        import difflib
 
         close = difflib.get_close_matches(name, valid, n=1)
         hint = f"; did you mean '{close[0]}'?" if close else " (e.g. DICT_4X4_50)"
@@ -56,7 +57,6 @@ class MarkerDetector:
     """
 
     def __init__(self, dictionary: str, marker_id: int, cfg: TrackingConfig):
-        import cv2
 
         self.marker_id = int(marker_id)
         self.cfg = cfg
@@ -79,8 +79,6 @@ class MarkerDetector:
         """
         det = self._locate(gray)
         if det.corners is not None and self.cfg.corner_refinement == "edges":
-            from i2ris_calib.tracking.edges import refine_corners_by_edges
-
             ref = refine_corners_by_edges(gray, det.corners, self.cfg.edge_half_width_px)
             if ref is not None:
                 det.corners, det.edge_refined = ref, True

@@ -32,6 +32,9 @@ from i2ris_calib.tracking.geometry import (
     mean_rotation,
     project,
     rodrigues,
+    rot_x,
+    rot_y,
+    rot_z,
     rotation_angle_deg,
 )
 
@@ -400,7 +403,6 @@ def _twist_free_residuals(g, L, M0, R_ba0, a: ViewData, b: ViewData) -> np.ndarr
     ``g = (e, w_ba)``: reference roll (rad) and camera-rotation update (rotation vector);
     ``L`` (n, 8): yaw, pitch (rad), cube centre in camera a and b (mm).
     """
-    from i2ris_calib.tracking.geometry import rot_x
 
     M = M0 @ rot_x(-g[0])
     Q = M @ _rz_ry(L[:, 0], L[:, 1])
@@ -540,7 +542,6 @@ def fit_reference(res: FusionResult, a: ViewData, b: ViewData, window: np.ndarra
     ValueError
         No measured frame in the reference window.
     """
-    from i2ris_calib.tracking.geometry import rot_x, rot_y, rot_z
 
     meas = res.status == MEASURED
     M0 = reference_rotation(res.Q, window & meas)

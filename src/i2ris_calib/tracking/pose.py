@@ -13,9 +13,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
-from i2ris_calib.tracking.geometry import FACE_NORMALS, FACE_ROTATIONS, marker_corners_mm
+from i2ris_calib.tracking.geometry import (
+    FACE_NORMALS,
+    FACE_ROTATIONS,
+    camera_matrix,
+    marker_corners_mm,
+)
 
 
 @dataclass(frozen=True)
@@ -33,7 +39,6 @@ class CameraIntrinsics:
         c = np.asarray(corners, dtype=np.float64)
         if self.dist.size == 0 or not np.any(self.dist):
             return c
-        import cv2
 
         flat = c.reshape(-1, 1, 2)
         ok = np.isfinite(flat).all(axis=2).ravel()
@@ -45,7 +50,6 @@ class CameraIntrinsics:
 
 def weak_perspective_intrinsics(width_px: int, height_px: int, focal_px: float) -> CameraIntrinsics:
     """The weak-perspective camera as a very long pinhole centred on the image."""
-    from i2ris_calib.tracking.geometry import camera_matrix
 
     return CameraIntrinsics(camera_matrix(focal_px, width_px, height_px), np.zeros(0), width_px, height_px,
                             "weak_perspective")  # fmt: skip
@@ -70,7 +74,6 @@ def ippe_candidates(corners: np.ndarray, K: np.ndarray, marker_size_mm: float):
     err : ndarray (2,)
         RMS reprojection errors (px).
     """
-    import cv2
 
     obj = marker_corners_mm(marker_size_mm)
     img = np.ascontiguousarray(corners, dtype=np.float64).reshape(4, 1, 2)

@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from i2ris_calib.errors import CalibError
 
@@ -142,21 +145,14 @@ def atomic_dir(path: str | Path) -> Iterator[Path]:
 
 def _json_safe(obj: Any) -> Any:
     """Convert numpy scalars/arrays and non-finite floats for strict JSON."""
-    import math
-
-    try:
-        import numpy as np
-    except ImportError:  # pragma: no cover
-        np = None
     if isinstance(obj, dict):
         return {str(k): _json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [_json_safe(v) for v in obj]
-    if np is not None:
-        if isinstance(obj, np.ndarray):
-            return [_json_safe(v) for v in obj.tolist()]
-        if isinstance(obj, np.generic):
-            obj = obj.item()
+    if isinstance(obj, np.ndarray):
+        return [_json_safe(v) for v in obj.tolist()]
+    if isinstance(obj, np.generic):
+        obj = obj.item()
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, Path):

@@ -10,9 +10,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.io.atomic import atomic_path
+from i2ris_calib.io.video import iter_frames
+from i2ris_calib.tracking.calibrate import CharucoSpec, calibrate_from_views
 
 
 def _node_matrix(node, rows: int, cols: int | None = None) -> np.ndarray:
@@ -39,8 +43,6 @@ def read_camera_yaml(path: str | Path) -> tuple[np.ndarray, np.ndarray, int, int
     Accepts OpenCV FileStorage YAML/XML and ROS camera_info YAML; CalibError with
     the file name when unreadable or incomplete.
     """
-    import cv2
-
     p = Path(path)
     if not p.is_file():
         raise CalibError(f"camera calibration file not found: {p}")
@@ -86,10 +88,6 @@ def write_camera_yaml(
     path: Path, K: np.ndarray, dist: np.ndarray, width: int, height: int, extra: dict | None = None
 ) -> None:
     """Intrinsics as OpenCV FileStorage YAML (camera_matrix, distortion_coefficients)."""
-    import cv2
-
-    from i2ris_calib.io.atomic import atomic_path
-
     with atomic_path(path) as tmp:
         fs = cv2.FileStorage(str(tmp), cv2.FILE_STORAGE_WRITE)
         fs.write("image_width", int(width))
@@ -110,8 +108,6 @@ def calibrate_camera_files(inputs: list[Path], out: Path, config) -> Path:
 
     A single YAML input (OpenCV or ROS ``camera_info``) is converted instead.
     """
-    from i2ris_calib.tracking.calibrate import CharucoSpec, calibrate_from_views
-
     cfg = config.track
     inputs = [Path(p) for p in inputs]
     for p in inputs:
@@ -134,10 +130,6 @@ def calibrate_camera_files(inputs: list[Path], out: Path, config) -> Path:
 
 def _calibration_views(inputs: list[Path], every: int):
     """Grey frames from images and (every n-th frame of) videos."""
-    import cv2
-
-    from i2ris_calib.io.video import iter_frames
-
     for p in inputs:
         if p.suffix.lower() in IMAGE_SUFFIXES:
             img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)

@@ -12,7 +12,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.compensation import STATUS_NAMES, compensate
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.io.atomic import atomic_path, write_json
+from i2ris_calib.io.fit import read_fit_json, read_model_file
+from i2ris_calib.io.provenance import provenance
 
 SCHEMA = "i2ris-calib.compensate/1"
 KINDS = ("egpi", "egpi_c", "gpi", "diagnosed")
@@ -102,8 +107,6 @@ def best_kind(record: dict) -> str:
 
 def load_model(doc: dict, record: dict, kind: str, path: Path, model_file: Path | None = None):
     """The fitted model ``kind`` of a fit.json dataset record, rebuilt."""
-    from i2ris_calib.fitting.pipeline import model_from_params
-
     models = record.get("models", {})
     if kind not in models:
         raise CalibError(
@@ -117,7 +120,6 @@ def load_model(doc: dict, record: dict, kind: str, path: Path, model_file: Path 
                 "--model diagnosed needs --model-file final_model.json (the diagnosed "
                 "model's structure; fit.json holds its refitted values)"
             )
-        from i2ris_calib.io.fit import read_model_file
 
         base = read_model_file(model_file)
         names = [p.name for p in base.parameters]
@@ -168,11 +170,6 @@ def compensate_files(
     model_file : path, optional
         final_model.json (``--model diagnosed``).
     """
-    from i2ris_calib.compensation import STATUS_NAMES, compensate
-    from i2ris_calib.io.atomic import atomic_path, write_json
-    from i2ris_calib.io.fit import read_fit_json
-    from i2ris_calib.io.provenance import provenance
-
     if model is not None and model not in KINDS:
         raise CalibError(f"--model must be one of {', '.join(KINDS)}, got '{model}'")
     if not fit_paths:

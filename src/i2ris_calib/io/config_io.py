@@ -24,6 +24,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+from i2ris_calib.config import PipelineConfig
 from i2ris_calib.errors import CalibError
 
 T = TypeVar("T")
@@ -151,8 +152,6 @@ def dataclass_to_dict(obj: Any) -> Any:
 
 def load_config(path: str | Path | None = None):
     """Load the pipeline TOML (or defaults when ``path`` is None) as PipelineConfig."""
-    from i2ris_calib.config import PipelineConfig
-
     if path is None:
         return PipelineConfig()
     return dataclass_from_mapping(PipelineConfig, load_toml(path), where=str(path))

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from rosbags.highlevel import AnyReader, AnyReaderError
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.session import EncoderLogSpec
@@ -103,8 +104,6 @@ def read_encoder_bag(path: Path, spec: EncoderLogSpec, max_gap_s: float) -> Enco
     e.g. ``sensor_msgs/JointState.position``); the time is the bag's receive time
     (``time_source = "log"``) or ``msg.header.stamp`` (``"header"``).
     """
-    from rosbags.highlevel import AnyReader, AnyReaderError
-
     topics = {"enc_yaw": spec.yaw_topic, "enc_pitch": spec.pitch_topic}
     if spec.sync_topic:
         topics["sync_flash"] = spec.sync_topic

@@ -5,39 +5,34 @@ File formats are documented in docs/fit.md (schema ``i2ris-calib.fit/1``).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
+from rich.console import Console
+from rich.progress import Progress
+from rich.table import Table
 
 from i2ris_calib.data.dataset import Dataset
+from i2ris_calib.diagnosis.effects import base_of
+from i2ris_calib.diagnosis.serialize import model_from_dict
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.fit import fit_model
+from i2ris_calib.fitting.pipeline import MODEL_KINDS, fit_dataset, fit_warnings
+from i2ris_calib.io.atomic import atomic_path, check_output_dir, write_json
+from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.synced import load_datasets
 
 SCHEMA = "i2ris-calib.fit/1"
 PRED_COLUMNS = ("dataset", "time_s", "v", "theta_deg", "gpi_deg", "egpi_deg", "egpi_c_deg", "split")
 
 
-def read_synced(path: str | Path, axis: str) -> pd.DataFrame:
-    """Read and validate a synced CSV (:func:`i2ris_calib.io.synced.read_synced`)."""
-    from i2ris_calib.io.synced import read_synced as _read
-
-    return _read(path, axis)
-
-
-def load_datasets(paths: Sequence[str | Path], axis: str, fit_config) -> list[Dataset]:
-    """All motion-direction datasets of ``axis`` (:func:`i2ris_calib.io.synced.load_datasets`)."""
-    from i2ris_calib.io.synced import load_datasets as _load
-
-    return _load(paths, axis, fit_config)
-
-
 def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str, Any]:
     """The fit.json record M of one fitted model (docs/fit.md); ``v``: the dataset's
     input, for the warnings (:func:`i2ris_calib.fitting.pipeline.fit_warnings`)."""
-    from i2ris_calib.fitting.pipeline import fit_warnings
-
     rec = {
         "params": res.params,
         "stderr": res.stderr,
@@ -53,26 +48,17 @@ def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str
         "nfev": res.nfev,
         "n_samples": res.n_samples,
         "n_holdout": res.holdout_metrics.n_samples,
-        "n_operators": int(getattr(base_model(model), "n", 0)),
+        "n_operators": int(getattr(base_of(model), "n", 0)),
         "v_f": res.params.get("v_f"),
         "warnings": list(fit_warnings(res, np.zeros(0) if v is None else v)),
     }
-    if hasattr(base_model(model), "deadband_counts"):
-        rec["deadband_counts"] = float(base_model(model).deadband_counts)
+    if hasattr(base_of(model), "deadband_counts"):
+        rec["deadband_counts"] = float(base_of(model).deadband_counts)
     return rec
-
-
-def base_model(model):
-    """The GPI/EGPI model inside a model extended by diagnosed effects (itself otherwise)."""
-    from i2ris_calib.diagnosis.effects import base_of
-
-    return base_of(model)
 
 
 def fit_saved(model, data: Dataset, fit_config):
     """Refit a saved (diagnosed) model to one dataset, starting from its saved values."""
-    from i2ris_calib.fitting.fit import fit_model
-
     return fit_model(
         model,
         data.signals,
@@ -90,8 +76,6 @@ def fit_datasets(
     ``saved`` is an optional model from ``final_model.json`` (diagnose), fitted as kind
     ``"diagnosed"`` when that kind is listed.
     """
-    from i2ris_calib.fitting.pipeline import MODEL_KINDS, fit_dataset
-
     out = []
     for d in datasets:
         if np.ptp(d.v) == 0:
@@ -178,14 +162,13 @@ def results_table(fitted, kinds: Sequence[str], axis: str):
     """A rich Table shaped like the paper's Tables 1-2: one row per model (fitted
     cycles and held-out cycles), RMSE / NRMSE / MAE (= max |error|) per dataset. A
     ``*`` marks each cell group whose fit did not converge (per model and dataset)."""
-    from rich.table import Table
-
     absd = [d.name for d, _ in fitted if d.abs_fitted]
     table = Table(
         title=f"GPI and EGPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %",
         caption="; ".join(
             [f"{', '.join(absd)}: fitted on |counts| -> |deg|"] * bool(absd)
-            + ["* = not converged"] * any(not r.converged for _, res in fitted for r in res.values())
+            + ["* = not converged"]
+            * any(not r.converged for _, res in fitted for r in res.values())
         )
         or None,
     )
@@ -221,13 +204,6 @@ def fit_files(
     ``model_file`` is a ``final_model.json`` written by ``diagnose``: that model is
     refitted too, as model ``"diagnosed"`` in fit.json. Returns the fit.json document.
     """
-    from rich.console import Console
-    from rich.progress import Progress
-
-    from i2ris_calib.fitting.pipeline import MODEL_KINDS
-    from i2ris_calib.io.atomic import atomic_path, check_output_dir, write_json
-    from i2ris_calib.io.provenance import provenance
-
     if model not in (*MODEL_KINDS, "all"):
         raise CalibError(f"--model must be {', '.join(MODEL_KINDS)} or all, got '{model}'")
     if not paths:
@@ -280,10 +256,6 @@ def fit_files(
 
 def read_model_file(path: str | Path):
     """The model saved in a ``final_model.json`` (docs/diagnosis.md); CalibError if unreadable."""
-    import json
-
-    from i2ris_calib.diagnosis.serialize import model_from_dict
-
     p = Path(path)
     try:
         obj = json.loads(p.read_text(encoding="utf-8"))
@@ -299,8 +271,6 @@ def read_model_file(path: str | Path):
 
 def read_fit_json(path: str | Path) -> dict[str, Any]:
     """Load a fit.json written by :func:`fit_files`; CalibError when unreadable."""
-    import json
-
     p = Path(path)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))

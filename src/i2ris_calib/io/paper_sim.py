@@ -11,17 +11,23 @@ from __future__ import annotations
 from pathlib import Path
 
 import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from i2ris_calib.hysteresis.paper import (
+    PAPER_SIM_RATE_HZ,
+    PAPER_SIM_VALUES,
+    dead_zones,
+    run_paper_sim,
+)
+from i2ris_calib.io.atomic import atomic_path, write_csv, write_json
+from i2ris_calib.io.provenance import provenance
 
 
 def _figure(path: Path, v, y, title: str, ylabel: str, flags=None, zones=()) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from i2ris_calib.io.atomic import atomic_path
-
-    fig, ax = plt.subplots(figsize=(6.0, 4.5), dpi=120)
+    fig = Figure(figsize=(6.0, 4.5), dpi=120)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
     ax.plot(v, y, lw=0.8, color="tab:blue")
     if flags:
         for name, val, style in flags:
@@ -47,20 +53,10 @@ def _figure(path: Path, v, y, title: str, ylabel: str, flags=None, zones=()) -> 
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp)
-    plt.close(fig)
 
 
 def write_paper_sim(out: str | Path) -> dict:
     """Command body of ``paper-sim``: simulate, write CSV, figures and JSON into ``out``."""
-    from i2ris_calib.hysteresis.paper import (
-        PAPER_SIM_RATE_HZ,
-        PAPER_SIM_VALUES,
-        dead_zones,
-        run_paper_sim,
-    )
-    from i2ris_calib.io.atomic import write_csv, write_json
-    from i2ris_calib.io.provenance import provenance
-
     out = Path(out)
     sim = run_paper_sim()
     write_csv(

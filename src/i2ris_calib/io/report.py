@@ -15,11 +15,19 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+from rich.console import Console
+from rich.progress import Progress
 
+from i2ris_calib import __version__
+from i2ris_calib.data.dataset import AXES
 from i2ris_calib.errors import CalibError
+from i2ris_calib.io.atomic import atomic_dir
+from i2ris_calib.io.config_io import load_config
+from i2ris_calib.io.provenance import provenance
+from i2ris_calib.report.build import build_document, section_count
 from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
+from i2ris_calib.report.render import render_html, render_markdown
 
-AXES = ("yaw", "pitch")
 REPORT_FILES = {"report.html", "report.md", "figures", ".stamp.json"}  # stamp: see io/run.py
 FIGURE_DIR = "figures"
 
@@ -338,8 +346,6 @@ def _check_is_run_folder(root: Path) -> None:
 
 def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, Any]:
     """Provenance block of the report, input paths relative to the run folder."""
-    from i2ris_calib.io.provenance import provenance
-
     prov = provenance(inputs, config)
     base = root.resolve()
     prov["inputs"] = {
@@ -351,11 +357,6 @@ def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, 
 
 def _build_with_progress(run: RunData, report_config: Any, prov: dict[str, Any]):
     """build_document with a transient rich progress bar on stderr (one step per section)."""
-    from rich.console import Console
-    from rich.progress import Progress
-
-    from i2ris_calib.report.build import build_document, section_count
-
     with Progress(console=Console(stderr=True), transient=True) as bar:
         task = bar.add_task("report", total=section_count(run))
         started = []
@@ -414,11 +415,6 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     Path
         The written ``report.html``.
     """
-    from i2ris_calib import __version__
-    from i2ris_calib.io.atomic import atomic_dir
-    from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.report.render import render_html, render_markdown
-
     root = Path(run_dir)
     cfg = config if config is not None else load_config(None)
     out_dir = Path(out) if out is not None else root / "report"

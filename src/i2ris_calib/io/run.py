@@ -23,15 +23,28 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
+from rich.console import Console
+
 from i2ris_calib import __version__
 from i2ris_calib.config import PipelineConfig
+from i2ris_calib.data.dataset import AXES
+from i2ris_calib.diagnosis.workflow import check_dataset
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.atomic import write_json
+from i2ris_calib.io.atomic import atomic_dir, write_bytes, write_json
+from i2ris_calib.io.compensate import compensate_files
 from i2ris_calib.io.config_io import dataclass_to_dict
+from i2ris_calib.io.diagnose import diagnose_dataset
+from i2ris_calib.io.encoders import encoder_log_path
+from i2ris_calib.io.fit import fit_files
 from i2ris_calib.io.provenance import file_sha256
+from i2ris_calib.io.report import write_report
+from i2ris_calib.io.session import load_session, session_file
+from i2ris_calib.io.sync import sync_session
+from i2ris_calib.io.synced import load_datasets
+from i2ris_calib.io.track import track_session
 
 STAMP = ".stamp.json"
-AXES = ("yaw", "pitch")
 
 
 @dataclass(frozen=True)
@@ -113,8 +126,6 @@ def session_inputs(session: Path) -> tuple[Path, ...]:
 
 def axis_moves(synced_csv: Path, axis: str, min_span_counts: float = 1.0) -> bool:
     """True when the synced data contains motion of ``axis`` (its encoder changes)."""
-    import pandas as pd
-
     col = f"enc_{axis}"
     enc = pd.read_csv(synced_csv, usecols=lambda c: c == col)
     return col in enc and float(enc[col].max() - enc[col].min()) >= min_span_counts
@@ -122,11 +133,6 @@ def axis_moves(synced_csv: Path, axis: str, min_span_counts: float = 1.0) -> boo
 
 def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
     """The ordered stages for one session writing under ``run_dir``."""
-    from i2ris_calib.io.fit import fit_files
-    from i2ris_calib.io.report import write_report
-    from i2ris_calib.io.sync import sync_session
-    from i2ris_calib.io.track import track_session
-
     track_dir, sync_dir = run_dir / "track", run_dir / "sync"
     angles, synced = track_dir / "angles.csv", sync_dir / "synced.csv"
     raw = session_inputs(session)
@@ -202,11 +208,6 @@ def diagnose_direction(
     :func:`~i2ris_calib.diagnosis.workflow.check_dataset`) do not stop the run:
     ``out/skipped.json`` records why and the report shows the other diagnoses.
     """
-    from i2ris_calib.diagnosis.workflow import check_dataset
-    from i2ris_calib.io.atomic import atomic_dir
-    from i2ris_calib.io.diagnose import diagnose_dataset
-    from i2ris_calib.io.synced import load_datasets
-
     try:
         if not axis_moves(synced, axis):
             raise CalibError(f"{axis} does not move in {synced}")
@@ -240,10 +241,6 @@ def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineC
     Datasets: ``[compensate] datasets``, else per axis of the target the direction of
     its median angle (``+`` when >= 0).
     """
-    import pandas as pd
-
-    from i2ris_calib.io.compensate import compensate_files
-
     cc = config.compensate
     datasets = list(cc.datasets)
     if not datasets:
@@ -269,7 +266,6 @@ def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineC
         model=cc.model or None,
         max_counts_per_s=cc.max_counts_per_s or None,
     )
-    from i2ris_calib.io.atomic import write_bytes
 
     write_bytes(out_dir / "target.csv", target.read_bytes())  # the target as used, for the report
 
@@ -340,9 +336,6 @@ def checked_session_name(session: Path) -> str:
     Checking up front means a session missing its encoder log fails before the
     (long) tracking stage rather than after it.
     """
-    from i2ris_calib.io.encoders import encoder_log_path
-    from i2ris_calib.io.session import load_session, session_file
-
     spec = load_session(session)
     for cam_name, cam in spec.cameras.items():
         session_file(session, cam.video, f"video of camera '{cam_name}'")
@@ -371,8 +364,6 @@ def run_sessions(
     jobs : int
         Parallel sessions; 0 = number of cores.
     """
-    from rich.console import Console
-
     console = Console(stderr=True)
     names = []
     for s in sessions:

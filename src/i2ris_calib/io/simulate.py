@@ -9,19 +9,24 @@ The two videos render in two processes; the folder appears atomically when done.
 from __future__ import annotations
 
 import multiprocessing as mp
+import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pandas as pd
+from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json, write_text
 from i2ris_calib.io.calibrate import write_camera_yaml
 from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.video import open_writer
 from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.simulation import trajectory as tj
 from i2ris_calib.simulation.config import SimulationConfig
+from i2ris_calib.simulation.render import FrameRenderer
 from i2ris_calib.simulation.scene import CameraModel, make_cameras, make_cube, true_marker_corners
 from i2ris_calib.simulation.truth import Truth, session_truth, truth_at
 from i2ris_calib.tracking.geometry import tip_rotation
@@ -70,8 +75,6 @@ def build_session(
     folder: Path, cfg: SimulationConfig, name: str = "session", progress: bool = False
 ) -> dict:
     """Write all session files into the existing ``folder``; returns the truth summary."""
-    import cv2
-
     ss = np.random.SeedSequence(cfg.seed)
     s_cam, s_time, s_render = ss.spawn(3)
     cams = make_cameras(cfg, np.random.default_rng(s_cam))
@@ -128,8 +131,6 @@ def build_session(
 
 
 def _dictionary_id(name: str) -> int:
-    import cv2
-
     if not hasattr(cv2.aruco, name):
         raise CalibError(f"unknown ArUco dictionary '{name}' (use e.g. DICT_4X4_50)")
     return getattr(cv2.aruco, name)
@@ -179,9 +180,6 @@ def _init_worker(counter) -> None:
 
 def _render_camera(plan: CameraPlan, cube, cfg: SimulationConfig) -> int:
     """Render and encode one camera's video (runs in a worker process)."""
-    from i2ris_calib.io.video import open_writer
-    from i2ris_calib.simulation.render import FrameRenderer
-
     renderer = FrameRenderer(cfg, plan.cam, cube, plan.seed)
     writer = open_writer(plan.path, cfg.fps, (cfg.width_px, cfg.height_px))
     try:
@@ -200,10 +198,6 @@ def _render_camera(plan: CameraPlan, cube, cfg: SimulationConfig) -> int:
 
 def _render_all(plans: list[CameraPlan], cube, cfg: SimulationConfig, progress: bool) -> None:
     """Render the cameras in parallel processes with a progress bar."""
-    import time
-
-    from rich.progress import Progress
-
     ctx = mp.get_context("spawn")  # fork can deadlock on inherited OpenCV threads
     counter = ctx.Value("l", 0)
     total = sum(len(p.rotations) for p in plans)

@@ -7,6 +7,7 @@ diagnosed on a dataset is refitted and plotted on exactly the same samples.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ import pandas as pd
 
 from i2ris_calib.data.dataset import AXES, Dataset, direction_datasets, input_bands, other_axis
 from i2ris_calib.errors import CalibError
+from i2ris_calib.sync.log import find_glitches, speed_limit
 
 
 def read_synced(path: str | Path, axis: str) -> pd.DataFrame:
@@ -87,8 +89,6 @@ def check_encoder_jumps(t: np.ndarray, enc: np.ndarray, col: str, p: Path) -> No
     derived from the file itself (``sync.log.find_glitches``, ``sync.log.speed_limit``).
     A step that stays is left alone (synthetic inputs and joined recordings have them).
     """
-    from i2ris_calib.sync.log import find_glitches, speed_limit
-
     limit = speed_limit(t, enc)
     bad = find_glitches(t, enc, limit)
     if not bad.any():
@@ -152,8 +152,6 @@ def load_datasets(
 ) -> list[Dataset]:
     """All motion-direction datasets of ``axis`` in the given synced CSVs, uniquely
     named (``"yaw+ (file stem)"`` when two files give the same name)."""
-    from dataclasses import replace
-
     found: list[Dataset] = []
     for path in paths:
         found += datasets_from_frame(

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
 from i2ris_calib.report import figures, tables
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
@@ -316,14 +317,7 @@ def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
 
 
 def parameter_info() -> dict[str, tuple[str, str]]:
-    """Parameter name -> (unit, meaning) from the GPI and I2RIS-EGPI model declarations.
-
-    Empty when the hysteresis package cannot be imported (the table then has no units).
-    """
-    try:
-        from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
-    except ImportError:
-        return {}
+    """Parameter name -> (unit, meaning) from the GPI and I2RIS-EGPI model declarations."""
     info: dict[str, tuple[str, str]] = {}
     for model in (i2ris_egpi_model(), gpi_model()):
         for p in model.parameters:

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 MEASURED_COLOR = "0.45"
 GPI_COLOR = "#D55E00"  # vermillion (Okabe-Ito, colour-blind safe)
@@ -27,9 +29,6 @@ STATUS_COLORS = {"not_found": "#E69F00", "ambiguous": "#CC79A7", "rejected": "#D
 
 def _new_figure(width_in: float, height_in: float):
     """A matplotlib Figure on an Agg canvas (no global pyplot state)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=(width_in, height_in), layout="constrained")
     FigureCanvasAgg(fig)
     return fig

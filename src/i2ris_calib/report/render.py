@@ -17,6 +17,8 @@ import html
 import re
 from string import Template
 
+from markdown_it import MarkdownIt
+
 from i2ris_calib.report.document import (
     Block,
     Code,
@@ -160,8 +162,6 @@ def fragment_html(frag: MarkdownFragment) -> str:
 
     Raw HTML in the fragment is escaped, not passed through.
     """
-    from markdown_it import MarkdownIt
-
     md = MarkdownIt("commonmark", {"html": False}).enable("table")
     tokens = md.parse(frag.text)
     levels = [int(t.tag[1]) for t in tokens if t.type == "heading_open"]

@@ -9,6 +9,7 @@ flash brightens the whole frame; additive Gaussian sensor noise; rounding to uin
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from i2ris_calib.simulation.config import SimulationConfig
@@ -30,8 +31,6 @@ def illumination_field(cfg: SimulationConfig) -> np.ndarray:
 
 def background(cfg: SimulationConfig, rng: np.random.Generator) -> np.ndarray:
     """Smooth textured background (h, w) float32, grey levels before illumination."""
-    import cv2
-
     h, w = cfg.height_px, cfg.width_px
     small = rng.normal(0.0, 1.0, (max(h // 32, 2), max(w // 32, 2))).astype(np.float32)
     tex = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
@@ -93,8 +92,6 @@ class FrameRenderer:
         occluded : bool
             Cover this camera's marker with a dark blob (e.g. an instrument).
         """
-        import cv2
-
         cfg = self.cfg
         frame = self.base.copy()
         S, C, (y0, y1, x0, x1), depth = self.scene(rotations)
@@ -122,8 +119,6 @@ class FrameRenderer:
         return np.rint(frame).astype(np.uint8)
 
     def _occlude(self, frame: np.ndarray, roi: tuple) -> None:
-        import cv2
-
         y0, y1, x0, x1 = roi
         cx, cy = (x0 + x1) // 2, (y0 + y1) // 2
         r = int(0.45 * max(y1 - y0, x1 - x0))

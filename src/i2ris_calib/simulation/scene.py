@@ -15,8 +15,11 @@ import numpy as np
 
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.tracking.geometry import (
+    FACE_NORMALS,
+    FACE_ROTATIONS,
     NOMINAL_CAMERA_ROTATIONS,
     camera_matrix,
+    face_corner_points_tip,
     rodrigues,
 )
 
@@ -106,8 +109,6 @@ class CubeModel:
 
 def make_cube(cfg: SimulationConfig, marker_bits: dict) -> CubeModel:
     """Cube model with the two markers (``marker_bits`` view -> bit image)."""
-    from i2ris_calib.tracking.geometry import FACE_NORMALS, FACE_ROTATIONS
-
     h = cfg.cube_size_mm / 2.0
     faces, normals = {}, {}
     for name, (n, u, v) in _FACES.items():
@@ -182,8 +183,6 @@ def true_marker_corners(
     cam: CameraModel, cube_size_mm: float, marker_size_mm: float, pivot_mm: float, R_bt: np.ndarray
 ) -> np.ndarray:
     """Pixel coordinates (4, 2) of this camera's marker corners (IPPE order)."""
-    from i2ris_calib.tracking.geometry import face_corner_points_tip
-
     X = face_corner_points_tip(cam.view, marker_size_mm, cube_size_mm)
     Xb = X @ R_bt.T + R_bt @ np.array([pivot_mm, 0.0, 0.0])
     return _to_pixels(cam.K, Xb @ cam.R_cb.T + cam.t_cb)

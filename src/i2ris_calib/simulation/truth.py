@@ -41,6 +41,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from i2ris_calib.data.dataset import direction_input, direction_of_samples, input_bands
+from i2ris_calib.diagnosis.effects import build_model, model_values
+from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.hysteresis.models import i2ris_egpi_model
+from i2ris_calib.hysteresis.presets import paper_like_params
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.simulation.trajectory import (
     Block,
@@ -81,9 +86,6 @@ class Truth:
 
 def dataset_model(cfg: SimulationConfig, block: Block):
     """The truth model of one dataset (EGPI wrapped by the hidden effects)."""
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.hysteresis.presets import paper_like_params
-
     amp = cfg.amplitude_counts[0 if block.axis == "yaw" else 1]
     values = dict(paper_like_params(block.name, v_max_counts=amp))
     values.update(cfg.models.get(block.name, {}))
@@ -95,7 +97,6 @@ def apply_hidden_effects(model, effects: dict):
     """Wrap ``model`` with the configured hidden effects (diagnosis effect catalogue)."""
     if not effects:
         return model
-    from i2ris_calib.diagnosis.effects import build_model
 
     return build_model(model, effects)
 
@@ -110,9 +111,6 @@ def session_truth(cfg: SimulationConfig, t_s: np.ndarray | None = None) -> Truth
         Motion times (controller s); default a ``TRUTH_RATE_HZ`` grid over the motion
         plus one second either side.
     """
-    from i2ris_calib.diagnosis.effects import model_values
-    from i2ris_calib.hysteresis.model import Signals
-
     blocks = session_blocks(cfg)
     if t_s is None:
         t_s = np.arange(-2.0, motion_duration_s(cfg) + 2.0, 1.0 / TRUTH_RATE_HZ)
@@ -186,8 +184,6 @@ def zero_start_shift(model, values: np.ndarray) -> float:
 
 
 def _signals(v, t_s=None, v_other=None, theta_other=None):
-    from i2ris_calib.hysteresis.model import Signals
-
     return Signals(v=np.asarray(v, dtype=float), t_s=t_s, v_other=v_other,
                    theta_other_deg=theta_other)  # fmt: skip
 
@@ -197,10 +193,6 @@ def direction_model(cfg: SimulationConfig, name: str, deadband: float):
     EGPI with ``paper_like_params(name)`` scaled to the axis's amplitude, the
     ``models`` overrides, the given ``v'`` dead band (counts), the zero-start shift
     (``zero_start``), wrapped by the hidden effects. Returns ``(model, values)``."""
-    from i2ris_calib.diagnosis.effects import model_values
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.hysteresis.presets import paper_like_params
-
     amp = cfg.amplitude_counts[0 if name.startswith("yaw") else 1]
     values = dict(paper_like_params(name, v_max_counts=amp))
     values.update(cfg.models.get(name, {}))
@@ -242,8 +234,6 @@ def whole_history_angle(
         over every sample. An input that never leaves the zero band is a ``"+"``
         sample.
     """
-    from i2ris_calib.data.dataset import direction_input, direction_of_samples
-
     enc = np.asarray(enc, dtype=float)
     d = direction_of_samples(enc, zero_band)
     out = np.zeros(enc.size)
@@ -266,8 +256,6 @@ def _whole_history_angles(
 ) -> tuple[dict, dict]:
     """Angles {axis: (n,)} and parameters {name: dict} on samples ``t_s`` (s) with
     inputs ``enc`` {axis: (n,)}; effects see the other axis's effect-free angle."""
-    from i2ris_calib.diagnosis.effects import model_values
-
     models = {a: _axis_models(cfg, a, bands) for a in ("yaw", "pitch")}
     plain = {}
     if cfg.effects:  # effect-free angles first: what a coupling effect reads
@@ -294,8 +282,6 @@ def _whole_history_angles(
 
 
 def _whole_history_truth(cfg: SimulationConfig, t_s: np.ndarray, blocks: list[Block]) -> Truth:
-    from i2ris_calib.data.dataset import input_bands
-
     ey, ep = session_inputs(cfg, t_s)
     enc = {"yaw": ey, "pitch": ep}
     bands = {}

@@ -20,6 +20,7 @@ from i2ris_calib.diagnosis.effects import (
 from i2ris_calib.diagnosis.synthetic import excitation
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model, Parameter, Signals
+from i2ris_calib.hysteresis.models import gpi_model
 
 
 def _signals(seed: int = 0) -> Signals:
@@ -163,6 +164,57 @@ def test_dead_zone_is_the_tao_kokotovic_dead_band(linear):
     expect = 0.01 * np.sign(v) * np.maximum(np.abs(v) - 300.0, 0.0)
     np.testing.assert_allclose(y, expect)
     assert np.all(y[np.abs(v) <= 300.0] == 0.0)
+
+
+def _ramps(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ramps between random levels at random speeds with holds (30 Hz, whole counts)."""
+    rng = np.random.default_rng(seed)
+    kt, kv = [0.0], [0.0]
+    for i in range(16):
+        kt += [kt[-1] + rng.uniform(1.0, 8.0), 0.0]
+        kv += [rng.uniform(0.3, 1.0) * 6000.0 if i % 2 == 0 else rng.uniform(0.0, 0.4) * 6000.0]
+        kt[-1] = kt[-2] + rng.uniform(0.3, 2.0)
+        kv.append(kv[-1])
+    t = np.arange(0.0, kt[-1], 1 / 30)
+    return t, np.round(np.interp(t, kt, kv))
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_rate_dependent_play_equals_the_play_of_a_rate_dependent_play(seed):
+    """Al Janaideh-Krejci thresholds ``r + beta |dv/dt|``: a play of the time-varying
+    threshold ``r + c(t)`` equals a play of ``r`` after a play of ``c(t)`` (what the
+    catalogue's ``rate_dependent_thresholds`` applies ahead of the base model's
+    operators), to rounding, on ramps of varied speed with holds."""
+    t, v = _ramps(seed)
+    c = 0.4 * np.abs(np.gradient(v, t))
+    for r in (0.0, 50.0, 400.0):
+        direct = play_varying(v, r + c)
+        composed = play_varying(play_varying(v, c), np.full(v.shape, r))
+        np.testing.assert_allclose(composed, direct, atol=1e-9)
+        assert np.max(np.abs(direct - play_varying(v, np.full(v.shape, r)))) > 100.0
+
+
+@pytest.mark.parametrize(
+    ("a3", "a4", "absorbed"), [(7e-3, 0.3, True), (8e-3, 0.3, True), (6e-3, 0.3, False)]
+)
+def test_backlash_on_a_gpi_input_is_a_gpi_with_moved_offsets_unless_bands_invert(a3, a4, absorbed):
+    """Why a backlash can be *not excluded*: a play of half-width h on the input of a
+    GPI with linear envelopes equals the GPI with ``a2 - a1 h`` and ``a4 + a3 h``
+    exactly while every operator band is non-inverted (``gamma_l(v) - r <=
+    gamma_r(v) + r``; here a3 >= a1, a4 > a2). Where the r = 0 band inverts (a3 < a1
+    at high input) the GPI jumps at a reversal and the backlash holds first: they
+    differ."""
+    t, v = _ramps(4)
+    h = 150.0
+    g = gpi_model(a1=7e-3, a2=-0.2, a3=a3, a4=a4)
+    x = g.values
+    played = g.evaluate(Signals(v=play_varying(v, np.full(v.shape, h))), x)
+    moved = x.copy()
+    moved[1] -= x[0] * h
+    moved[3] += x[2] * h
+    diff = np.max(np.abs(played - g.evaluate(Signals(v=v), moved)))
+    assert np.max(np.abs(played - g(v))) > 1.0  # the backlash itself is large
+    assert (diff < 1e-9) if absorbed else (diff > 1.0)
 
 
 def test_rate_dependent_thresholds_widen_with_speed_and_relax_at_rest(linear):

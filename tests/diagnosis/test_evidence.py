@@ -8,8 +8,8 @@ import pytest
 from i2ris_calib.data.dataset import make_dataset
 from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
-from i2ris_calib.diagnosis.report import diagnosis_markdown, step_verdict
-from i2ris_calib.diagnosis.results import Alternative, separating_experiment
+from i2ris_calib.diagnosis.report import diagnosis_markdown, not_excluded_sentence, step_verdict
+from i2ris_calib.diagnosis.results import SEPARATING_FROM_BASE, Alternative, separating_experiment
 from i2ris_calib.diagnosis.stats import autocovariance, sse_reduction_z
 from i2ris_calib.fitting.cycles import cycle_index
 from i2ris_calib.hysteresis.model import Signals
@@ -153,3 +153,23 @@ def test_verdict_names_the_open_alternatives_with_z_and_experiment():
         "time_delay", (Alternative("rate_dependent_thresholds", 0.2, 1.1, 0.14, False, {}, exp),)
     )
     assert "to separate rate_dependent_thresholds: a slow and a fast ramp" in with_exp
+
+
+def test_summary_lists_what_the_data_cannot_tell_from_the_final_model():
+    """Nothing named, a backlash absorbed by the base: the one-line answer says so with
+    its fitted width, its size, z and why no recording of the angle separates it."""
+    bl = Alternative(
+        "backlash",
+        0.085,
+        -1.2,
+        0.88,
+        False,
+        {"width_counts": 151.3},
+        SEPARATING_FROM_BASE["backlash"],
+        effect_rms_deg=0.37,
+    )
+    assert not_excluded_sentence(()) == ""
+    text = not_excluded_sentence((bl,))
+    assert text.startswith("backlash not excluded (width_counts = 151 moves the angle by 0.37 deg")
+    assert "z = -1.2" in text and "envelope offsets" in text
+    assert bl.as_dict()["effect_rms_deg"] == 0.37

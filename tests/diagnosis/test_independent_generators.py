@@ -74,6 +74,23 @@ def test_independent_effect_is_named_and_the_gap_closes(effect, strength, noise,
     assert d.final.holdout_rmse_deg < 1.3 * noise
 
 
+def test_backlash_absorbed_by_the_start_is_not_named_but_not_excluded():
+    """A backlash on the input of the generator's PI base is again a PI (plays compose:
+    F_r[F_b[v]] = F_(r+b)[v]), so the GPI start fits it to the noise by moving its
+    envelope offsets. The honest answer: nothing named (no wrong effect), backlash
+    listed as not excluded, with a fitted width that moves the angle by more than
+    the noise."""
+    strength = SUITE["backlash"][1]
+    case, auto = _diagnose("backlash", strength, 0.08, 7007)
+    d = auto.diagnosis
+    assert d.named_effects == []
+    assert d.baseline.holdout_rmse_deg < 1.2 * 0.08
+    open_ = {a.effect: a for a in d.not_excluded}
+    assert "backlash" in open_
+    assert open_["backlash"].effect_rms_deg > 0.08
+    assert 0.0 < open_["backlash"].params["width_counts"] < 1.5 * strength * case.v.max()
+
+
 def test_independent_clean_case_names_nothing():
     _, auto = _diagnose(None, 0.0, 0.2, 7901)
     assert auto.diagnosis.named_effects == []

@@ -56,6 +56,7 @@ def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
         "decimation": diag.decimation,
         "holdout_fraction": float(np.mean(diag.holdout)),
         "notes": list(diag.notes),
+        "not_excluded": [a.as_dict() for a in diag.not_excluded],
         "figures": figures,
     }
 
@@ -72,13 +73,34 @@ def step_verdict(effect: str, alternatives) -> str:
     return text + (" (" + "; ".join(exps) + ")" if exps else "")
 
 
+def not_excluded_sentence(alternatives) -> str:
+    """One sentence on the effects the data cannot tell from the final model, e.g.
+    ``"backlash not excluded (width_counts = 151 moves the angle by 0.37 deg RMS as
+    well fitted, z = -1.2; to separate it: ...)"``; "" when there are none."""
+    parts = []
+    for a in alternatives:
+        params = ", ".join(f"{k} = {v:.3g}" for k, v in a.params.items())
+        text = (
+            f"{a.effect} not excluded ({params} moves the angle by {a.effect_rms_deg:.2g} deg "
+            f"RMS and fits as well, z = {a.z:.1f}"
+        )
+        parts.append(text + (f"; to separate it: {a.experiment})" if a.experiment else ")"))
+    return "; ".join(parts)
+
+
 def diagnosis_summary(diag: Diagnosis) -> str:
-    """The diagnosis in one sentence (the steps' verdicts, or nothing missing)."""
+    """The diagnosis in one sentence (the steps' verdicts, or nothing missing), with
+    the effects the data cannot tell from the final model."""
     if not diag.steps:
-        return (
+        text = (
             "nothing missing: no candidate improved the held-out error by more than noise explains"
         )
-    return " Then ".join(step_verdict(s.effect, s.alternatives) + "." for s in diag.steps)
+    else:
+        text = " Then ".join(step_verdict(s.effect, s.alternatives) + "." for s in diag.steps)
+    open_ = not_excluded_sentence(diag.not_excluded)
+    if open_:
+        text = text.rstrip(".") + ("; " if not diag.steps else ". Not told apart: ") + open_
+    return text
 
 
 def paths_record(auto) -> dict:
@@ -98,6 +120,7 @@ def paths_record(auto) -> dict:
                 }
                 for s in d.steps
             ],
+            "not_excluded": [a.as_dict() for a in d.not_excluded],
             "notes": list(d.notes),
         }
         for kind, d in auto.paths.items()

@@ -145,6 +145,9 @@ class Alternative:
         Its fitted effect parameters.
     experiment : str
         A recording that would separate it from the named effect ("" if none known).
+    effect_rms_deg : float
+        RMS (deg, counted samples) of what its fitted effect moves the angle: its
+        model with the effect set neutral vs with it (nan where not computed).
     """
 
     effect: str
@@ -154,6 +157,7 @@ class Alternative:
     excluded: bool
     params: dict
     experiment: str = ""
+    effect_rms_deg: float = float("nan")
 
     def as_dict(self) -> dict:
         """JSON-ready dict."""
@@ -210,6 +214,39 @@ def separating_experiment(a: str, b: str) -> str:
     return SEPARATING_EXPERIMENTS.get(frozenset({a, b}), "")
 
 
+#: What would show an effect the start model absorbs (the ``not_excluded`` entries).
+SEPARATING_FROM_BASE: dict[str, str] = {
+    "backlash": (
+        "no input-angle recording while the model's operator bands are not inverted: a "
+        "play of half-width h on the input of a GPI/EGPI with linear envelopes is again "
+        "one, its envelope offsets moved by slope x h (a2 - a1 h, a4 + a3 h, a6 + a5 h); "
+        "measure the slack itself (motor travel after a reversal before the tendon "
+        "tension changes)"
+    ),
+    "multi_stage_backlash": SEPARATING_EXPERIMENTS[
+        frozenset({"dead_zone", "multi_stage_backlash"})
+    ],
+    "dead_zone": (
+        "returns to zero input and small moves near zero: a dead zone holds the angle "
+        "only below its break point"
+    ),
+    "time_delay": (
+        "a fast ramp that stops without a hold-in: a delay keeps the angle moving for "
+        "its delay after the input stops"
+    ),
+    "creep": _LONG_HOLDS,
+    "creep_log": _LONG_HOLDS,
+    "rate_dependent_thresholds": (
+        "ramps at three speeds to the same level with holds: the loop widens with speed"
+    ),
+    "rate_dependent_weights": (
+        "ramps at three speeds to the same level with holds: the loop's slope changes with speed"
+    ),
+    "saturation": "slow ramps to the largest safe input: saturation flattens the top",
+    "axis_coupling": "move the other axis alone while this one holds its input",
+}
+
+
 @dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`diagnose`.
@@ -230,6 +267,13 @@ class Diagnosis:
         cycles, in direction, angle measured).
     decimation : int
         Step between the samples used in the search.
+    notes : tuple of str
+    not_excluded : tuple of Alternative
+        Candidates of the last round (nothing more named) that fit the held-out
+        cycles as well as the final model although their fitted effect moves the
+        angle by more than the noise: the data cannot tell them from the final
+        model (e.g. a backlash that the base's envelope offsets absorb). ``z`` is
+        the final model's held-out z over the candidate.
     """
 
     start_model: Model
@@ -243,6 +287,7 @@ class Diagnosis:
     holdout: np.ndarray
     decimation: int
     notes: tuple[str, ...] = field(default_factory=tuple)
+    not_excluded: tuple[Alternative, ...] = ()
 
     @property
     def named_effects(self) -> list[str]:

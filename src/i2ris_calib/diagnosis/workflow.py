@@ -53,6 +53,7 @@ from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of, model_values
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
 from i2ris_calib.diagnosis.refit import refit
 from i2ris_calib.diagnosis.results import (
+    SEPARATING_FROM_BASE,
     Alternative,
     AutoDiagnosis,
     Candidate,
@@ -61,7 +62,7 @@ from i2ris_calib.diagnosis.results import (
     Step,
     separating_experiment,
 )
-from i2ris_calib.diagnosis.stats import compare, n_free_of, score_of
+from i2ris_calib.diagnosis.stats import autocovariance, compare, n_free_of, score_of
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import fit_dataset
@@ -198,6 +199,57 @@ def _alternatives(best: Candidate, finals, d: SearchData, cfg) -> tuple[Alternat
     return tuple(out)
 
 
+def _not_excluded(
+    current: Model, cands: tuple[Candidate, ...], d: SearchData, cfg: DiagnosisConfig
+) -> tuple[Alternative, ...]:
+    """Candidates of the last round the data cannot tell from ``current``.
+
+    A candidate is listed when (1) ``current`` is not significantly better on the
+    held-out cycles (one-sided held-out z-test at ``alpha``) and (2) its fitted
+    effect is material: the candidate with its effect set neutral (base values
+    kept) moves the angle by more than the noise (RMS over the counted samples
+    above the noise sd from the fitted-sample residual of ``current``). Both hold
+    when the base absorbs the effect by moving its own parameters, e.g. a backlash
+    on the input of a GPI/EGPI, whose envelope offsets shift by the slope times
+    the half-width (docs/diagnosis.md).
+    """
+    if not cands:
+        return ()
+    y_cur = current.evaluate(d.signals, model_values(current))
+    counted = d.fit | d.hold
+    gamma = autocovariance((d.theta - y_cur)[d.fit], max_lag=50)
+    noise_sd = float(np.sqrt(gamma[0])) if gamma.size else 0.0
+    cur_m = score_of(current, model_values(current), d, n_free_of(current))
+    out = []
+    for c in cands:
+        if c.model is None or c.comparison is None:
+            continue
+        x = model_values(c.model)
+        m = c.model.n_inner
+        x0 = x.copy()
+        x0[m:] = c.model.effect.neutral()
+        y_c = c.model.evaluate(d.signals, x)
+        size = float(np.sqrt(np.mean((y_c - c.model.evaluate(d.signals, x0))[counted] ** 2)))
+        if not size > noise_sd:
+            continue
+        comp = compare((c.model, c.metrics), (current, cur_m), d, cfg)
+        if comp.p_value < cfg.alpha:
+            continue
+        out.append(
+            Alternative(
+                effect=c.effect,
+                holdout_rmse_deg=c.metrics.holdout_rmse_deg,
+                z=comp.z,
+                p_value=comp.p_value,
+                excluded=False,
+                params=effects_of(c.model)[-1][2],
+                experiment=SEPARATING_FROM_BASE.get(c.effect, ""),
+                effect_rms_deg=size,
+            )
+        )
+    return tuple(sorted(out, key=lambda a: a.holdout_rmse_deg))
+
+
 def fit_start_model(kind: str, data: Dataset, fit_config=None) -> Model:
     """Starting model ``"gpi"`` or ``"egpi"`` fitted by the fitting stage
     (:func:`i2ris_calib.fitting.pipeline.fit_dataset`, multi-start) on the dataset's
@@ -288,6 +340,7 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         current, cur_m = best.model, best.metrics
         last = ()
     analysis, sentences = _analysis(current, d)
+    not_excluded = _not_excluded(current, last, d, cfg)
     return Diagnosis(
         start_model=start_polished,
         final_model=current,
@@ -300,6 +353,7 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         holdout=hold_full,
         decimation=step,
         notes=tuple(notes),
+        not_excluded=not_excluded,
     )
 
 

@@ -348,6 +348,28 @@ def resample_corners(
     return out
 
 
+def nearest_frame_gray(
+    t_src: np.ndarray, gray_src: np.ndarray, t_dst: np.ndarray, cfg: TrackingConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """Mean grey level of the frame nearest to each of ``t_dst``, and that frame's time.
+
+    Not interpolated: a frame's grey level is the light of its own exposure, which the
+    sync stage reads as the lit fraction of that exposure at the frame's own time
+    (``time_s_<camera>``). Interpolating it to another camera's frame times (5 ms apart,
+    say) mixes two exposures and biases the LED edge times. NaN (both) where the nearest
+    frame is more than ``max_interp_gap_s`` away.
+
+    Returns
+    -------
+    gray, time_s : ndarray, shape (n_dst,)
+    """
+    j = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
+    near = np.where(np.abs(t_dst - t_src[j - 1]) <= np.abs(t_src[j] - t_dst), j - 1, j)
+    far = np.abs(t_src[near] - t_dst) > cfg.max_interp_gap_s
+    gray = np.where(far, np.nan, np.asarray(gray_src, dtype=float)[near])
+    return gray, np.where(far, np.nan, t_src[near])
+
+
 def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: TrackingConfig) -> dict:
     """Fused angles table and summary from the per-camera detections."""
     a_name, b_name = names if cams[names[0]].view == "top" else names[::-1]
@@ -382,8 +404,10 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
                        "pitch_deg": ang[:, 1], "status": status, "reproj_err_px": res.rms_px,
                        "roll_deg": ang[:, 2]})  # fmt: skip
     df[f"mean_gray_{a_name}"] = streams[a_name].mean_gray
-    gb = streams[b_name].mean_gray
-    df[f"mean_gray_{b_name}"] = np.interp(t, tb["time_s"].to_numpy(), gb)
+    gray_b, time_b = nearest_frame_gray(tb["time_s"].to_numpy(), streams[b_name].mean_gray, t, cfg)
+    df[f"mean_gray_{b_name}"] = gray_b
+    if np.nanmax(np.abs(time_b - t), initial=0.0) > cfg.same_frame_tol_s:
+        df[f"time_s_{b_name}"] = time_b  # the grey level's own frame time (sync flash edges)
     df[f"found_{a_name}"] = va.ok.astype(int)
     df[f"found_{b_name}"] = vb.ok.astype(int)
     if cfg.plain:

@@ -4,6 +4,7 @@
     python benchmarks/bench_tracking.py --quick    # ~25 s of the same scene
     python benchmarks/bench_tracking.py --format mp4 --keep /tmp/bench_mp4
     python benchmarks/bench_tracking.py --quick --keep /tmp/bq --decode   # + decode-only speed
+    python benchmarks/bench_tracking.py --issue-session /tmp/issue11   # the issue's 60 s session
 
 Scene (preset "benchmark"): 200 px markers, grey-level noise sigma 2, defocus blur,
 3 deg camera misalignment, f = 50000 px (near-orthographic), three occlusions per
@@ -171,6 +172,57 @@ def cross_axis(args) -> None:
         shutil.rmtree(root, ignore_errors=True)
 
 
+def issue_session(folder: Path, seed: int) -> None:
+    """The issue's session (``issue_session.py``): render once, track (written to
+    ``folder/track`` for ``bench_sync.py --issue-session``), print the issue's figures."""
+    import json
+
+    from issue_session import ensure_session, tracking_figures
+
+    from i2ris_calib.config import PipelineConfig
+    from i2ris_calib.io.track import track_session
+
+    ensure_session(folder, seed)
+    t0 = time.perf_counter()
+    track_session(folder, folder / "track", PipelineConfig())
+    wall = time.perf_counter() - t0
+    angles = pd.read_csv(folder / "track" / "angles.csv")
+    summary = json.loads((folder / "track" / "track.json").read_text())
+    fig = tracking_figures(folder, angles)
+    print(f"issue session {folder} (seed {seed}): track {wall:.1f} s wall")
+    print(f"frames measured: {fig['measured_visible']}/{fig['visible']} with both markers "
+          f"visible ({fig['frames']} frames); status {summary['status_counts']}")  # fmt: skip
+    print(
+        "axis  | RMS overall | RMS other axis > 15 deg (n) | RMS otherwise | bias beyond | max | >1 deg"
+    )
+    for axis in ("yaw", "pitch"):
+        a = fig[axis]
+        print(f"{axis:5s} | {a['rms']:.4f} | {a['rms_beyond']:.4f} ({a['n_beyond']}) | "
+              f"{a['rms_otherwise']:.4f} | {a['bias_beyond']:+.4f} | {a['max']:.3f} | "
+              f"{a['over_1deg']}")  # fmt: skip
+    ref = summary["reference"]
+    print(f"reference roll: {ref.get('roll_method')}, correction {ref.get('roll_correction_deg')}"
+          f" +- {ref.get('roll_sd_deg')} deg")  # fmt: skip
+    for name, c in summary["cameras"].items():
+        print(f"stream {name}: {c['frames']} frames, {c['frames_per_s']} frames/s wall, "
+              f"{c['frames_per_cpu_s']} frames/CPU-s")  # fmt: skip
+    fig2 = tracking_figures(folder, angles, skip_steps=True)
+    print(f"the same without the {fig2['step_frames']} frames next to a step of the true angle "
+          "(EGPI flag-point jumps inside a frame interval; the 5 ms late side camera is "
+          "interpolated across them):")  # fmt: skip
+    for axis in ("yaw", "pitch"):
+        a = fig2[axis]
+        print(f"{axis:5s} | {a['rms']:.4f} | {a['rms_beyond']:.4f} ({a['n_beyond']}) | "
+              f"{a['rms_otherwise']:.4f} | {a['bias_beyond']:+.4f} | {a['max']:.3f} | "
+              f"{a['over_1deg']}")  # fmt: skip
+    for name, f in (("all frames", fig), ("away from truth steps", fig2)):
+        met = all(f[a]["rms"] <= 0.02 and f[a]["rms_beyond"] <= 0.03 for a in ("yaw", "pitch"))
+        met &= f["yaw"]["over_1deg"] + f["pitch"]["over_1deg"] == 0
+        met &= fig["measured_visible"] >= 0.995 * fig["visible"]
+        print(f"targets (RMS <= 0.02 overall, <= 0.03 beyond 15 deg, none > 1 deg, >= 99.5 % "
+              f"measured), {name}: {'met' if met else 'MISSED'}")  # fmt: skip
+
+
 def overlap_speed(video: Path, dictionary: str, marker_id: int, frames: int) -> list[dict]:
     """One stream, decode + marker detection: serial vs decode-ahead thread (1 FFmpeg thread)."""
     import cv2
@@ -226,9 +278,17 @@ def main() -> None:
     ap.add_argument(
         "--before", action="store_true", help="with --cross-axis: also the window-only reference"
     )
+    ap.add_argument(
+        "--issue-session",
+        type=Path,
+        metavar="DIR",
+        help="the issue's 60 s session (benchmarks/issue_session.py), rendered into DIR once",
+    )
     args = ap.parse_args()
     if args.cross_axis:
         return cross_axis(args)
+    if args.issue_session:
+        return issue_session(args.issue_session, args.seed)
 
     over = dict(video_format=args.format, seed=args.seed)
     if args.quick:

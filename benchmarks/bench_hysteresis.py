@@ -19,7 +19,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from i2ris_calib.hysteresis.kernel import family_outputs_numpy  # noqa: E402
+from i2ris_calib.hysteresis.kernel import play_numpy  # noqa: E402
 from i2ris_calib.hysteresis.models import density, i2ris_egpi_model, thresholds  # noqa: E402
 from i2ris_calib.hysteresis.presets import loading_trajectory, paper_like_params  # noqa: E402
 
@@ -29,9 +29,8 @@ def egpi_numpy(v: np.ndarray, x: np.ndarray, n: int, deadband: float) -> np.ndar
     a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f = x
     r = thresholds(r1, rn, n)
     p = density(r, lam, sigma)
-    gl = np.vstack((a1 * v + a2, a1 * v + a2))
-    gr = np.vstack((a3 * v + a4, a5 * v + a6))
-    z = family_outputs_numpy(v, gl, gr, np.vstack((r, r)), np.vstack((r, kappa * r)), p)
+    gl = a1 * v + a2
+    z = (play_numpy(v, gl, r, a3 * v + a4, r, p), play_numpy(v, gl, r, a5 * v + a6, kappa * r, p))
     d = np.empty(v.size, dtype=int)
     state, anchor = 1, v[0]
     for k, xk in enumerate(v):  # v' = direction of the last change beyond the dead band

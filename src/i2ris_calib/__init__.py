@@ -57,12 +57,11 @@ def __getattr__(name: str):
         mod, attr = _IO[name]
         obj = getattr(import_module(mod), attr)
         if name == "load_synced":
+            fit_config = import_module("i2ris_calib.fitting.config").FitConfig
 
             def load_synced(path, axis, config=None, directions=None):
                 """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
-                from i2ris_calib.fitting.config import FitConfig
-
-                return obj([path], axis, config or FitConfig(), directions)
+                return obj([path], axis, config or fit_config(), directions)
 
             return load_synced
         return obj

@@ -7,12 +7,34 @@ import pytest
 from hyst_reference import gpi_reference, play_reference, triangle
 
 from i2ris_calib.hysteresis.kernel import (
-    family_outputs,
-    family_outputs_numpy,
-    linear_family_outputs,
+    density,
     motion_direction,
+    play_numpy,
+    play_operators,
+    play_switched,
     select_stage,
+    thresholds,
 )
+from i2ris_calib.hysteresis.models import (
+    continuous_egpi_model,
+    continuous_egpi_output,
+    egpi_output,
+    gpi_model,
+    gpi_output,
+    i2ris_egpi_model,
+)
+from i2ris_calib.hysteresis.presets import paper_like_params
+
+
+def test_thresholds_eq14_and_density_eq15():
+    """Eq14: r_0 = 0, r_i = r1 + (i - 1)(rn - r1)/(n - 1); Eq15: p = lam exp(-sigma r)."""
+    r = thresholds(0.3, 3.0, 10)
+    expected = [0.0] + [0.3 + (i - 1) * (3.0 - 0.3) / 9 for i in range(1, 11)]
+    np.testing.assert_allclose(r, expected, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(thresholds(0.5, 9.0, 1), [0.0, 0.5])
+    np.testing.assert_allclose(density(r, 0.06, 0.2), 0.06 * np.exp(-0.2 * np.array(expected)))
+    with pytest.raises(ValueError, match="n must be >= 1"):
+        thresholds(0.3, 3.0, 0)
 
 
 def test_single_operator_matches_eq1_2(rng):
@@ -21,51 +43,58 @@ def test_single_operator_matches_eq1_2(rng):
     gr = lambda x: 0.25 * x - 2.0  # noqa: E731
     for r in (0.0, 0.7, 5.0):
         ref = play_reference(v, gl, gr, r, ml=1.0, mr=2.5)
-        got = family_outputs(
-            v, gl(v)[None], gr(v)[None], np.array([[r]]), np.array([[2.5 * r]]), np.ones(1)
-        )[0]
+        got = play_operators(v, gl(v), np.array([r]), gr(v), np.array([2.5 * r]), np.ones(1))
         np.testing.assert_allclose(got, ref, atol=1e-9)
 
 
 def test_numba_equals_numpy_reference(rng):
     v = rng.normal(0, 30, 600).cumsum()
     v[100:120] = v[100]  # a hold
-    gl = np.vstack((np.tanh(v / 100) * 8, 0.02 * v + 1))
-    gr = np.vstack((np.tanh(v / 100 + 0.2) * 9, 0.03 * v - 1))
     r = np.linspace(0, 4, 31)
-    rl, rr = np.vstack((r, 2 * r)), np.vstack((r, 3 * r))
     p = 0.05 * np.exp(-0.2 * r)
-    np.testing.assert_allclose(
-        family_outputs(v, gl, gr, rl, rr, p), family_outputs_numpy(v, gl, gr, rl, rr, p), atol=1e-9
-    )
+    for gl, gr, rl, rr in (
+        (np.tanh(v / 100) * 8, np.tanh(v / 100 + 0.2) * 9, r, 3 * r),
+        (0.02 * v + 1, 0.03 * v - 1, 2 * r, r),
+    ):
+        np.testing.assert_allclose(
+            play_operators(v, gl, rl, gr, rr, p), play_numpy(v, gl, rl, gr, rr, p), atol=1e-9
+        )
 
 
-def test_linear_kernel_equals_generic(rng):
+def test_switched_play_reduces_to_play(rng):
+    """With the same boundary on both sides of v_f (kappa = 1) the switched loop is the
+    plain one, wherever v_f lies."""
     v = np.round(rng.normal(0, 40, 500).cumsum())
-    al, bl, ar, br = (
-        np.array([0.01, 0.012]),
-        np.array([1.0, 0.5]),
-        np.array([0.011, 0.02]),
-        np.array([-1.0, -5.0]),
-    )
     r = np.linspace(0, 3, 11)
-    rl, rr = np.vstack((r, r)), np.vstack((r, 4 * r))
     p = np.exp(-0.3 * r)
-    gl = al[:, None] * v + bl[:, None]
-    gr = ar[:, None] * v + br[:, None]
-    np.testing.assert_allclose(
-        linear_family_outputs(v, al, bl, ar, br, rl, rr, p),
-        family_outputs(v, gl, gr, rl, rr, p),
-        atol=1e-9,
-    )
+    gl, gr = 0.01 * v + 1.0, 0.011 * v - 1.0
+    plain = play_operators(v, gl, r, gr, r, p)
+    for v_f in (-np.inf, float(np.median(v)), float(v.max()) + 1):
+        got = play_switched(v, gl, gr, gr, r, 1.0, v_f, 0.011 * v_f - 1.0, p)
+        np.testing.assert_allclose(got, plain, atol=1e-12)
+
+
+def test_egpi_output_is_eq20_of_the_two_families():
+    """Eq20: y1 while loading, and while unloading above v_f; y2 unloading at v <= v_f,
+    with y1, y2 the families of Eq16-19 on the envelopes of Eq21-23."""
+    t = paper_like_params("yaw+")
+    v = triangle([0, 5000, 1000, 4000, 0]).astype(float)
+    r = thresholds(t["r1"], t["rn"], 30)
+    p = density(r, t["lam"], t["sigma"])
+    gl = t["a1"] * v + t["a2"]
+    y1 = play_operators(v, gl, r, t["a3"] * v + t["a4"], r, p)
+    y2 = play_operators(v, gl, r, t["a5"] * v + t["a6"], t["kappa"] * r, p)
+    d = motion_direction(v, 2.0)
+    expected = np.where((d < 0) & (v <= t["v_f"]), y2, y1)
+    got = i2ris_egpi_model(deadband_counts=2.0, **t)(v)
+    np.testing.assert_allclose(got, expected, atol=1e-12)
+    assert np.any((d < 0) & (v <= t["v_f"])) and np.any(y1 != y2)
 
 
 def test_gpi_sum_of_operators_matches_reference():
     v = triangle([0, 3000, 800, 2500, 0, 3000])
     pars = (0.007, 0.5, 0.0075, -0.5, 0.05, 0.2, 0.3, 3.0)
     n = 7
-    from i2ris_calib.hysteresis.models import gpi_model
-
     got = gpi_model(n=n).evaluate(np.asarray(v), np.array(pars))
     np.testing.assert_allclose(got, gpi_reference(v, *pars, n), atol=1e-9)
 
@@ -75,19 +104,6 @@ def test_motion_direction_holds_and_deadband():
     np.testing.assert_array_equal(motion_direction(v, 0.0), [1, 1, 1, 1, 1, -1, -1, -1, 1, -1])
     # a 0.6 dead band ignores the 0.5 dip, then turns at 1.0 below the maximum 2
     np.testing.assert_array_equal(motion_direction(v, 0.6), [1, 1, 1, 1, 1, 1, -1, -1, 1, 1])
-
-
-@pytest.mark.parametrize(
-    ("direction", "v", "expected"),
-    [(1, 0.0, 0), (1, 10.0, 0), (-1, 10.0, 0), (-1, 5.0, 1), (-1, 0.0, 1)],
-)
-def test_select_stage_i2ris_rule(direction, v, expected):
-    """Eq21: y1 while loading; unloading: y1 above v_f, y2 at or below v_f (= 5)."""
-    z = np.array([[100.0], [200.0]])
-    got = select_stage(
-        z, np.array([v]), np.array([direction], np.int8), np.empty(0), np.array([5.0])
-    )
-    assert got[0] == z[expected, 0]
 
 
 def test_select_stage_paper_rule():
@@ -101,16 +117,12 @@ def test_select_stage_paper_rule():
 
 def test_holds_are_evaluated_once_per_run(rng):
     """Models evaluate a run of equal inputs once (exact for rate-independent models):
-    same output as the kernel on every sample."""
-    from i2ris_calib.hysteresis.kernel import continuous_egpi_output, gpi_output, i2ris_egpi_output
-    from i2ris_calib.hysteresis.models import continuous_egpi_model, gpi_model, i2ris_egpi_model
-
+    same output as the compiled output function on every sample."""
     v = np.repeat(np.round(rng.uniform(0, 6000, 300)), rng.integers(1, 6, 300)).astype(float)
     v[50:400] = 0.0  # a long rest at zero (the other direction's stretch)
-    for model, kernel, extra in (
-        (gpi_model(), gpi_output, ()),
-        (i2ris_egpi_model(deadband_counts=2.0), i2ris_egpi_output, (2.0,)),
-        (continuous_egpi_model(), continuous_egpi_output, ()),
+    for model, output, extra in (
+        (gpi_model(), gpi_output, {}),
+        (i2ris_egpi_model(deadband_counts=2.0), egpi_output, {"deadband": 2.0}),
+        (continuous_egpi_model(), continuous_egpi_output, {}),
     ):
-        x = model.values
-        np.testing.assert_array_equal(model(v), kernel(v, x, 30, *extra))
+        np.testing.assert_array_equal(model(v), output(v, n=30, **extra, **model.value_dict()))

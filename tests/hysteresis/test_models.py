@@ -6,8 +6,16 @@ import numpy as np
 import pytest
 from hyst_reference import triangle
 
+from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model, Signals
-from i2ris_calib.hysteresis.models import egpi_model, gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.models import (
+    ContinuousEGPIModel,
+    GPIModel,
+    I2RISEGPIModel,
+    egpi_model,
+    gpi_model,
+    i2ris_egpi_model,
+)
 from i2ris_calib.hysteresis.presets import (
     DATASETS,
     GPI_NAMES,
@@ -16,6 +24,7 @@ from i2ris_calib.hysteresis.presets import (
     paper_like_params,
     random_i2ris_egpi_params,
 )
+from i2ris_calib.hysteresis.registry import MODEL_KINDS, model_for_kind
 
 V = triangle([0, 6000, 1500, 5000, 0, 3500, 200, 6000, 0])
 
@@ -133,3 +142,18 @@ def test_loading_trajectory(rng):
     assert holds >= 4 * 2 * 15  # pauses of 1 s at top and bottom, 20 Hz
     _, v2 = loading_trajectory(rng, n_samples=1234)
     assert v2.size == 1234
+
+
+def test_registry_builds_every_kind_with_the_same_defaults():
+    classes = {"gpi": GPIModel, "egpi": I2RISEGPIModel, "egpi_c": ContinuousEGPIModel}
+    assert set(MODEL_KINDS) == set(classes)
+    for kind in MODEL_KINDS:
+        m = model_for_kind(kind, n=12, a1=0.01)
+        assert type(m) is classes[kind] and m.name == kind and m.n == 12
+        assert m.value_dict()["a1"] == 0.01
+        if kind != "gpi":
+            assert m.deadband_counts == i2ris_egpi_model().deadband_counts
+    with pytest.raises(CalibError, match="unknown model 'pgi'"):
+        model_for_kind("pgi")
+    with pytest.raises(CalibError, match="model 'gpi'"):
+        model_for_kind("gpi", kappa=3.0)

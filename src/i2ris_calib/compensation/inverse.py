@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2ris_calib.compensation import kernel as K
+from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import (
@@ -130,7 +131,6 @@ class CompensationResult:
 
 def _base_and_delay(model) -> tuple[object, float]:
     """(GPI/EGPI base model, total delay in s) of a possibly extended model."""
-    from i2ris_calib.diagnosis.effects import base_of, effects_of
 
     effects = effects_of(model)
     bad = sorted({name for name, _, _ in effects if name not in SUPPORTED_EFFECTS})
@@ -287,7 +287,6 @@ def compensate(
 def forward(model, v: np.ndarray, t_s: np.ndarray | None = None, v_initial: float | None = None):
     """The model's output (deg), shape (n,), for input ``v`` (shape (n,)), preceded by
     ``v_initial`` when given (that sample is dropped from the result)."""
-    from i2ris_calib.diagnosis.effects import model_values
 
     v = np.asarray(v, dtype=float)
     t = None if t_s is None else np.asarray(t_s, dtype=float)

@@ -14,10 +14,12 @@ The fitted result is a new object; the input model is never changed.
 
 from __future__ import annotations
 
+import html
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
@@ -197,8 +199,6 @@ class FitResult:
 
     def _repr_html_(self) -> str:
         """Notebook display: the statistics and the parameter table."""
-        import html
-
         rows = "".join(
             f"<tr><td>{html.escape(p.name)}</td><td>{self.params[p.name]:.6g}</td>"
             f"<td>{'fixed' if p.name not in self.free else format(self.stderr.get(p.name, float('nan')), '.3g')}</td>"
@@ -376,8 +376,6 @@ def fit_model(*args, **kwargs) -> FitResult:
     # (n samples x p <= 13), where threads only add overhead, and on a busy 2-core
     # machine OpenBLAS threads made scipy's trf 7x slower (SVD of a 25k x 8 Jacobian:
     # 66 ms instead of 2 ms per iteration). The docstring is _fit_model's.
-    from threadpoolctl import threadpool_limits
-
     with threadpool_limits(limits=1, user_api="blas"):
         return _fit_model(*args, **kwargs)
 

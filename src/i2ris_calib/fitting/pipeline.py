@@ -7,51 +7,44 @@ direction's input and a loss mask: every model runs over every sample in time or
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from i2ris_calib.errors import CalibError
+from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
 from i2ris_calib.fitting.fit import FitResult, fit_model
-from i2ris_calib.fitting.initial import start_values
 from i2ris_calib.hysteresis.model import Signals
-from i2ris_calib.hysteresis.models import (
-    GPIModel,
-    I2RISEGPIModel,
-    ParametricModel,
-    continuous_egpi_model,
-    gpi_model,
-    i2ris_egpi_model,
+from i2ris_calib.hysteresis.models import ParametricModel
+from i2ris_calib.hysteresis.registry import (
+    DEFAULT_DEADBAND_COUNTS,
+    DEFAULT_N_OPERATORS,
+    MODEL_KINDS,
+    model_for_kind,
 )
+from i2ris_calib.hysteresis.start import default_deadband, keep_fixed, recipe_of, start_values
 
-if TYPE_CHECKING:
-    from i2ris_calib.data.dataset import Dataset
-
-MODEL_KINDS = ("gpi", "egpi", "egpi_c")
-"""Model kinds ``fit`` knows: GPI (Eq3), the paper's EGPI (Eq16-23) and the
-continuous EGPI (docs/models.md). ``"all"`` on the command line means all three."""
-
-_FACTORIES = {
-    "gpi": lambda n, db, params: gpi_model(n=n, **params),
-    "egpi": lambda n, db, params: i2ris_egpi_model(n=n, deadband_counts=db, **params),
-    "egpi_c": lambda n, db, params: continuous_egpi_model(n=n, deadband_counts=db, **params),
-}
-
-
-def _unknown_kind(kind: str) -> CalibError:
-    return CalibError(f"unknown model '{kind}'; use {', '.join(MODEL_KINDS)} or all")
+__all__ = [
+    "MODEL_KINDS",
+    "build_model",
+    "deadband_for",
+    "fit",
+    "fit_all",
+    "fit_dataset",
+    "fit_dataset_all",
+    "fit_kind",
+    "fit_warnings",
+    "model_from_params",
+    "split_masks",
+]
 
 
 def deadband_for(v: np.ndarray, config: FitConfig) -> float:
     """The ``v'`` dead band (input unit): configured, or derived from the input
     (:func:`i2ris_calib.data.dataset.input_bands`)."""
-    from i2ris_calib.data.dataset import input_bands
-
     if config.deadband_counts >= 0:
         return float(config.deadband_counts)
-    return input_bands(v).deadband
+    return default_deadband(v)
 
 
 def build_model(
@@ -59,10 +52,8 @@ def build_model(
 ) -> ParametricModel:
     """An unfitted model of ``kind`` set up from ``config`` (``deadband``: the ``v'``
     dead band in input units, default :func:`deadband_for`)."""
-    if kind not in _FACTORIES:
-        raise _unknown_kind(kind)
     db = deadband_for(v, config) if deadband is None else float(deadband)
-    m = _FACTORIES[kind](config.n_operators, db, {})
+    m = model_for_kind(kind, n=config.n_operators, deadband_counts=db)
     fixed = set(config.fixed_gpi if kind == "gpi" else config.fixed_egpi)
     if not config.fit_flag_point and "v_f" in m.names:
         fixed.add("v_f")
@@ -70,13 +61,14 @@ def build_model(
 
 
 def model_from_params(
-    kind: str, params: dict[str, float], n_operators: int = 30, deadband_counts: float = 2.0
+    kind: str,
+    params: dict[str, float],
+    n_operators: int = DEFAULT_N_OPERATORS,
+    deadband_counts: float = DEFAULT_DEADBAND_COUNTS,
 ) -> ParametricModel:
     """A fitted model rebuilt from a fit.json record's ``params`` (and its
-    ``n_operators`` / ``deadband_counts``)."""
-    if kind not in _FACTORIES:
-        raise _unknown_kind(kind)
-    return _FACTORIES[kind](n_operators, deadband_counts, params)
+    ``n_operators`` / ``deadband_counts``): :func:`~i2ris_calib.hysteresis.registry.model_for_kind`."""
+    return model_for_kind(kind, n=n_operators, deadband_counts=deadband_counts, **params)
 
 
 def split_masks(v: np.ndarray, config: FitConfig = FitConfig()) -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +143,7 @@ def fit_kind(
             if set(other.params) == set(model.names):
                 starts.append(model.vector(other.params))
     if starts is not None:
-        starts = [_keep_fixed(model, x) for x in starts]
+        starts = [keep_fixed(model, x) for x in starts]
     return _fit_configured(model, s, theta, holdout, starts, config)
 
 
@@ -234,15 +226,6 @@ def nested_gpi_start(
     vals |= {k: float(x) for k, x in gpi_params.items() if k in vals}
     vals |= {"a5": vals["a3"], "a6": vals["a4"], "kappa": 1.0}
     return model.vector(vals)
-
-
-def _keep_fixed(model: ParametricModel, x: np.ndarray) -> np.ndarray:
-    """Fixed parameters keep the model's values, except lam (scale gauge) and v_f."""
-    x = np.array(x, dtype=float)
-    for i, p in enumerate(model.parameters):
-        if p.fixed and p.name not in ("lam", "v_f"):
-            x[i] = p.value
-    return x
 
 
 def fit_all(
@@ -350,8 +333,8 @@ def fit(
         v = np.asarray(signals.v, dtype=float)
     starts = [model.values]
     theta_fit = np.where(np.isfinite(theta) & ~hold, theta, np.nan)
-    if isinstance(model, (GPIModel, I2RISEGPIModel)) and np.isfinite(theta_fit).sum() > 2:
+    if recipe_of(model) is not None and np.isfinite(theta_fit).sum() > 2:
         rng = np.random.default_rng(config.seed)
         starts += start_values(model, v, theta_fit, config.n_starts, rng, db)
-        starts = [_keep_fixed(model, x) for x in starts]
+        starts = [keep_fixed(model, x) for x in starts]
     return _fit_configured(model, signals, theta, hold, starts, config)

@@ -1,22 +1,33 @@
-"""Compiled play-operator loops (numba) and a straightforward numpy reference.
+"""Compiled building blocks of the hysteresis models (numba) and a numpy reference.
 
-The operator recursion (Eq1-2) is sequential in time, so it is compiled: the loop
-over time runs in machine code and the inner loop over operators is branch-free
-(``max``/``min`` over contiguous arrays), which LLVM vectorises.
+The models (:mod:`.models`) write the paper's equations with these:
 
-Conventions shared by every function here:
+* :func:`thresholds` (Eq14) and :func:`density` (Eq15): the operators' thresholds
+  ``r_i`` and weights ``p(r_i)``, written once (callable from Python and from compiled
+  code);
+* :func:`play_operators`: THE play-operator loop (Eq1-2 / Eq16-17) and the weighted
+  sum (Eq3 / Eq18-19) - the operators of GPI, of both paper-EGPI families and of the
+  general EGPI run through it; :func:`play_switched` is the same loop with the
+  continuous EGPI's unloading law, which switches at the flag point;
+* :func:`motion_direction`: what ``v'`` means on sampled data (Eq8, Eq20);
+* :func:`select_stage`: the general EGPI's output switching (Eq8).
+
+The operator recursion is sequential in time, so it is compiled: the loop over time
+runs in machine code and the loop over operators is branch-free (``max``/``min`` over
+contiguous arrays), which LLVM vectorises.
+
+Conventions:
 
 * ``v`` : input, shape (n,), any unit (encoder counts for I2RIS).
-* ``gl``, ``gr`` : ascending / descending envelope values at every sample,
-  shape (S, n), one row per operator family (stage).
-* ``rl``, ``rr`` : effective thresholds of each family, shape (S, m): the ascending
-  branch is ``gl - rl`` and the descending one ``gr + rr`` (``rl = kappa_l * r``,
-  ``rr = kappa_r * r``; Eq4-5, Eq16-17).
+* ``gamma_l``, ``gamma_r`` : loading / unloading envelope at every sample, shape (n,).
+* ``r_l``, ``r_r`` : effective thresholds of the loading and unloading boundaries,
+  shape (m,): the loading boundary is ``gamma_l - r_l``, the unloading one
+  ``gamma_r + r_r`` (``r_r = kappa r`` for the paper's second family, Eq17).
 * ``p`` : operator weights p(r_i), shape (m,) (Eq15).
 * Direction of an operator step: sign of ``v[k] - v[k-1]`` exactly as Eq1-2
   (a hold keeps the state).
 * Initial state (the paper is silent; our choice, docs/models.md): ``w[-1] = 0`` clamped
-  into ``[gl[0] - rl, gr[0] + rr]``, i.e. ``w = min(max(0, gl - rl), gr + rr)``.
+  into the band at ``v[0]``: ``w = min(max(0, gamma_l - r_l), gamma_r + r_r)``.
 """
 
 from __future__ import annotations
@@ -25,121 +36,140 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True, fastmath=True)
-def family_outputs(v, gl, gr, rl, rr, p):  # pragma: no cover - compiled
-    """Weighted sums of play operators, one per family: array (S, n) (Eq3/Eq6-7)."""
-    n_fam, n = gl.shape
-    m = p.size
-    out = np.empty((n_fam, n))
-    w = np.empty(m)
-    for s in range(n_fam):
-        acc = 0.0
-        for i in range(m):
-            wi = min(max(0.0, gl[s, 0] - rl[s, i]), gr[s, 0] + rr[s, i])
-            w[i] = wi
-            acc += p[i] * wi
-        out[s, 0] = acc
-        for k in range(1, n):
-            if v[k] > v[k - 1]:
-                g = gl[s, k]
-                acc = 0.0
-                for i in range(m):
-                    wi = max(g - rl[s, i], w[i])
-                    w[i] = wi
-                    acc += p[i] * wi
-                out[s, k] = acc
-            elif v[k] < v[k - 1]:
-                g = gr[s, k]
-                acc = 0.0
-                for i in range(m):
-                    wi = min(g + rr[s, i], w[i])
-                    w[i] = wi
-                    acc += p[i] * wi
-                out[s, k] = acc
-            else:
-                out[s, k] = out[s, k - 1]
-    return out
-
-
-@njit(cache=True, fastmath=True)
-def linear_family_outputs(v, al, bl, ar, br, rl, rr, p):  # pragma: no cover - compiled
-    """:func:`family_outputs` for linear envelopes ``gl = al v + bl``, ``gr = ar v + br``
-    (al, bl, ar, br: shape (S,)), computed inline: no envelope arrays are built."""
-    n = v.size
-    n_fam = al.size
-    out = np.empty((n_fam, n))
-    m = p.size
-    w = np.empty(m)
-    for s in range(n_fam):
-        acc = 0.0
-        g_l = al[s] * v[0] + bl[s]
-        g_r = ar[s] * v[0] + br[s]
-        for i in range(m):
-            wi = min(max(0.0, g_l - rl[s, i]), g_r + rr[s, i])
-            w[i] = wi
-            acc += p[i] * wi
-        out[s, 0] = acc
-        for k in range(1, n):
-            if v[k] > v[k - 1]:
-                g = al[s] * v[k] + bl[s]
-                acc = 0.0
-                for i in range(m):
-                    wi = max(g - rl[s, i], w[i])
-                    w[i] = wi
-                    acc += p[i] * wi
-                out[s, k] = acc
-            elif v[k] < v[k - 1]:
-                g = ar[s] * v[k] + br[s]
-                acc = 0.0
-                for i in range(m):
-                    wi = min(g + rr[s, i], w[i])
-                    w[i] = wi
-                    acc += p[i] * wi
-                out[s, k] = acc
-            else:
-                out[s, k] = out[s, k - 1]
-    return out
-
-
 @njit(cache=True)
-def thresholds_and_weights(r1, rn, n, lam, sigma):  # pragma: no cover - compiled
-    """Thresholds [0, r1..rn] (Eq14) and weights lam exp(-sigma r) (Eq15), shape (n+1,)."""
+def thresholds(r1, rn, n):  # pragma: no cover - compiled
+    """Thresholds ``r_0 = 0``, ``r_i = r1 + (i - 1)(rn - r1)/(n - 1)`` (Eq14).
+
+    Parameters
+    ----------
+    r1, rn : float
+        Smallest and largest non-zero threshold (unit of the output, deg).
+    n : int
+        Number of non-zero thresholds (>= 1; with n = 1 only r1 is used).
+
+    Returns
+    -------
+    ndarray, shape (n + 1,)
+    """
+    if n < 1:
+        raise ValueError("thresholds: n must be >= 1")
     r = np.empty(n + 1)
     r[0] = 0.0
+    step = (rn - r1) / (n - 1) if n > 1 else 0.0
     for i in range(1, n + 1):
-        r[i] = r1 + (i - 1) * (rn - r1) / (n - 1) if n > 1 else r1
-    return r, lam * np.exp(-sigma * r)
+        r[i] = r1 + (i - 1) * step
+    return r
 
 
 @njit(cache=True)
-def i2ris_egpi_output(v, x, n, deadband):  # pragma: no cover - compiled
-    """I2RIS EGPI output (Eq16-23), shape (n_samples,); x = (a1..a6, lam, sigma, r1, rn, kappa, v_f)."""
-    r, p = thresholds_and_weights(x[8], x[9], n, x[6], x[7])
-    rl = np.empty((2, n + 1))
-    rr = np.empty((2, n + 1))
-    rl[0] = r
-    rl[1] = r
-    rr[0] = r
-    rr[1] = x[10] * r
-    al = np.array([x[0], x[0]])
-    bl = np.array([x[1], x[1]])
-    ar = np.array([x[2], x[4]])
-    br = np.array([x[3], x[5]])
-    z = linear_family_outputs(v, al, bl, ar, br, rl, rr, p)
-    d = motion_direction(v, deadband)
-    return select_stage(z, v, d, np.empty(0), np.array([x[11]]))
+def density(r, lam, sigma):  # pragma: no cover - compiled
+    """Operator weights ``p(r) = lam exp(-sigma r)`` (Eq15), shape of ``r`` (1-D)."""
+    return lam * np.exp(-sigma * r)
 
 
-@njit(cache=True)
-def gpi_output(v, x, n):  # pragma: no cover - compiled
-    """GPI output (Eq3), shape (n_samples,); x = (a1, a2, a3, a4, lam, sigma, r1, rn)."""
-    r, p = thresholds_and_weights(x[6], x[7], n, x[4], x[5])
-    rr = np.empty((1, n + 1))
-    rr[0] = r
-    z = linear_family_outputs(
-        v, np.array([x[0]]), np.array([x[1]]), np.array([x[2]]), np.array([x[3]]), rr, rr, p
-    )
-    return z[0]
+@njit(cache=True, fastmath=True)
+def play_operators(v, gamma_l, r_l, gamma_r, r_r, p):  # pragma: no cover - compiled
+    """Weighted sum of play operators ``sum_i p_i w_i`` at every sample, shape (n,).
+
+    THE play-operator loop (Eq1-3; each family of Eq4-7 and Eq16-19): v rises
+    ``w_i = max(gamma_l - r_l[i], w_i)``, v falls ``w_i = min(gamma_r + r_r[i], w_i)``,
+    a hold keeps ``w``.
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+        Input (counts).
+    gamma_l, gamma_r : ndarray, shape (n,)
+        Loading / unloading envelope at every sample (deg).
+    r_l, r_r : ndarray, shape (m,)
+        Thresholds of the loading / unloading boundary (deg).
+    p : ndarray, shape (m,)
+        Weights p(r_i).
+    """
+    ns = v.size
+    m = p.size
+    out = np.empty(ns)
+    if ns == 0:
+        return out
+    w = np.empty(m)
+    acc = 0.0
+    for i in range(m):
+        wi = min(max(0.0, gamma_l[0] - r_l[i]), gamma_r[0] + r_r[i])
+        w[i] = wi
+        acc += p[i] * wi
+    out[0] = acc
+    for k in range(1, ns):
+        if v[k] > v[k - 1]:  # Eq1, v' > 0
+            g = gamma_l[k]
+            acc = 0.0
+            for i in range(m):
+                wi = max(g - r_l[i], w[i])
+                w[i] = wi
+                acc += p[i] * wi
+            out[k] = acc
+        elif v[k] < v[k - 1]:  # Eq1, v' < 0
+            g = gamma_r[k]
+            acc = 0.0
+            for i in range(m):
+                wi = min(g + r_r[i], w[i])
+                w[i] = wi
+                acc += p[i] * wi
+            out[k] = acc
+        else:  # Eq1, v' = 0
+            out[k] = out[k - 1]
+    return out
+
+
+@njit(cache=True, fastmath=True)
+def play_switched(
+    v, gamma_l, gamma_r1, gamma_r2, r, kappa, v_f, gamma_r1_at_vf, p
+):  # pragma: no cover
+    """:func:`play_operators` whose unloading law switches at ``v_f`` (continuous EGPI).
+
+    Loading ``w_i = max(gamma_l - r_i, w_i)``; unloading ``w_i = min(gamma_r1 + r_i, w_i)``
+    above ``v_f`` and ``min(gamma_r2 + kappa r_i, w_i)`` at or below it, from whatever
+    state the operators have there (docs/models.md). An unloading step that crosses
+    ``v_f`` first meets the first boundary at ``v_f`` (``gamma_r1_at_vf + r_i``, as a
+    continuous input would), so the output does not depend on the sampling. Shapes as
+    :func:`play_operators` (``r``: thresholds, shape (m,)); ``kappa``, ``v_f``,
+    ``gamma_r1_at_vf`` are scalars. (A loop of its own: a switch inside
+    :func:`play_operators` costs that loop ~30 % of its speed.)
+    """
+    ns = v.size
+    m = p.size
+    out = np.empty(ns)
+    if ns == 0:
+        return out
+    w = np.empty(m)
+    g, kr = (gamma_r1[0], 1.0) if v[0] > v_f else (gamma_r2[0], kappa)
+    acc = 0.0
+    for i in range(m):
+        wi = min(max(0.0, gamma_l[0] - r[i]), g + kr * r[i])
+        w[i] = wi
+        acc += p[i] * wi
+    out[0] = acc
+    for k in range(1, ns):
+        if v[k] > v[k - 1]:
+            g = gamma_l[k]
+            acc = 0.0
+            for i in range(m):
+                wi = max(g - r[i], w[i])
+                w[i] = wi
+                acc += p[i] * wi
+            out[k] = acc
+        elif v[k] < v[k - 1]:
+            g, kr = (gamma_r1[k], 1.0) if v[k] > v_f else (gamma_r2[k], kappa)
+            # a step that crossed v_f meets the first boundary at v_f first
+            g1 = gamma_r1_at_vf if v[k - 1] > v_f >= v[k] else np.inf
+            acc = 0.0
+            for i in range(m):
+                wi = min(g + kr * r[i], min(g1 + r[i], w[i]))
+                w[i] = wi
+                acc += p[i] * wi
+            out[k] = acc
+        else:
+            out[k] = out[k - 1]
+    return out
 
 
 @njit(cache=True)
@@ -177,7 +207,7 @@ def motion_direction(v, deadband):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def select_stage(z, v, direction, rising_flags, falling_flags):  # pragma: no cover
-    """EGPI output switching (Eq8, Eq21): pick a family's output per sample, (n,).
+    """General EGPI output switching (Eq8): pick a family's output per sample, (n,).
 
     Loading (direction > 0): stage = number of ``rising_flags`` <= v.
     Unloading: stage = number of ``falling_flags`` >= v.
@@ -202,77 +232,17 @@ def select_stage(z, v, direction, rising_flags, falling_flags):  # pragma: no co
     return out
 
 
-def family_outputs_numpy(v, gl, gr, rl, rr, p):
-    """Reference implementation of :func:`family_outputs`: python loop over time,
-    numpy over operators. Used by tests and by the speed benchmark."""
+def play_numpy(v, gamma_l, r_l, gamma_r, r_r, p):
+    """Reference for :func:`play_operators`: Python loop over time, numpy over operators
+    (tests and the speed benchmark)."""
     v = np.asarray(v, dtype=float)
-    n_fam, n = gl.shape
-    out = np.empty((n_fam, n))
-    w = np.minimum(np.maximum(0.0, gl[:, :1] - rl), gr[:, :1] + rr)
-    out[:, 0] = w @ p
-    for k in range(1, n):
+    out = np.empty(v.size)
+    w = np.minimum(np.maximum(0.0, gamma_l[0] - r_l), gamma_r[0] + r_r)
+    out[0] = w @ p
+    for k in range(1, v.size):
         if v[k] > v[k - 1]:
-            w = np.maximum(gl[:, k : k + 1] - rl, w)
+            w = np.maximum(gamma_l[k] - r_l, w)
         elif v[k] < v[k - 1]:
-            w = np.minimum(gr[:, k : k + 1] + rr, w)
-        out[:, k] = w @ p
-    return out
-
-
-@njit(cache=True, fastmath=True)
-def continuous_egpi_output(v, x, n):  # pragma: no cover - compiled
-    """Continuous I2RIS EGPI output, shape (n_samples,); x as :func:`i2ris_egpi_output`.
-
-    One family of play operators whose *unloading* boundary is piecewise in the input:
-    ``gamma_r1(v) + r`` above the flag point v_f, ``gamma_r2(v) + kappa r`` at or
-    below it; loading is ``gamma_l(v) - r`` throughout (Eq16-17's envelopes and
-    thresholds). The stage-2 operators thus take over the stage-1 state where the
-    input crosses v_f instead of running from the start with a state of their own,
-    so the output never steps at v_f: while the stage-2 boundary lies above the
-    state the operators hold (the S3 dead zone), then follow ``gamma_r2 + kappa r``.
-    """
-    r, p = thresholds_and_weights(x[8], x[9], n, x[6], x[7])
-    m = p.size
-    a1, a2, a3, a4, a5, a6, kappa, vf = x[0], x[1], x[2], x[3], x[4], x[5], x[10], x[11]
-    ns = v.size
-    out = np.empty(ns)
-    w = np.empty(m)
-    if ns == 0:
-        return out
-    gl = a1 * v[0] + a2
-    if v[0] > vf:
-        g, kr = a3 * v[0] + a4, 1.0
-    else:
-        g, kr = a5 * v[0] + a6, kappa
-    acc = 0.0
-    for i in range(m):
-        wi = min(max(0.0, gl - r[i]), g + kr * r[i])
-        w[i] = wi
-        acc += p[i] * wi
-    out[0] = acc
-    for k in range(1, ns):
-        if v[k] > v[k - 1]:
-            g = a1 * v[k] + a2
-            acc = 0.0
-            for i in range(m):
-                wi = max(g - r[i], w[i])
-                w[i] = wi
-                acc += p[i] * wi
-            out[k] = acc
-        elif v[k] < v[k - 1]:
-            if v[k] > vf:
-                g, kr = a3 * v[k] + a4, 1.0
-            else:
-                g, kr = a5 * v[k] + a6, kappa
-            # a step that crosses v_f passes the stage-1 boundary at v_f first (as a
-            # continuous input would): the output does not depend on the sampling
-            g1 = a3 * vf + a4 if v[k - 1] > vf >= v[k] else np.inf
-            acc = 0.0
-            for i in range(m):
-                wi = min(g + kr * r[i], min(g1 + r[i], w[i]))
-                w[i] = wi
-                acc += p[i] * wi
-            out[k] = acc
-        else:
-            out[k] = out[k - 1]
+            w = np.minimum(gamma_r[k] + r_r, w)
+        out[k] = w @ p
     return out

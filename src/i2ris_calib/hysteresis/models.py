@@ -3,9 +3,16 @@
 * :class:`GPIModel` - generalized Prandtl-Ishlinskii model with linear envelopes
   (Eq1-3, Eq14-15): ``gamma_l = a1 v + a2``, ``gamma_r = a3 v + a4``.
 * :class:`I2RISEGPIModel` - the 11-parameter EGPI fitted to I2RIS (Eq16-23), plus
-  the flag point ``v_f`` as a 12th parameter (held fixed unless freed).
+  the flag point ``v_f`` as a 12th parameter (free by default, profiled by the fit).
+* :class:`ContinuousEGPIModel` - the same parameters without the output step (ours).
 * :class:`EGPIModel` - the general N-stage EGPI (Eq4-8) with per-stage linear or
   tanh envelopes, magnitude regulators and flag points (used by ``paper-sim``).
+
+Each model's ``evaluate(signals, values)`` names the parameter vector
+(:meth:`ParametricModel.named`) and calls its output function with keyword arguments
+(:func:`gpi_output`, :func:`egpi_output`, :func:`continuous_egpi_output`: compiled,
+written as the paper's equations with the blocks of :mod:`.kernel`: thresholds,
+density, the play-operator loop, ``v'``).
 
 Units (I2RIS): input v in encoder counts, output in deg; thresholds r in deg
 (they are subtracted from envelope values, which are in deg); envelope slopes in
@@ -15,7 +22,7 @@ Choices the paper leaves open (documented in docs/models.md):
 
 * operator initial state: ``w[-1] = 0`` clamped into the band at ``v[0]``;
 * operator step direction: sign of ``v[k] - v[k-1]`` (Eq1-2 literally; holds keep state);
-* ``v'`` for the output switch (Eq8, Eq21): direction of the last change larger than
+* ``v'`` for the output switch (Eq8, Eq20): direction of the last change larger than
   ``deadband_counts`` (:func:`~.kernel.motion_direction`); a hold keeps the direction,
   so a pause while loading does not switch to the unloading branch.
 * ``n`` = number of uniformly spaced thresholds r_1..r_n; with r_0 = 0 there are
@@ -28,32 +35,34 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 
 from i2ris_calib.hysteresis.kernel import (
-    continuous_egpi_output,
-    family_outputs,
-    gpi_output,
-    i2ris_egpi_output,
+    density,
     motion_direction,
+    play_operators,
+    play_switched,
     select_stage,
+    thresholds,
 )
 from i2ris_calib.hysteresis.model import Parameter, Signals
+from i2ris_calib.hysteresis.start import default_deadband, initial_values, keep_fixed
 
-INF = np.inf
-
-
-def thresholds(r1: float, rn: float, n: int) -> np.ndarray:
-    """Thresholds ``[0, r_1, ..., r_n]`` (Eq14), shape (n + 1,), unit of the output."""
-    if n < 1:
-        raise ValueError("n must be >= 1")
-    if n == 1:
-        return np.array([0.0, r1])
-    return np.concatenate(([0.0], np.linspace(r1, rn, n)))
-
-
-def density(r: np.ndarray, lam: float, sigma: float) -> np.ndarray:
-    """Operator weights ``p(r) = lam * exp(-sigma r)`` (Eq15), same shape as r."""
-    return lam * np.exp(-sigma * np.asarray(r, dtype=float))
+__all__ = [
+    "ContinuousEGPIModel",
+    "EGPIModel",
+    "Envelope",
+    "GPIModel",
+    "I2RISEGPIModel",
+    "ParametricModel",
+    "as_signals",
+    "continuous_egpi_model",
+    "density",
+    "egpi_model",
+    "gpi_model",
+    "i2ris_egpi_model",
+    "thresholds",
+]
 
 
 @dataclass(frozen=True)
@@ -79,6 +88,13 @@ class ParametricModel:
     def value_dict(self) -> dict[str, float]:
         """``{name: value}`` of the current parameters."""
         return {p.name: float(p.value) for p in self.parameters}
+
+    def named(self, values: np.ndarray) -> dict[str, float]:
+        """``{name: value}`` of a parameter vector (shape (p,), model order)."""
+        x = np.asarray(values, dtype=float).ravel()
+        if x.size != len(self.parameters):
+            raise ValueError(f"{self.name}: expected {len(self.parameters)} values, got {x.size}")
+        return dict(zip(self.names, x.tolist(), strict=True))
 
     def with_values(self, values: np.ndarray | Mapping[str, float]) -> ParametricModel:
         """A new model whose parameter values are ``values`` (vector or name->value)."""
@@ -151,19 +167,15 @@ class ParametricModel:
     ) -> ParametricModel:
         """A new model whose values are the data-driven start for (v, theta) (GPI and
         EGPI models: envelope lines from the branches, shape from the angle range, the
-        flag point from the unloading branches; docs/fit.md). Other models: unchanged.
-        Fixed parameters keep their values (except the ``lam`` scale gauge).
+        flag point from the unloading branches; :mod:`.start`, docs/fit.md). Other
+        models: unchanged. Fixed parameters keep their values (except the ``lam``
+        scale gauge). ``deadband``: the ``v'`` dead band (input unit), default derived
+        from the input as the fit does.
         """
-        from i2ris_calib.fitting.initial import initial_values
-        from i2ris_calib.fitting.pipeline import _keep_fixed, deadband_for
-
         v = np.asarray(v, dtype=float)
-        if deadband is None:
-            from i2ris_calib.fitting.config import FitConfig
-
-            deadband = deadband_for(v, FitConfig())
-        x = initial_values(self, v, np.asarray(theta_deg, dtype=float), float(deadband))
-        return self.with_values(_keep_fixed(self, x))
+        db = default_deadband(v) if deadband is None else float(deadband)
+        x = initial_values(self, v, np.asarray(theta_deg, dtype=float), db)
+        return self.with_values(keep_fixed(self, x))
 
 
 def as_signals(signals: Signals | np.ndarray) -> Signals:
@@ -198,18 +210,63 @@ def _held_runs(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return np.ascontiguousarray(v[new]), np.cumsum(new) - 1
 
 
-def _rate_independent(kernel, v: np.ndarray, *args) -> np.ndarray:
-    """``kernel(v, *args)`` evaluated once per run of equal inputs (exact, see
-    :func:`_held_runs`)."""
+def _per_run(output, v: np.ndarray, **params) -> np.ndarray:
+    """``output(v, **params)`` evaluated once per run of equal inputs (exact for a
+    rate-independent model, see :func:`_held_runs`)."""
     runs = _held_runs(v)
     if runs is None:
-        return kernel(v, *args)
+        return output(v, **params)
     vc, idx = runs
-    return kernel(vc, *args)[idx]
+    return output(vc, **params)[idx]
 
 
-def _P(name, value, lower=-INF, upper=INF, unit="", doc="", fixed=False) -> Parameter:
-    return Parameter(name, float(value), float(lower), float(upper), fixed, unit, doc)
+# ------------------------------------------------------------- the equations, compiled
+# Each model's evaluate names its parameter vector and calls one of these with keyword
+# arguments; they are compiled (numba) so the envelopes, both families and the output
+# switch run without Python overhead (a fit evaluates a model thousands of times).
+
+
+@njit(cache=True)
+def gpi_output(v, a1, a2, a3, a4, lam, sigma, r1, rn, n):  # pragma: no cover - compiled
+    """GPI output y (deg), shape (len(v),), for input ``v`` (counts); ``n`` thresholds."""
+    r = thresholds(r1, rn, n)  # Eq14: r_0 = 0, r_1..r_n uniform
+    p = density(r, lam, sigma)  # Eq15: p(r_i) = lam exp(-sigma r_i)
+    gamma_l = a1 * v + a2  # loading envelope (the form of Eq21)
+    gamma_r = a3 * v + a4  # unloading envelope (the form of Eq22)
+    # Eq1-3: y = sum_i p(r_i) G_{r_i}[v]; G on gamma_l - r (v rises), gamma_r + r (v falls)
+    return play_operators(v, gamma_l, r, gamma_r, r, p)
+
+
+@njit(cache=True)
+def egpi_output(
+    v, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f, n, deadband
+):  # pragma: no cover
+    """The paper's I2RIS EGPI output y (deg), shape (len(v),) (Eq14-23); ``deadband``:
+    the ``v'`` dead band (counts, :func:`~.kernel.motion_direction`)."""
+    r = thresholds(r1, rn, n)  # Eq14
+    p = density(r, lam, sigma)  # Eq15
+    gamma_l = a1 * v + a2  # Eq21
+    gamma_r1 = a3 * v + a4  # Eq22
+    gamma_r2 = a5 * v + a6  # Eq23
+    y1 = play_operators(v, gamma_l, r, gamma_r1, r, p)  # Eq16, Eq18: F_{r,1}, y1
+    y2 = play_operators(v, gamma_l, r, gamma_r2, kappa * r, p)  # Eq17, Eq19: F_{r,2}, y2
+    unloading = motion_direction(v, deadband) < 0  # v' <= 0 (a hold keeps the direction)
+    return np.where(unloading & (v <= v_f), y2, y1)  # Eq20
+
+
+@njit(cache=True)
+def continuous_egpi_output(
+    v, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f, n
+):  # pragma: no cover
+    """Continuous EGPI output y (deg), shape (len(v),) (docs/models.md): one family,
+    loading as Eq16-17, unloading as F_{r,1} (Eq16) above v_f and as F_{r,2} (Eq17) at
+    or below it, from the state the operators have there."""
+    r = thresholds(r1, rn, n)  # Eq14
+    p = density(r, lam, sigma)  # Eq15
+    gamma_l = a1 * v + a2  # Eq21
+    gamma_r1 = a3 * v + a4  # Eq22
+    gamma_r2 = a5 * v + a6  # Eq23
+    return play_switched(v, gamma_l, gamma_r1, gamma_r2, r, kappa, v_f, a3 * v_f + a4, p)
 
 
 # Default values are the "yaw+" paper-like preset (see presets.py); bounds are wide
@@ -220,19 +277,14 @@ _OFFSET = dict(lower=-500.0, upper=500.0, unit="deg")
 
 def _density_params(lam, sigma, r1, rn) -> tuple[Parameter, ...]:
     return (
-        _P(
-            "lam",
-            lam,
-            1e-6,
-            1e3,
-            "1",
+        Parameter(
+            "lam", lam, 1e-6, 1e3, True, "1",
             "density scale lambda (Eq15); fixed: redundant with the envelope scale",
-            True,
         ),
-        _P("sigma", sigma, 0.0, 20.0, "1/deg", "density decay sigma (Eq15)"),
-        _P("r1", r1, 0.0, 100.0, "deg", "smallest non-zero threshold r_1 (Eq14)"),
-        _P("rn", rn, 0.0, 100.0, "deg", "largest threshold r_n (Eq14)"),
-    )
+        Parameter("sigma", sigma, 0.0, 20.0, False, "1/deg", "density decay sigma (Eq15)"),
+        Parameter("r1", r1, 0.0, 100.0, False, "deg", "smallest non-zero threshold r_1 (Eq14)"),
+        Parameter("rn", rn, 0.0, 100.0, False, "deg", "largest threshold r_n (Eq14)"),
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -247,19 +299,16 @@ class GPIModel(ParametricModel):
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,), for values (a1..a4, lam, sigma, r1, rn)."""
-        x = np.ascontiguousarray(values, dtype=float)
-        if x.size != 8:
-            raise ValueError(f"gpi: expected 8 values, got {x.size}")
-        return _rate_independent(gpi_output, _input(signals), x, int(self.n))
+        return _per_run(gpi_output, _input(signals), n=self.n, **self.named(values))
 
 
 def gpi_model(n: int = 30, **values: float) -> GPIModel:
     """A GPI model with default (paper-like yaw+) values, overridden by ``values``."""
     params = (
-        _P("a1", 7.0e-3, doc="loading envelope slope", **_SLOPE),
-        _P("a2", 0.5, doc="loading envelope offset", **_OFFSET),
-        _P("a3", 7.0e-3, doc="unloading envelope slope", **_SLOPE),
-        _P("a4", -0.5, doc="unloading envelope offset", **_OFFSET),
+        Parameter("a1", 7.0e-3, doc="loading envelope slope", **_SLOPE),
+        Parameter("a2", 0.5, doc="loading envelope offset", **_OFFSET),
+        Parameter("a3", 7.0e-3, doc="unloading envelope slope", **_SLOPE),
+        Parameter("a4", -0.5, doc="unloading envelope offset", **_OFFSET),
         *_density_params(0.06, 0.2, 0.3, 3.0),
     )
     return GPIModel("gpi", params, n=n).with_values(values)
@@ -269,12 +318,13 @@ def gpi_model(n: int = 30, **values: float) -> GPIModel:
 class I2RISEGPIModel(ParametricModel):
     """The EGPI fitted to I2RIS (Eq16-23): 11 parameters + flag point ``v_f``.
 
-    ``F_{r,1}``: loading ``gamma_l - r``, unloading ``gamma_r1 + r``;
-    ``F_{r,2}``: loading ``gamma_l - r``, unloading ``gamma_r2 + kappa r``;
-    ``gamma_l = a1 v + a2``, ``gamma_r1 = a3 v + a4``, ``gamma_r2 = a5 v + a6``;
-    ``y = y1`` while loading or above ``v_f``, ``y = y2`` while unloading at ``v <= v_f``.
-    ``v_f`` (counts) is free by default and fitted by a profile search from the
-    data-driven start (``fitting.initial.flag_point``); ``with_fixed(fixed=("v_f",))``
+    ``F_{r,1}``: loading ``gamma_l - r``, unloading ``gamma_r1 + r`` (Eq16);
+    ``F_{r,2}``: loading ``gamma_l - r``, unloading ``gamma_r2 + kappa r`` (Eq17);
+    ``y1``, ``y2`` their weighted sums (Eq18-19);
+    ``y = y1`` while loading or above ``v_f``, ``y = y2`` while unloading at ``v <= v_f``
+    (Eq20); ``gamma_l = a1 v + a2``, ``gamma_r1 = a3 v + a4``, ``gamma_r2 = a5 v + a6``
+    (Eq21-23). ``v_f`` (counts) is free by default and fitted by a profile search from
+    the data-driven start (:func:`.start.flag_point`); ``with_fixed(fixed=("v_f",))``
     keeps the start. ``lam`` is fixed by default: it is exactly redundant with the
     envelope scale (docs/models.md).
     """
@@ -282,46 +332,36 @@ class I2RISEGPIModel(ParametricModel):
     n: int = 30
     deadband_counts: float = 2.0
 
-    def families(self, v: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """Outputs y1, y2 of both operator families, shape (2, n_samples) (Eq18-19)."""
-        a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa = np.asarray(values, dtype=float)[:11]
-        r = thresholds(r1, rn, self.n)
-        p = density(r, lam, sigma)
-        glv = a1 * v + a2
-        gl = np.vstack((glv, glv))
-        gr = np.vstack((a3 * v + a4, a5 * v + a6))
-        return family_outputs(v, gl, gr, np.vstack((r, r)), np.vstack((r, kappa * r)), p)
-
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
-        """Output angle (deg), shape (n_samples,) (Eq21)."""
-        x = np.ascontiguousarray(values, dtype=float)
-        if x.size != 12:
-            raise ValueError(f"egpi: expected 12 values, got {x.size}")
-        return _rate_independent(
-            i2ris_egpi_output, _input(signals), x, int(self.n), float(self.deadband_counts)
+        """Output angle (deg), shape (n_samples,), for values (a1..a6, lam, sigma, r1,
+        rn, kappa, v_f)."""
+        return _per_run(
+            egpi_output,
+            _input(signals),
+            n=self.n,
+            deadband=float(self.deadband_counts),
+            **self.named(values),
         )
 
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:
     """An I2RIS EGPI with default (paper-like yaw+) values, overridden by ``values``."""
     params = (
-        _P("a1", 7.0e-3, doc="loading envelope slope gamma_l", **_SLOPE),
-        _P("a2", 0.5, doc="loading envelope offset gamma_l", **_OFFSET),
-        _P("a3", 7.0e-3, doc="stage-1 unloading envelope slope gamma_r1", **_SLOPE),
-        _P("a4", -0.5, doc="stage-1 unloading envelope offset gamma_r1", **_OFFSET),
-        _P("a5", 7.0e-3, doc="stage-2 unloading envelope slope gamma_r2", **_SLOPE),
-        _P("a6", -0.5, doc="stage-2 unloading envelope offset gamma_r2", **_OFFSET),
+        Parameter("a1", 7.0e-3, doc="loading envelope slope gamma_l", **_SLOPE),
+        Parameter("a2", 0.5, doc="loading envelope offset gamma_l", **_OFFSET),
+        Parameter("a3", 7.0e-3, doc="stage-1 unloading envelope slope gamma_r1", **_SLOPE),
+        Parameter("a4", -0.5, doc="stage-1 unloading envelope offset gamma_r1", **_OFFSET),
+        Parameter("a5", 7.0e-3, doc="stage-2 unloading envelope slope gamma_r2", **_SLOPE),
+        Parameter("a6", -0.5, doc="stage-2 unloading envelope offset gamma_r2", **_OFFSET),
         *_density_params(0.06, 0.2, 0.3, 3.0),
-        _P("kappa", 3.0, 0.0, 100.0, "1", "stage-2 backlash magnitude regulator (Eq17)"),
-        _P(
-            "v_f",
-            2000.0,
-            -1e7,
-            1e7,
-            "count",
+        Parameter(
+            "kappa", 3.0, 0.0, 100.0, False, "1", "stage-2 backlash magnitude regulator (Eq17)"
+        ),
+        Parameter(
+            "v_f", 2000.0, -1e7, 1e7, False, "count",
             "flag point: unloading switches to y2 at v <= v_f (fitted by profile search)",
         ),
-    )
+    )  # fmt: skip
     model = I2RISEGPIModel("egpi", params, n=n, deadband_counts=deadband_counts)
     return model.with_values(values)
 
@@ -332,22 +372,18 @@ class ContinuousEGPIModel(I2RISEGPIModel):
     but the stage-2 operators take over the stage-1 state at the flag point.
 
     One operator family: loading ``gamma_l - r``; unloading ``gamma_r1 + r`` above
-    ``v_f`` and ``gamma_r2 + kappa r`` at or below it
-    (:func:`~.kernel.continuous_egpi_output`). The paper's EGPI runs both families
-    from the start and switches the *output* at v_f, so the angle steps there by
-    ``y2 - y1``; a bending angle cannot jump, so here the stage-2 family starts from
-    the stage-1 state where the input crosses v_f. The dead zone S3 appears as a
-    hold while ``gamma_r2 + kappa r`` lies above the state. No ``v'`` dead band is
-    needed: the unloading update only acts on a falling input. ``deadband_counts``
-    is kept for the interface and unused.
+    ``v_f`` and ``gamma_r2 + kappa r`` at or below it. The paper's EGPI runs both
+    families from the start and switches the *output* at v_f, so the angle steps there
+    by ``y2 - y1``; a bending angle cannot jump, so here the stage-2 family starts from
+    the stage-1 state where the input crosses v_f. The dead zone S3 appears as a hold
+    while ``gamma_r2 + kappa r`` lies above the state. No ``v'`` dead band is needed:
+    the unloading update only acts on a falling input. ``deadband_counts`` is kept for
+    the interface and unused.
     """
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,)."""
-        x = np.ascontiguousarray(values, dtype=float)
-        if x.size != 12:
-            raise ValueError(f"egpi_c: expected 12 values, got {x.size}")
-        return _rate_independent(continuous_egpi_output, _input(signals), x, int(self.n))
+        return _per_run(continuous_egpi_output, _input(signals), n=self.n, **self.named(values))
 
 
 def continuous_egpi_model(
@@ -407,24 +443,27 @@ class EGPIModel(ParametricModel):
         return len(self.envelopes)
 
     def families(self, v: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """Outputs z_1..z_N of all families, shape (N, n_samples) (Eq6-7)."""
-        val = dict(zip(self.names, np.asarray(values, dtype=float), strict=True))
-        r = thresholds(val["r1"], val["rn"], self.n)
-        p = density(r, val["lam"], val["sigma"])
-        gl, gr, rl, rr = [], [], [], []
+        """Outputs z_1..z_N of all families, shape (N, n_samples) (Eq4-7)."""
+        v = _input(v)
+        val = self.named(values)
+        r = thresholds(val["r1"], val["rn"], self.n)  # Eq14
+        p = density(r, val["lam"], val["sigma"])  # Eq15
+        z = np.empty((self.n_stages, v.size))
         for s, (el, er) in enumerate(self.envelopes, start=1):
-            gl.append(el(v, np.array([val[f"l{s}_{x}"] for x in el.suffixes])))
-            gr.append(er(v, np.array([val[f"r{s}_{x}"] for x in er.suffixes])))
-            rl.append(val.get(f"kappa_l{s}", 1.0) * r)
-            rr.append(val.get(f"kappa_r{s}", 1.0) * r)
-        return family_outputs(v, np.vstack(gl), np.vstack(gr), np.vstack(rl), np.vstack(rr), p)
+            gamma_l = el(v, np.array([val[f"l{s}_{x}"] for x in el.suffixes]))
+            gamma_r = er(v, np.array([val[f"r{s}_{x}"] for x in er.suffixes]))
+            kappa_l, kappa_r = val.get(f"kappa_l{s}", 1.0), val.get(f"kappa_r{s}", 1.0)
+            # Eq4-7: H_{r,s} on gamma_l,s - kappa_l r (v rises), gamma_r,s + kappa_r r (v falls)
+            z[s - 1] = play_operators(
+                v, gamma_l=gamma_l, r_l=kappa_l * r, gamma_r=gamma_r, r_r=kappa_r * r, p=p
+            )
+        return z
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """EGPI output z, shape (n_samples,) (Eq8)."""
         v = _input(signals)
-        values = np.asarray(values, dtype=float)
         z = self.families(v, values)
-        val = dict(zip(self.names, values, strict=True))
+        val = self.named(values)
         rise = np.array([val[f"vf_rise{j}"] for j in range(1, self.n_stages)])
         fall = np.array([val[f"vf_fall{j}"] for j in range(1, self.n_stages)])
         return select_stage(z, v, motion_direction(v, float(self.deadband)), rise, fall)
@@ -459,5 +498,5 @@ def egpi_model(
     extra = set(values) - set(names)
     if missing or extra:
         raise KeyError(f"EGPI values: missing {missing}, unknown {sorted(extra)}")
-    params = tuple(_P(x, values[x]) for x in names)
+    params = tuple(Parameter(x, float(values[x])) for x in names)
     return EGPIModel("egpi_general", params, envelopes=env, n=n, deadband=deadband)

@@ -1,0 +1,255 @@
+"""Data-driven starts of GPI/EGPI fits (``model.guess``; LM alone from a poor start fails).
+
+Recipe (docs/fit.md):
+
+1. Shape parameters ``sigma, r1, rn, kappa`` from the angle range Theta:
+   ``rn = 0.1 Theta``, ``r1 = 0.1 rn``, ``sigma = 0.5 / rn``, ``kappa = 4``; ``lam`` so
+   that the operator weights sum to 1 (lam and the envelope scale are exactly
+   redundant, see docs/models.md, so lam is held fixed by default).
+2. Envelope lines from the branches: with weights summing to P and
+   ``pr = sum p_i r_i``, a long loading stretch follows ``P (a1 v + a2) - pr``, a long
+   unloading stretch above the flag point ``P (a3 v + a4) + pr`` and below it
+   ``P (a5 v + a6) + kappa pr``; straight-line fits give a1..a6: loading and upper
+   unloading samples far (>= 20 % of the input range) from the last reversal, lower
+   unloading samples in the lower half of their angles (below the S3 dead zone);
+   samples within 5 % of the range of the estimated flag point are left out.
+3. Flag point (:func:`flag_point`): on each unloading stretch, the first input value
+   where the angle stops following the input (|d theta / d v| below 20 % of the
+   loading slope) after it has followed it - the paper's "first point where the
+   derivative is approximately zero" (Lee et al. 2021), read as the derivative of the
+   output with respect to the input, since the commanded input itself keeps moving.
+4. Further starts: the shape parameters scaled by log-uniform factors (seeded), the
+   envelope lines refitted for each.
+
+The recipe applies to models whose parameters are exactly those of the GPI
+(:data:`GPI_PARAMETERS`) or of the I2RIS EGPI (:data:`EGPI_PARAMETERS`, both the
+paper's and the continuous variant); any other model keeps its values. It lives with
+the models (``ParametricModel.guess``) and is used by the fitting stage.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from i2ris_calib.data.dataset import input_bands
+from i2ris_calib.hysteresis.kernel import density, motion_direction, thresholds
+from i2ris_calib.hysteresis.model import Model
+
+#: Parameters of the models the recipe applies to (model order)
+GPI_PARAMETERS = ("a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn")
+EGPI_PARAMETERS = ("a1", "a2", "a3", "a4", "a5", "a6", "lam", "sigma", "r1", "rn", "kappa", "v_f")
+
+
+def recipe_of(model: Model) -> str | None:
+    """``"gpi"``, ``"egpi"`` (both EGPI variants) or None: which start recipe applies."""
+    names = tuple(p.name for p in model.parameters)
+    return {GPI_PARAMETERS: "gpi", EGPI_PARAMETERS: "egpi"}.get(names)
+
+
+def default_deadband(v: np.ndarray) -> float:
+    """The ``v'`` dead band derived from the input (:func:`i2ris_calib.data.input_bands`),
+    what the fit uses unless configured."""
+    return input_bands(np.asarray(v, dtype=float)).deadband
+
+
+def keep_fixed(model: Model, x: np.ndarray) -> np.ndarray:
+    """Start ``x`` (shape (p,)) with the fixed parameters at the model's values, except
+    ``lam`` (the scale gauge, set by the recipe) and ``v_f`` (estimated from the data)."""
+    x = np.array(x, dtype=float)
+    for i, p in enumerate(model.parameters):
+        if p.fixed and p.name not in ("lam", "v_f"):
+            x[i] = p.value
+    return x
+
+
+def segments(direction: np.ndarray) -> np.ndarray:
+    """Index of the monotone stretch every sample belongs to, int (n,)."""
+    d = np.asarray(direction)
+    return np.concatenate(([0], np.cumsum(d[1:] != d[:-1])))
+
+
+def reversal_distance(v: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """|v - v at the start of the current monotone stretch| (counts), shape (n,)."""
+    seg = segments(direction)
+    starts = np.flatnonzero(np.concatenate(([True], seg[1:] != seg[:-1])))
+    anchor = np.asarray(v, dtype=float)[starts][seg]
+    return np.abs(np.asarray(v, dtype=float) - anchor)
+
+
+def _line(v: np.ndarray, theta: np.ndarray, sel: np.ndarray, min_samples: int = 5):
+    """(slope, intercept) of a straight line through the selected samples, or None.
+
+    Least squares, then once more without the samples beyond 3 robust sd (1.4826 MAD)
+    of the residuals: tracking outliers do not tilt the start.
+    """
+    sel = sel & np.isfinite(theta)
+    if sel.sum() < min_samples or np.ptp(v[sel]) <= 0:
+        return None
+    slope, intercept = np.polyfit(v[sel], theta[sel], 1)
+    res = theta[sel] - (slope * v[sel] + intercept)
+    scale = 1.4826 * np.median(np.abs(res - np.median(res)))
+    keep = np.abs(res) <= 3.0 * scale if scale > 0 else np.ones(res.size, bool)
+    if min_samples <= keep.sum() < res.size and np.ptp(v[sel][keep]) > 0:
+        slope, intercept = np.polyfit(v[sel][keep], theta[sel][keep], 1)
+    return float(slope), float(intercept)
+
+
+def _trimmed_mean(x: np.ndarray) -> float:
+    """Mean of ``x`` without values beyond 3 robust sd (1.4826 MAD) of its median."""
+    med = np.median(x)
+    scale = 1.4826 * np.median(np.abs(x - med))
+    keep = np.abs(x - med) <= 3.0 * scale if scale > 0 else np.ones(x.size, bool)
+    return float(np.mean(x[keep])) if keep.any() else float(med)
+
+
+def flag_point(
+    v: np.ndarray, theta: np.ndarray, direction: np.ndarray, loading_slope: float | None = None
+) -> float | None:
+    """Flag point v_f (counts) estimated from the unloading stretches, or None.
+
+    Per unloading stretch covering >= 30 % of the input range, theta is averaged
+    (without values beyond 3 robust sd of the bin's median) in input bins of 2 % of the
+    range, and v_f is the first bin (walking down in v) where
+    |d theta/d v| < 0.2 |loading slope| after it has exceeded 0.5 |loading slope|.
+    The median over stretches is returned.
+    """
+    v = np.asarray(v, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    span = float(np.ptp(v))
+    if span <= 0:
+        return None
+    if loading_slope is None:
+        line = _line(v, theta, direction > 0)
+        if line is None:
+            return None
+        loading_slope = line[0]
+    s_ref = abs(loading_slope)
+    width = 0.02 * span
+    seg = segments(direction)
+    found = []
+    for s in np.unique(seg[direction < 0]):
+        sel = (seg == s) & np.isfinite(theta)
+        if sel.sum() < 10 or np.ptp(v[sel]) < 0.3 * span:
+            continue
+        vb = np.floor((v[sel] - v.min()) / width).astype(int)
+        counts = np.bincount(vb)
+        keep = counts > 0
+        centres = (np.arange(counts.size)[keep] + 0.5) * width + v.min()
+        th_sel = theta[sel]
+        # trimmed bin means: a tracking outlier does not fake a slope change
+        means = np.array([_trimmed_mean(th_sel[vb == b]) for b in np.flatnonzero(keep)])
+        # walk from high v to low v
+        c, m = centres[::-1], means[::-1]
+        slope = np.abs(np.diff(m) / np.diff(c))
+        moving = np.flatnonzero(slope > 0.5 * s_ref)
+        if moving.size == 0:
+            continue
+        after = np.flatnonzero((slope < 0.2 * s_ref) & (np.arange(slope.size) > moving[0]))
+        if after.size:
+            found.append(c[after[0]])
+    return float(np.median(found)) if found else None
+
+
+def shape_defaults(theta: np.ndarray) -> dict[str, float]:
+    """Default shape parameters from the angle range (step 1 of the recipe)."""
+    span = float(np.nanmax(theta) - np.nanmin(theta)) if np.isfinite(theta).any() else 1.0
+    rn = max(0.1 * span, 1e-3)
+    return {"sigma": 0.5 / rn, "r1": 0.1 * rn, "rn": rn, "kappa": 4.0}
+
+
+def envelope_values(
+    model: Model,
+    v: np.ndarray,
+    theta: np.ndarray,
+    direction: np.ndarray,
+    shape: dict[str, float],
+    v_f: float | None,
+) -> dict[str, float]:
+    """a1..a6 (as the model has them) and lam from branch lines, given shape params."""
+    r = thresholds(shape["r1"], shape["rn"], int(model.n))
+    lam = 1.0 / np.exp(-shape["sigma"] * r).sum()
+    p = density(r, lam, shape["sigma"])
+    P, pr = float(p.sum()), float((p * r).sum())
+    span = float(np.ptp(v))
+    far = reversal_distance(v, direction) > 0.2 * span
+    up, down = direction > 0, direction < 0
+    load = (
+        _line(v, theta, up & far) or _line(v, theta, up) or (np.nanmax(theta) / max(span, 1), 0.0)
+    )
+    out = {"lam": lam, "a1": load[0] / P, "a2": (load[1] + pr) / P}
+    margin = 0.05 * span  # keep clear of the (uncertain) flag point
+    upper = down & (v > v_f + margin) if v_f is not None else down
+    unl1 = _line(v, theta, upper & far) or _line(v, theta, upper) or (load[0], load[1] + 2 * pr)
+    out.update(a3=unl1[0] / P, a4=(unl1[1] - pr) / P)
+    if recipe_of(model) == "egpi":
+        kappa = shape["kappa"]
+        vlow = v_f if v_f is not None else float(np.median(v))
+        lower = down & (v <= vlow - margin)
+        # the steep part below the stage-2 dead zone: the lower half of those angles
+        ok = lower & np.isfinite(theta)
+        low_half = ok & (theta <= np.median(theta[ok])) if ok.any() else ok
+        unl2 = _line(v, theta, low_half) or _line(v, theta, lower) or unl1
+        out.update(a5=unl2[0] / P, a6=(unl2[1] - kappa * pr) / P)
+    return out
+
+
+def initial_values(
+    model: Model,
+    v: np.ndarray,
+    theta: np.ndarray,
+    deadband: float = 0.0,
+    shape: dict[str, float] | None = None,
+    v_f: float | None = None,
+) -> np.ndarray:
+    """Data-driven start vector for ``model`` (GPI or I2RIS EGPI), shape (p,).
+
+    Other model types get their current values. Fixed parameters keep their values
+    except ``lam`` (set by the normalisation of step 1 unless the caller fixed a
+    value through ``shape``) and ``v_f`` (estimated when ``v_f`` is None and the
+    model's value is not pinned).
+    """
+    recipe = recipe_of(model)
+    if recipe is None:
+        return np.array([p.value for p in model.parameters], dtype=float)
+    v = np.asarray(v, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    direction = motion_direction(np.ascontiguousarray(v), float(deadband))
+    sh = shape_defaults(theta) | (shape or {})
+    vals = {k: sh[k] for k in ("sigma", "r1", "rn")}
+    if recipe == "egpi":
+        if v_f is None:
+            v_f = flag_point(v, theta, direction)
+        if v_f is None:
+            v_f = float(np.min(v) + 0.6 * np.ptp(v))
+        vals.update(kappa=sh["kappa"], v_f=v_f)
+    vals.update(envelope_values(model, v, theta, direction, sh, vals.get("v_f")))
+    if "lam" in sh:
+        vals["lam"] = sh["lam"]
+    return model.vector({k: x for k, x in vals.items() if k in model.names})
+
+
+def start_values(
+    model: Model,
+    v: np.ndarray,
+    theta: np.ndarray,
+    n_starts: int,
+    rng: np.random.Generator,
+    deadband: float = 0.0,
+    v_f: float | None = None,
+) -> list[np.ndarray]:
+    """``n_starts`` start vectors: the data-driven one first, then seeded variations
+    of the shape parameters (log-uniform factors in [1/3, 3]; kappa in [1/2, 2])."""
+    base = shape_defaults(np.asarray(theta, dtype=float))
+    starts = [initial_values(model, v, theta, deadband, base, v_f)]
+    if recipe_of(model) == "egpi":
+        v_f = float(starts[0][EGPI_PARAMETERS.index("v_f")])
+    for _ in range(max(0, n_starts - 1)):
+        f = np.exp(rng.uniform(np.log(1 / 3), np.log(3), 3))
+        shape = {
+            "rn": base["rn"] * f[0],
+            "r1": base["r1"] * f[1],
+            "sigma": base["sigma"] * f[2],
+            "kappa": base["kappa"] * float(np.exp(rng.uniform(np.log(0.5), np.log(2.0)))),
+        }
+        starts.append(initial_values(model, v, theta, deadband, shape, v_f))
+    return starts

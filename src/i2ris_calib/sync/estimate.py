@@ -287,8 +287,9 @@ DISAGREE_SD = 3.0
 def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncConfig, fit_config):
     """``auto`` with a coarse sync event: combine it with the hysteresis model.
 
-    When the event's offset standard error (middle of the recording) exceeds
-    ``cfg.auto_refine_stderr_s`` and an axis moves, the model profile is searched
+    When the event clock's standard error somewhere in the recording (the largest of
+    its first frame, middle and last frame: an uncertain drift dominates at the ends)
+    exceeds ``cfg.auto_refine_stderr_s`` and an axis moves, the model profile is searched
     within the event's +-4 standard errors and the two clocks are combined as
     evidence (:func:`combine_clocks`: the product of their Gaussian likelihoods in
     (offset at the model's reference time, drift); method ``event+model``, both
@@ -299,9 +300,12 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     the event, and a model that contradicts the event is not trusted over it.
     """
     series = axis_series(angles)
-    t_mid = float(np.mean(angles["time_s"].to_numpy(dtype=float)))
+    t_cam = angles["time_s"].to_numpy(dtype=float)
+    t_mid = float(np.mean(t_cam))
     sd = event.offset_stderr_at(t_mid)
-    if cfg.auto_refine_stderr_s <= 0 or not series or not sd > cfg.auto_refine_stderr_s:
+    # the clock's sd anywhere in the recording: at its ends an uncertain drift dominates
+    sd_any = max(event.offset_stderr_at(float(t)) for t in (t_cam[0], t_mid, t_cam[-1]))
+    if cfg.auto_refine_stderr_s <= 0 or not series or not sd_any > cfg.auto_refine_stderr_s:
         return event
     try:
         model = clock_from_model(frame_series(angles), log, cfg, fit_config, prior=event)
@@ -325,7 +329,7 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     }
     combined.evidence["combination"] = info
     combined.evidence["auto"] = (
-        f"sync event too coarse (offset sd {sd * 1e3:.2f} ms > auto_refine_stderr_s): "
+        f"sync event too coarse (clock sd up to {sd_any * 1e3:.2f} ms > auto_refine_stderr_s): "
         "combined with the hysteresis-model profile searched within its +-4 sd "
         "(product of the two likelihoods)"
     )

@@ -666,7 +666,7 @@ def drift_gauss_newton(
 
 def cycle_offsets(
     profile: OffsetProfile, offset_c_s: float, drift_ppm: float, eps_s: float = 1e-3
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Local offsets, one per loading cycle of every block, with the models held fixed.
 
     For each (block, loading cycle) with >= 10 frames in the trimmed loss: one
@@ -682,10 +682,12 @@ def cycle_offsets(
     t_cam_s, offsets_s, sd_s : ndarray, shape (g,)
         Offsets as ``t_ctrl - t_cam`` at ``t_g`` (the clock's offset at ``t_c`` moved
         along the drift).
+    block : ndarray of int, shape (g,)
+        Index of the block (axis and direction) of each cycle in ``profile.blocks``.
     """
 
-    ts, os_, sds = [], [], []
-    for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
+    ts, os_, sds, blk = [], [], [], []
+    for k, (b, f) in enumerate(zip(profile.blocks, profile.fits(offset_c_s), strict=True)):
         x = np.asarray(f.model.values, dtype=float)
         v = profile.inputs(b, offset_c_s, drift_ppm)
         r = b.theta_deg - f.model.evaluate(v, x)
@@ -710,7 +712,91 @@ def cycle_offsets(
                 offset_c_s + float(jo[sel] @ r[sel]) / jj + drift_ppm * PPM * (t_g - profile.t_c)
             )
             sds.append(sigma / np.sqrt(jj))
-    return np.array(ts), np.array(os_), np.array(sds)
+            blk.append(k)
+    return np.array(ts), np.array(os_), np.array(sds), np.array(blk, dtype=int)
+
+
+def block_bias_cov(
+    t_g: np.ndarray,
+    o_g: np.ndarray,
+    sd_g: np.ndarray,
+    block: np.ndarray,
+    t_c: float,
+    offset_c_s: float,
+    drift_ppm: float,
+    fit_drift: bool = True,
+) -> tuple[np.ndarray, dict]:
+    """Covariance of (offset at ``t_c``, drift) allowing a misfit bias shared by a block.
+
+    The per-cycle offsets (:func:`cycle_offsets`) are modelled as
+
+    ::
+
+        o_g = offset_c + drift * 1e-6 * (t_g - t_c) + u_b(g) + e_g
+        u_b ~ N(0, tau^2)   one per block (axis and direction), shared by its cycles
+        e_g ~ N(0, sd_g^2)  per cycle
+
+    A hysteresis model that misfits an axis-direction in the same way on every cycle
+    shifts all its cycles' offsets alike: no number of cycles averages that out, and
+    when the axes move at different times (yaw first, pitch later) the difference of
+    their biases looks exactly like drift. ``tau^2`` is the pooled scatter of the
+    cycle offsets about their block's mean (the misfit that differs between cycles is
+    taken to be as large as the one they share; without two cycles in a block, the
+    scatter about the clock line). The covariance is the generalised least-squares one,
+    ``(X^T V^-1 X)^-1`` with ``V = diag(sd_g^2) + tau^2 [b(g) = b(h)]``, scaled by the
+    reduced chi-square of that fit when it exceeds 1.
+
+    Parameters
+    ----------
+    t_g, o_g, sd_g : ndarray, shape (G,)
+        Cycle times (camera clock, s), offsets (s) and their sd (s).
+    block : ndarray of int, shape (G,)
+        Block of each cycle.
+    t_c, offset_c_s, drift_ppm : float
+        The clock: offset at camera time ``t_c`` (s) and drift (ppm).
+    fit_drift : bool
+        False: the offset only (drift held).
+
+    Returns
+    -------
+    cov : ndarray, shape (2, 2)
+        Covariance of (offset at ``t_c``, drift); NaN with fewer than 2 cycles.
+    info : dict
+        ``tau_s``, ``n_cycles``, ``n_blocks``, ``chi2_reduced``, ``offset_sd_s``,
+        ``drift_sd_ppm``.
+    """
+    t_g, o_g, sd_g, block = (np.asarray(a) for a in (t_g, o_g, sd_g, block))
+    n = t_g.size
+    if n < 2:
+        return np.full((2, 2), np.nan), {"n_cycles": int(n)}
+    r = o_g - (offset_c_s + drift_ppm * PPM * (t_g - t_c))
+    ss, dof = 0.0, 0
+    for b in np.unique(block):
+        rb = r[block == b]
+        if rb.size >= 2:
+            ss += float(np.sum((rb - rb.mean()) ** 2))
+            dof += rb.size - 1
+    tau2 = ss / dof if dof >= 2 else float(np.mean(r**2))
+    v = np.diag(sd_g**2) + tau2 * (block[:, None] == block[None, :])
+    x = np.column_stack([np.ones(n), (t_g - t_c) * PPM]) if fit_drift else np.ones((n, 1))
+    vi = np.linalg.inv(v)
+    cov_p = np.linalg.pinv(x.T @ vi @ x)
+    resid = r - x @ (cov_p @ x.T @ vi @ r)
+    k = n - x.shape[1]
+    chi2 = float(resid @ vi @ resid / k) if k > 0 else float("nan")
+    if k > 0 and chi2 > 1:
+        cov_p = cov_p * chi2
+    cov = np.zeros((2, 2))
+    cov[: x.shape[1], : x.shape[1]] = cov_p
+    info = {
+        "tau_s": float(np.sqrt(tau2)),
+        "n_cycles": int(n),
+        "n_blocks": int(np.unique(block).size),
+        "chi2_reduced": chi2,
+        "offset_sd_s": float(np.sqrt(cov[0, 0])),
+        "drift_sd_ppm": float(np.sqrt(cov[1, 1])) if fit_drift else float("nan"),
+    }
+    return cov, info
 
 
 def frames_series(series: list[AxisSeries]) -> list[AxisSeries]:
@@ -809,13 +895,21 @@ def clock_from_model(
             profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
             best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
     sd_c, unc = offset_stderr(profile, best, 1.5 * step)
+    # per-cycle offsets: white sd inflated by F (misfit correlated within a cycle, as
+    # for the offset)
+    t_g, o_g, sd_g, blk = cycle_offsets(profile, best, drift)
+    f_ac = unc.get("autocorr_factor_F", 1.0)
+    sd_g = sd_g * np.sqrt(max(1.0, f_ac if np.isfinite(f_ac) else 1.0))
+    # a misfit shared by all cycles of a block (axis-direction) biases offset and drift
+    # alike: the sd of both is at least that of the per-cycle offsets with a block bias
+    cov_b, block_info = block_bias_cov(t_g, o_g, sd_g, blk, t_c, best, drift, cfg.estimate_drift)
+    if np.isfinite(cov_b[0, 0]):
+        block_info["offset_sd_before_s"] = sd_c
+        sd_c = max(sd_c, float(np.sqrt(cov_b[0, 0])))
+        unc["blocks"] = block_info
     if cfg.estimate_drift:
-        # the drift's sd is at least that of a line through the per-cycle offsets, whose
-        # white sd is inflated by F (misfit correlated within a cycle, as for the offset)
-        # and scaled by their reduced chi-square when they scatter more than that
-        t_g, o_g, sd_g = cycle_offsets(profile, best, drift)
-        f_ac = unc.get("autocorr_factor_F", 1.0)
-        sd_g = sd_g * np.sqrt(max(1.0, f_ac if np.isfinite(f_ac) else 1.0))
+        # the drift's sd is at least that of a line through the per-cycle offsets,
+        # scaled by their reduced chi-square when they scatter more than their sd
         if t_g.size >= 3 and np.ptp(t_g) > 0:
             _, d_line, cov_line, chi2_line = clock_from_offsets(t_g, o_g, sd_g, True, "if_larger")
             line_sd = float(np.sqrt(cov_line[1, 1]))
@@ -827,6 +921,9 @@ def clock_from_model(
                 "gauss_newton_drift_sd_ppm": drift_sd,
             }
             drift_sd = max(drift_sd, line_sd)
+        if np.isfinite(cov_b[1, 1]):
+            drift_scatter["block_bias_drift_sd_ppm"] = float(np.sqrt(cov_b[1, 1]))
+            drift_sd = max(drift_sd, float(np.sqrt(cov_b[1, 1])))
     offset0 = best - drift * PPM * t_c  # offset at camera time 0 (t_ctrl - t_cam)
     var_d = drift_sd**2 if np.isfinite(drift_sd) else 0.0
     cov = np.array(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from i2ris_calib.hysteresis.kernel import play_operators
@@ -33,7 +33,7 @@ def _egpi(seed):
 def test_operator_stays_in_envelope_band(v, r, slope, gap):
     """gamma_l(v) - r <= w <= gamma_r(v) + r at every sample when gamma_l <= gamma_r + 2r."""
     gl, gr = slope * v, slope * v + gap
-    w = play_operators(v, gl, np.array([r]), gr, np.array([r]), np.ones(1))
+    w = play_operators(v, slope, 0.0, np.array([r]), slope, gap, np.array([r]), np.ones(1))
     assert np.all(w >= gl - r - 1e-9)
     assert np.all(w <= gr + r + 1e-9)
 
@@ -126,8 +126,17 @@ def test_continuous_egpi_nests_gpi(v, seed):
 def test_continuous_egpi_has_no_step_at_the_flag_point(seed):
     """A finely sampled unloading ramp through v_f: the paper's EGPI may step by
     |y2 - y1| there; the continuous EGPI moves by at most what the boundaries allow for
-    one input step (sum of weights x steepest boundary slope x 2 counts)."""
+    one input step (sum of weights x steepest boundary slope x 2 counts).
+
+    Only where the stage-2 boundary starts at or above the stage-1 boundary at v_f
+    (``gamma_r2(v_f) + kappa r >= gamma_r1(v_f) + r`` for every threshold): below it,
+    operators in contact with the stage-1 boundary drop to the stage-2 one at v_f, a
+    step of the output (e.g. seed 591: gap -0.95 deg at r = 0, step 0.041 deg)."""
     vals = random_i2ris_egpi_params(np.random.default_rng(seed))
+    r = thresholds(vals["r1"], vals["rn"], 30)
+    vf = vals["v_f"]
+    gap = vals["a5"] * vf + vals["a6"] + vals["kappa"] * r - (vals["a3"] * vf + vals["a4"] + r)
+    assume(gap.min() >= 0)
     v = np.r_[np.linspace(0, 6000, 3001), np.linspace(6000, 0, 3001)]
     y = continuous_egpi_model(**vals)(v)
     k = int(np.flatnonzero((v[:-1] > vals["v_f"]) & (v[1:] <= vals["v_f"]))[-1]) + 1

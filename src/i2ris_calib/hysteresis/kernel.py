@@ -5,10 +5,11 @@ The models (:mod:`.models`) write the paper's equations with these:
 * :func:`thresholds` (Eq14) and :func:`density` (Eq15): the operators' thresholds
   ``r_i`` and weights ``p(r_i)``, written once (callable from Python and from compiled
   code);
-* :func:`play_operators`: THE play-operator loop (Eq1-2 / Eq16-17) and the weighted
-  sum (Eq3 / Eq18-19) - the operators of GPI, of both paper-EGPI families and of the
-  general EGPI run through it; :func:`play_switched` is the same loop with the
+* :func:`play_operators`: THE compiled play-operator loop (Eq1-2 / Eq16-17) and the
+  weighted sum (Eq3 / Eq18-19) on linear envelopes - the operators of GPI and of both
+  paper-EGPI families run through it; :func:`play_switched` is the same loop with the
   continuous EGPI's unloading law, which switches at the flag point;
+  :func:`play_numpy` the plain reference on envelope arrays (also the general EGPI's);
 * :func:`motion_direction`: what ``v'`` means on sampled data (Eq8, Eq20);
 * :func:`select_stage`: the general EGPI's output switching (Eq8).
 
@@ -19,7 +20,8 @@ contiguous arrays), which LLVM vectorises.
 Conventions:
 
 * ``v`` : input, shape (n,), any unit (encoder counts for I2RIS).
-* ``gamma_l``, ``gamma_r`` : loading / unloading envelope at every sample, shape (n,).
+* envelopes: ``gamma_l = a_l v + b_l``, ``gamma_r = a_r v + b_r`` (compiled loops;
+  scalars), or values at every sample, shape (n,) (:func:`play_numpy`).
 * ``r_l``, ``r_r`` : effective thresholds of the loading and unloading boundaries,
   shape (m,): the loading boundary is ``gamma_l - r_l``, the unloading one
   ``gamma_r + r_r`` (``r_r = kappa r`` for the paper's second family, Eq17).
@@ -68,19 +70,21 @@ def density(r, lam, sigma):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=True)
-def play_operators(v, gamma_l, r_l, gamma_r, r_r, p):  # pragma: no cover - compiled
+def play_operators(v, a_l, b_l, r_l, a_r, b_r, r_r, p):  # pragma: no cover - compiled
     """Weighted sum of play operators ``sum_i p_i w_i`` at every sample, shape (n,).
 
-    THE play-operator loop (Eq1-3; each family of Eq4-7 and Eq16-19): v rises
-    ``w_i = max(gamma_l - r_l[i], w_i)``, v falls ``w_i = min(gamma_r + r_r[i], w_i)``,
-    a hold keeps ``w``.
+    THE compiled play-operator loop (Eq1-3; each family of Eq16-19), on linear
+    envelopes ``gamma_l = a_l v + b_l`` and ``gamma_r = a_r v + b_r`` (Eq21-23),
+    evaluated inside the loop (envelope arrays of a long record would cost more than
+    the loop: fresh memory pages). v rises ``w_i = max(gamma_l - r_l[i], w_i)``, v falls
+    ``w_i = min(gamma_r + r_r[i], w_i)``, a hold keeps ``w``.
 
     Parameters
     ----------
     v : ndarray, shape (n,)
         Input (counts).
-    gamma_l, gamma_r : ndarray, shape (n,)
-        Loading / unloading envelope at every sample (deg).
+    a_l, b_l, a_r, b_r : float
+        Envelope slopes (deg/count) and offsets (deg).
     r_l, r_r : ndarray, shape (m,)
         Thresholds of the loading / unloading boundary (deg).
     p : ndarray, shape (m,)
@@ -92,15 +96,16 @@ def play_operators(v, gamma_l, r_l, gamma_r, r_r, p):  # pragma: no cover - comp
     if ns == 0:
         return out
     w = np.empty(m)
+    g_l, g_r = a_l * v[0] + b_l, a_r * v[0] + b_r
     acc = 0.0
     for i in range(m):
-        wi = min(max(0.0, gamma_l[0] - r_l[i]), gamma_r[0] + r_r[i])
+        wi = min(max(0.0, g_l - r_l[i]), g_r + r_r[i])
         w[i] = wi
         acc += p[i] * wi
     out[0] = acc
     for k in range(1, ns):
         if v[k] > v[k - 1]:  # Eq1, v' > 0
-            g = gamma_l[k]
+            g = a_l * v[k] + b_l
             acc = 0.0
             for i in range(m):
                 wi = max(g - r_l[i], w[i])
@@ -108,7 +113,7 @@ def play_operators(v, gamma_l, r_l, gamma_r, r_r, p):  # pragma: no cover - comp
                 acc += p[i] * wi
             out[k] = acc
         elif v[k] < v[k - 1]:  # Eq1, v' < 0
-            g = gamma_r[k]
+            g = a_r * v[k] + b_r
             acc = 0.0
             for i in range(m):
                 wi = min(g + r_r[i], w[i])
@@ -121,19 +126,17 @@ def play_operators(v, gamma_l, r_l, gamma_r, r_r, p):  # pragma: no cover - comp
 
 
 @njit(cache=True, fastmath=True)
-def play_switched(
-    v, gamma_l, gamma_r1, gamma_r2, r, kappa, v_f, gamma_r1_at_vf, p
-):  # pragma: no cover
+def play_switched(v, a_l, b_l, a_r1, b_r1, a_r2, b_r2, r, kappa, v_f, p):  # pragma: no cover
     """:func:`play_operators` whose unloading law switches at ``v_f`` (continuous EGPI).
 
     Loading ``w_i = max(gamma_l - r_i, w_i)``; unloading ``w_i = min(gamma_r1 + r_i, w_i)``
     above ``v_f`` and ``min(gamma_r2 + kappa r_i, w_i)`` at or below it, from whatever
-    state the operators have there (docs/models.md). An unloading step that crosses
-    ``v_f`` first meets the first boundary at ``v_f`` (``gamma_r1_at_vf + r_i``, as a
-    continuous input would), so the output does not depend on the sampling. Shapes as
-    :func:`play_operators` (``r``: thresholds, shape (m,)); ``kappa``, ``v_f``,
-    ``gamma_r1_at_vf`` are scalars. (A loop of its own: a switch inside
-    :func:`play_operators` costs that loop ~30 % of its speed.)
+    state the operators have there (docs/models.md); ``gamma_l = a_l v + b_l``,
+    ``gamma_r1 = a_r1 v + b_r1``, ``gamma_r2 = a_r2 v + b_r2``. An unloading step that
+    crosses ``v_f`` first meets the first boundary at ``v_f`` (as a continuous input
+    would), so the output does not depend on the sampling. ``r``: thresholds, shape
+    (m,). (A loop of its own: a switch inside :func:`play_operators` costs that loop
+    ~30 % of its speed.)
     """
     ns = v.size
     m = p.size
@@ -141,16 +144,17 @@ def play_switched(
     if ns == 0:
         return out
     w = np.empty(m)
-    g, kr = (gamma_r1[0], 1.0) if v[0] > v_f else (gamma_r2[0], kappa)
+    g_l = a_l * v[0] + b_l
+    g, kr = (a_r1 * v[0] + b_r1, 1.0) if v[0] > v_f else (a_r2 * v[0] + b_r2, kappa)
     acc = 0.0
     for i in range(m):
-        wi = min(max(0.0, gamma_l[0] - r[i]), g + kr * r[i])
+        wi = min(max(0.0, g_l - r[i]), g + kr * r[i])
         w[i] = wi
         acc += p[i] * wi
     out[0] = acc
     for k in range(1, ns):
         if v[k] > v[k - 1]:
-            g = gamma_l[k]
+            g = a_l * v[k] + b_l
             acc = 0.0
             for i in range(m):
                 wi = max(g - r[i], w[i])
@@ -158,9 +162,12 @@ def play_switched(
                 acc += p[i] * wi
             out[k] = acc
         elif v[k] < v[k - 1]:
-            g, kr = (gamma_r1[k], 1.0) if v[k] > v_f else (gamma_r2[k], kappa)
+            if v[k] > v_f:
+                g, kr = a_r1 * v[k] + b_r1, 1.0
+            else:
+                g, kr = a_r2 * v[k] + b_r2, kappa
             # a step that crossed v_f meets the first boundary at v_f first
-            g1 = gamma_r1_at_vf if v[k - 1] > v_f >= v[k] else np.inf
+            g1 = a_r1 * v_f + b_r1 if v[k - 1] > v_f >= v[k] else np.inf
             acc = 0.0
             for i in range(m):
                 wi = min(g + kr * r[i], min(g1 + r[i], w[i]))
@@ -233,8 +240,15 @@ def select_stage(z, v, direction, rising_flags, falling_flags):  # pragma: no co
 
 
 def play_numpy(v, gamma_l, r_l, gamma_r, r_r, p):
-    """Reference for :func:`play_operators`: Python loop over time, numpy over operators
-    (tests and the speed benchmark)."""
+    """The play-operator loop on envelope arrays ``gamma_l``, ``gamma_r`` (shape (n,)),
+    plainly: Python loop over time, numpy over operators, shape (n,).
+
+    The reference of :func:`play_operators` (tests, the speed benchmark) and the loop
+    of the general EGPI (any envelope, e.g. the paper's tanh ones of Section 3.1;
+    about 50 ms for 10,000 samples)."""
+    v = np.asarray(v, dtype=float)
+    if v.size == 0:
+        return np.empty(0)
     v = np.asarray(v, dtype=float)
     out = np.empty(v.size)
     w = np.minimum(np.maximum(0.0, gamma_l[0] - r_l), gamma_r[0] + r_r)

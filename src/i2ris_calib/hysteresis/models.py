@@ -40,6 +40,7 @@ from numba import njit
 from i2ris_calib.hysteresis.kernel import (
     density,
     motion_direction,
+    play_numpy,
     play_operators,
     play_switched,
     select_stage,
@@ -231,10 +232,9 @@ def gpi_output(v, a1, a2, a3, a4, lam, sigma, r1, rn, n):  # pragma: no cover - 
     """GPI output y (deg), shape (len(v),), for input ``v`` (counts); ``n`` thresholds."""
     r = thresholds(r1, rn, n)  # Eq14: r_0 = 0, r_1..r_n uniform
     p = density(r, lam, sigma)  # Eq15: p(r_i) = lam exp(-sigma r_i)
-    gamma_l = a1 * v + a2  # loading envelope (the form of Eq21)
-    gamma_r = a3 * v + a4  # unloading envelope (the form of Eq22)
-    # Eq1-3: y = sum_i p(r_i) G_{r_i}[v]; G on gamma_l - r (v rises), gamma_r + r (v falls)
-    return play_operators(v, gamma_l, r, gamma_r, r, p)
+    # Eq1-3: y = sum_i p(r_i) G_{r_i}[v]; G on gamma_l - r while v rises and on
+    # gamma_r + r while v falls, gamma_l = a1 v + a2, gamma_r = a3 v + a4 (the form of Eq21-22)
+    return play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a3, b_r=a4, r_r=r, p=p)
 
 
 @njit(cache=True)
@@ -245,11 +245,10 @@ def egpi_output(
     the ``v'`` dead band (counts, :func:`~.kernel.motion_direction`)."""
     r = thresholds(r1, rn, n)  # Eq14
     p = density(r, lam, sigma)  # Eq15
-    gamma_l = a1 * v + a2  # Eq21
-    gamma_r1 = a3 * v + a4  # Eq22
-    gamma_r2 = a5 * v + a6  # Eq23
-    y1 = play_operators(v, gamma_l, r, gamma_r1, r, p)  # Eq16, Eq18: F_{r,1}, y1
-    y2 = play_operators(v, gamma_l, r, gamma_r2, kappa * r, p)  # Eq17, Eq19: F_{r,2}, y2
+    # Eq16, Eq18: F_{r,1} on gamma_l = a1 v + a2 (Eq21), gamma_r1 = a3 v + a4 (Eq22); y1
+    y1 = play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a3, b_r=a4, r_r=r, p=p)
+    # Eq17, Eq19: F_{r,2} on gamma_l, gamma_r2 = a5 v + a6 (Eq23) with kappa r; y2
+    y2 = play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a5, b_r=a6, r_r=kappa * r, p=p)
     unloading = motion_direction(v, deadband) < 0  # v' <= 0 (a hold keeps the direction)
     return np.where(unloading & (v <= v_f), y2, y1)  # Eq20
 
@@ -260,13 +259,12 @@ def continuous_egpi_output(
 ):  # pragma: no cover
     """Continuous EGPI output y (deg), shape (len(v),) (docs/models.md): one family,
     loading as Eq16-17, unloading as F_{r,1} (Eq16) above v_f and as F_{r,2} (Eq17) at
-    or below it, from the state the operators have there."""
+    or below it, from the state the operators have there; envelopes Eq21-23."""
     r = thresholds(r1, rn, n)  # Eq14
     p = density(r, lam, sigma)  # Eq15
-    gamma_l = a1 * v + a2  # Eq21
-    gamma_r1 = a3 * v + a4  # Eq22
-    gamma_r2 = a5 * v + a6  # Eq23
-    return play_switched(v, gamma_l, gamma_r1, gamma_r2, r, kappa, v_f, a3 * v_f + a4, p)
+    return play_switched(
+        v, a_l=a1, b_l=a2, a_r1=a3, b_r1=a4, a_r2=a5, b_r2=a6, r=r, kappa=kappa, v_f=v_f, p=p
+    )
 
 
 # Default values are the "yaw+" paper-like preset (see presets.py); bounds are wide
@@ -454,9 +452,7 @@ class EGPIModel(ParametricModel):
             gamma_r = er(v, np.array([val[f"r{s}_{x}"] for x in er.suffixes]))
             kappa_l, kappa_r = val.get(f"kappa_l{s}", 1.0), val.get(f"kappa_r{s}", 1.0)
             # Eq4-7: H_{r,s} on gamma_l,s - kappa_l r (v rises), gamma_r,s + kappa_r r (v falls)
-            z[s - 1] = play_operators(
-                v, gamma_l=gamma_l, r_l=kappa_l * r, gamma_r=gamma_r, r_r=kappa_r * r, p=p
-            )
+            z[s - 1] = play_numpy(v, gamma_l, kappa_l * r, gamma_r, kappa_r * r, p)
         return z
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:

@@ -75,7 +75,11 @@ class PIWeights(ParametricModel):
     def basis(self, v: np.ndarray) -> np.ndarray:
         """Columns 1, G_{r_1}[v], ..., shape (n, 1 + m)."""
         v = np.ascontiguousarray(v, dtype=float)
-        ops = [play_operators(v, v, np.array([ri]), v, np.array([ri]), np.ones(1)) for ri in self.r]
+        one = np.ones(1)
+        ops = [
+            play_operators(v, 1.0, 0.0, np.array([ri]), 1.0, 0.0, np.array([ri]), one)
+            for ri in self.r
+        ]
         return np.column_stack([np.ones(v.size), *ops])
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:

@@ -29,8 +29,9 @@ def egpi_numpy(v: np.ndarray, x: np.ndarray, n: int, deadband: float) -> np.ndar
     a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f = x
     r = thresholds(r1, rn, n)
     p = density(r, lam, sigma)
-    gl = a1 * v + a2
-    z = (play_numpy(v, gl, r, a3 * v + a4, r, p), play_numpy(v, gl, r, a5 * v + a6, kappa * r, p))
+    gl = np.column_stack((a1 * v + a2, a1 * v + a2))
+    gr = np.column_stack((a3 * v + a4, a5 * v + a6))
+    z = play_numpy(v, gl, np.vstack((r, r)), gr, np.vstack((r, kappa * r)), p).T  # both families
     d = np.empty(v.size, dtype=int)
     state, anchor = 1, v[0]
     for k, xk in enumerate(v):  # v' = direction of the last change beyond the dead band

@@ -70,7 +70,7 @@ def density(r, lam, sigma):  # pragma: no cover - compiled
 
 
 @njit(cache=True, fastmath=True)
-def play_operators(v, a_l, b_l, r_l, a_r, b_r, r_r, p):  # pragma: no cover - compiled
+def play_operators(v, a_l, b_l, r_l, a_r, b_r, r_r, p, out=None):  # pragma: no cover - compiled
     """Weighted sum of play operators ``sum_i p_i w_i`` at every sample, shape (n,).
 
     THE compiled play-operator loop (Eq1-3; each family of Eq16-19), on linear
@@ -89,10 +89,13 @@ def play_operators(v, a_l, b_l, r_l, a_r, b_r, r_r, p):  # pragma: no cover - co
         Thresholds of the loading / unloading boundary (deg).
     p : ndarray, shape (m,)
         Weights p(r_i).
+    out : ndarray, shape (n,), optional
+        Written in place and returned (default: a new array).
     """
     ns = v.size
     m = p.size
-    out = np.empty(ns)
+    if out is None:
+        out = np.empty(ns)
     if ns == 0:
         return out
     w = np.empty(m)
@@ -240,23 +243,37 @@ def select_stage(z, v, direction, rising_flags, falling_flags):  # pragma: no co
 
 
 def play_numpy(v, gamma_l, r_l, gamma_r, r_r, p):
-    """The play-operator loop on envelope arrays ``gamma_l``, ``gamma_r`` (shape (n,)),
-    plainly: Python loop over time, numpy over operators, shape (n,).
+    """The play-operator loop on envelope values, plainly: Python loop over time, numpy
+    over operators.
 
     The reference of :func:`play_operators` (tests, the speed benchmark) and the loop
-    of the general EGPI (any envelope, e.g. the paper's tanh ones of Section 3.1;
-    about 50 ms for 10,000 samples)."""
+    of the general EGPI (any envelope, e.g. the paper's tanh ones of Section 3.1; about
+    50 ms for 10,000 samples).
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+    gamma_l, gamma_r : ndarray, shape (n,) or (n, S)
+        Envelopes at every sample (S families at once).
+    r_l, r_r : ndarray, shape (m,) or (S, m)
+    p : ndarray, shape (m,)
+
+    Returns
+    -------
+    ndarray, shape (n,) or (n, S)
+    """
     v = np.asarray(v, dtype=float)
+    gl = np.asarray(gamma_l, dtype=float)[..., None]
+    gr = np.asarray(gamma_r, dtype=float)[..., None]
+    out = np.empty(gl.shape[:-1])
     if v.size == 0:
-        return np.empty(0)
-    v = np.asarray(v, dtype=float)
-    out = np.empty(v.size)
-    w = np.minimum(np.maximum(0.0, gamma_l[0] - r_l), gamma_r[0] + r_r)
+        return out
+    w = np.minimum(np.maximum(0.0, gl[0] - r_l), gr[0] + r_r)
     out[0] = w @ p
     for k in range(1, v.size):
         if v[k] > v[k - 1]:
-            w = np.maximum(gamma_l[k] - r_l, w)
+            w = np.maximum(gl[k] - r_l, w)
         elif v[k] < v[k - 1]:
-            w = np.minimum(gamma_r[k] + r_r, w)
+            w = np.minimum(gr[k] + r_r, w)
         out[k] = w @ p
     return out

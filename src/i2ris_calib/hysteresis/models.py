@@ -245,12 +245,14 @@ def egpi_output(
     the ``v'`` dead band (counts, :func:`~.kernel.motion_direction`)."""
     r = thresholds(r1, rn, n)  # Eq14
     p = density(r, lam, sigma)  # Eq15
+    y = np.empty((2, v.size))  # y1, y2 (one buffer: fewer fresh memory pages)
     # Eq16, Eq18: F_{r,1} on gamma_l = a1 v + a2 (Eq21), gamma_r1 = a3 v + a4 (Eq22); y1
-    y1 = play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a3, b_r=a4, r_r=r, p=p)
+    play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a3, b_r=a4, r_r=r, p=p, out=y[0])
     # Eq17, Eq19: F_{r,2} on gamma_l, gamma_r2 = a5 v + a6 (Eq23) with kappa r; y2
-    y2 = play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a5, b_r=a6, r_r=kappa * r, p=p)
-    unloading = motion_direction(v, deadband) < 0  # v' <= 0 (a hold keeps the direction)
-    return np.where(unloading & (v <= v_f), y2, y1)  # Eq20
+    play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a5, b_r=a6, r_r=kappa * r, p=p, out=y[1])
+    direction = motion_direction(v, deadband)  # v' (a hold keeps the direction)
+    # Eq20: y1 while loading (v' > 0) or above v_f, y2 while unloading (v' <= 0) at v <= v_f
+    return np.where((direction < 0) & (v <= v_f), y[1], y[0])
 
 
 @njit(cache=True)

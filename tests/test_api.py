@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import doctest
+import importlib
+import re
 from pathlib import Path
 
 import numpy as np
@@ -84,3 +86,45 @@ def test_docs_api_examples_run():
         str(ROOT / "docs" / "api.md"), module_relative=False, optionflags=doctest.ELLIPSIS
     )
     assert tests > 0 and failures == 0
+
+
+_HOMES = ("hysteresis.kernel", "hysteresis.models", "hysteresis.paper", "fitting.fit")
+_HOMES += ("fitting.metrics", "fitting.pipeline")
+
+
+def _resolve(name: str):
+    """The object a table entry like ``kernel.thresholds`` or ``GPIModel.evaluate`` names."""
+    parts = name.split(".")
+    for i in range(len(parts) - 1, 0, -1):  # a module path given in full or from its package
+        for mod in (".".join(parts[:i]), f"hysteresis.{'.'.join(parts[:i])}"):
+            try:
+                obj = importlib.import_module(f"i2ris_calib.{mod}")
+            except ModuleNotFoundError:
+                continue
+            for attr in parts[i:]:
+                obj = getattr(obj, attr)
+            return obj
+    for mod in _HOMES:  # a bare name: in one of the modules of the equations
+        obj = importlib.import_module(f"i2ris_calib.{mod}")
+        if hasattr(obj, parts[0]):
+            for attr in parts:
+                obj = getattr(obj, attr)
+            return obj
+    raise AttributeError(name)
+
+
+@pytest.mark.parametrize("doc", ["api.md", "models.md"])
+def test_equation_table_names_exist(doc):
+    """Every function and test named in the Eq -> code -> test table exists."""
+    text = (ROOT / "docs" / doc).read_text()
+    rows = text[text.index("| Eq | what | code | test |") :].split("\n\n")[0].splitlines()[2:]
+    assert len(rows) >= 14
+    sources = "".join(f.read_text() for f in (ROOT / "tests").rglob("test_*.py"))
+    for row in rows:
+        _, _, code, tests = (c.strip() for c in row.strip().strip("|").split(" | "))
+        for name in re.findall(r"`([A-Za-z_][\w.]*)`", code):
+            assert _resolve(name) is not None
+        names = re.findall(r"::(\w+)`", tests)
+        assert names, row
+        for test in names:
+            assert f"def {test}(" in sources, f"{doc}: test {test} not found"

@@ -30,6 +30,8 @@ _API = {
     "i2ris_egpi_model": "i2ris_calib.hysteresis.models",
     "continuous_egpi_model": "i2ris_calib.hysteresis.models",
     "egpi_model": "i2ris_calib.hysteresis.models",
+    "model_for_kind": "i2ris_calib.hysteresis.registry",
+    "MODEL_KINDS": "i2ris_calib.hysteresis.registry",
     "Parameter": "i2ris_calib.hysteresis.model",
     "Signals": "i2ris_calib.hysteresis.model",
     "Dataset": "i2ris_calib.data.dataset",

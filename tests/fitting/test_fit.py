@@ -9,16 +9,17 @@ import pytest
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.fit import fit_model
+from i2ris_calib.fitting.fit import _Counter, _refine_profiled, fit_model
 from i2ris_calib.fitting.initial import flag_point
 from i2ris_calib.fitting.pipeline import (
     build_model,
     fit_all,
     fit_kind,
     model_from_params,
+    split_masks,
 )
 from i2ris_calib.hysteresis.kernel import motion_direction
-from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.models import as_signals, gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
 
 NOISE = 0.1  # deg, the noise of the egpi_data fixture (conftest.py)
@@ -66,8 +67,6 @@ def test_egpi_recovers_truth_to_noise_floor(seed):
 
 def holdout_of(res, v):
     """The held-out mask the fit used (the one rule: fitting.pipeline.split_masks)."""
-    from i2ris_calib.fitting.pipeline import split_masks
-
     return split_masks(v)[1]
 
 
@@ -210,9 +209,6 @@ def test_flag_point_profile_never_makes_the_fit_worse(shift):
     step from the right interval to a neighbour, 0.14 -> 127 deg^2 on a rendered session).
     Coarse sampling (125 counts per sample, two phases 40 counts apart) makes intervals
     that reach beyond the window; shifts -0.026, -0.005, 0.006, 0.027 failed before."""
-    from i2ris_calib.fitting.fit import _Counter, _refine_profiled
-    from i2ris_calib.hysteresis.models import as_signals
-
     rng = np.random.default_rng(3)
     truth = paper_like_params("yaw+")
     up = np.linspace(0, 6000, 49)

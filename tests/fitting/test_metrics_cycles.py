@@ -69,8 +69,6 @@ def test_holdout_never_extrapolates():
 
 def test_holdout_holds_out_as_many_cycles_as_asked():
     """Evenly spread picks that round to one cycle still give k distinct cycles."""
-    from i2ris_calib.fitting.cycles import holdout_mask
-
     cycles = np.repeat(np.arange(4), 10)
     held = np.unique(cycles[holdout_mask(cycles, 0.5)])
     assert held.size == 2 and 0 not in held

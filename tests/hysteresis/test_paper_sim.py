@@ -11,6 +11,7 @@ from hyst_reference import triangle
 
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.paper import PAPER_SIM_VALUES, dead_zones, run_paper_sim
+from i2ris_calib.io.paper_sim import write_paper_sim
 
 
 @pytest.fixture(scope="module")
@@ -61,8 +62,6 @@ def test_egpi_two_dead_zones_per_branch_at_flag_points(sim):
 
 
 def test_paper_sim_files(tmp_path):
-    from i2ris_calib.io.paper_sim import write_paper_sim
-
     summary = write_paper_sim(tmp_path)
     df = pd.read_csv(tmp_path / "paper_sim.csv")
     assert list(df.columns) == ["t", "v", "z1", "z2", "z"]

@@ -122,7 +122,7 @@ def _direction(dstate, anchor, u, db, init):  # pragma: no cover
 
 @njit(cache=True)
 def _select(kind, dstate, anchor, u, db, vf, init):  # pragma: no cover
-    """Family whose output the model shows after input ``u`` (Eq21 for the EGPI)."""
+    """Family whose output the model shows after input ``u`` (Eq20 for the EGPI)."""
     if kind != KIND_EGPI:
         return 0
     d, _ = _direction(dstate, anchor, u, db, init)

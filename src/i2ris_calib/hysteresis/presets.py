@@ -10,7 +10,7 @@ The I2RIS-EGPI recipe (:func:`random_i2ris_egpi_params`) produces loops like the
 paper's Fig 3(a)/6: a dead zone S1 when loading starts, a soft dead zone S2 when
 unloading starts (stage 1, thresholds r), a second dead zone S3 after the flag point
 v_f (stage 2, thresholds kappa r), bending range 30-45 deg. Note a property of
-Eq21 itself: at v_f the output switches from y1 to y2, which are generally not equal,
+Eq20 itself: at v_f the output switches from y1 to y2, which are generally not equal,
 so the modelled unloading branch has a step at v_f.
 """
 

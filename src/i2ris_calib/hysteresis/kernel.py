@@ -57,9 +57,8 @@ def thresholds(r1, rn, n):  # pragma: no cover - compiled
         raise ValueError("thresholds: n must be >= 1")
     r = np.empty(n + 1)
     r[0] = 0.0
-    step = (rn - r1) / (n - 1) if n > 1 else 0.0
     for i in range(1, n + 1):
-        r[i] = r1 + (i - 1) * step
+        r[i] = r1 + (i - 1) * (rn - r1) / (n - 1) if n > 1 else r1
     return r
 
 

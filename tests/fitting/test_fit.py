@@ -10,7 +10,6 @@ import pytest
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.fit import _Counter, _refine_profiled, fit_model
-from i2ris_calib.fitting.initial import flag_point
 from i2ris_calib.fitting.pipeline import (
     build_model,
     fit_all,
@@ -21,6 +20,7 @@ from i2ris_calib.fitting.pipeline import (
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.models import as_signals, gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
+from i2ris_calib.hysteresis.start import flag_point
 
 NOISE = 0.1  # deg, the noise of the egpi_data fixture (conftest.py)
 

@@ -410,7 +410,8 @@ def _fit_model(
         samples (metrics only).
     starts : list of ndarray, shape (p,), optional
         Start vectors (all parameters, model order); default ``[model values]``.
-        Use :func:`i2ris_calib.fitting.initial.start_values` for data-driven starts.
+        Use :func:`i2ris_calib.hysteresis.start.start_values` (or ``model.guess``) for
+        data-driven starts.
     method : {"lm", "trf"}
         Levenberg-Marquardt (unbounded; an end point outside the bounds is refitted
         bounded by trf from inside them) or bounded trust-region reflective. Either

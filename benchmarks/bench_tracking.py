@@ -172,7 +172,7 @@ def cross_axis(args) -> None:
         shutil.rmtree(root, ignore_errors=True)
 
 
-def issue_session(folder: Path, seed: int) -> None:
+def issue_session(folder: Path, seed: int, sim: list[str] | None = None) -> None:
     """The issue's session (``issue_session.py``): render once, track (written to
     ``folder/track`` for ``bench_sync.py --issue-session``), print the issue's figures."""
     import json
@@ -182,7 +182,11 @@ def issue_session(folder: Path, seed: int) -> None:
     from i2ris_calib.config import PipelineConfig
     from i2ris_calib.io.track import track_session
 
-    ensure_session(folder, seed)
+    over = {}
+    for item in sim or []:  # KEY=VALUE overrides of the issue's [simulate] settings
+        key, value = item.split("=", 1)
+        over[key] = json.loads(value)
+    ensure_session(folder, seed, **over)
     t0 = time.perf_counter()
     track_session(folder, folder / "track", PipelineConfig())
     wall = time.perf_counter() - t0
@@ -284,11 +288,18 @@ def main() -> None:
         metavar="DIR",
         help="the issue's 60 s session (benchmarks/issue_session.py), rendered into DIR once",
     )
+    ap.add_argument(
+        "--sim",
+        action="append",
+        metavar="KEY=VALUE",
+        help="with --issue-session: override a [simulate] setting of the issue's session "
+        "(JSON value, e.g. --sim exposure_s=0.01 --sim encoder_rate_hz=100)",
+    )
     args = ap.parse_args()
     if args.cross_axis:
         return cross_axis(args)
     if args.issue_session:
-        return issue_session(args.issue_session, args.seed)
+        return issue_session(args.issue_session, args.seed, args.sim)
 
     over = dict(video_format=args.format, seed=args.seed)
     if args.quick:

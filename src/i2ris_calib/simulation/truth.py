@@ -32,7 +32,7 @@ angle left at zero input after the last return (backlash) is faded out over the
 final ``settle_s`` (input held at 0 in both phases). So each dataset starts and
 ends at rest at exactly 0 deg and the angle is continuous across datasets. The
 other axis holds 0 deg during a dataset. (Inside a dataset the EGPI output itself
-may step where it switches branch at the flag point, Eq21; that is the model.)
+may step where it switches branch at the flag point, Eq20; that is the model.)
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.sync.clock import ClockModel, clock_from_offsets, clock_model
-from i2ris_calib.sync.estimate import combine_clocks
+from i2ris_calib.sync.estimate import combine_clocks, largest_clock_sd
 from i2ris_calib.sync.log import make_encoder_log
 
 
@@ -105,3 +105,18 @@ def test_auto_keeps_the_event_when_the_model_disagrees_or_is_flat():
     )
     clk, info = combine_clocks(event, _clk(0.5005, np.nan, 80, 10, "model"), 0.0)
     assert clk is None and "no usable curvature" in info["reason"]
+
+
+def test_largest_clock_sd_is_at_the_ends_when_the_drift_is_uncertain():
+    """offset sd 0.1 ms at t = 30 s, drift sd 20 ppm: 0.1 ms in the middle of a 0-60 s
+    recording but sqrt(0.1^2 + 0.6^2) = 0.61 ms at both ends (what auto compares with
+    auto_refine_stderr_s)."""
+    t_c, s_o, s_d = 30.0, 1e-4, 20.0
+    j = np.array([[1.0, -t_c * 1e-6], [0.0, 1.0]])  # (offset at t_c, drift) -> (offset at 0, drift)
+    cov = j @ np.diag([s_o**2, s_d**2]) @ j.T
+    clk = clock_model(1.0 - 50e-6 * t_c, 50.0, cov, "event", {}, True)
+    t = np.linspace(0.0, 60.0, 1801)
+    assert clk.offset_stderr_at(t_c) == pytest.approx(s_o, rel=1e-6)
+    assert largest_clock_sd(clk, t) == pytest.approx(np.hypot(s_o, 30 * s_d * 1e-6), rel=1e-6)
+    flat = clock_model(1.0, 0.0, np.diag([s_o**2, 0.0]), "event", {}, False)
+    assert largest_clock_sd(flat, t) == pytest.approx(s_o)

@@ -284,6 +284,19 @@ def _estimate_local(
 DISAGREE_SD = 3.0
 
 
+def largest_clock_sd(clock: ClockModel, t_cam_s: np.ndarray) -> float:
+    """Largest sd (s) of the clock's controller time over camera times ``t_cam_s``.
+
+    The variance of ``offset + drift t`` is quadratic in ``t``, so its largest value over
+    the recording is at the first or the last frame; the middle is included for a clock
+    without drift. An uncertain drift dominates at the ends: a sync event with a precise
+    offset in the middle can still be a millisecond off there.
+    """
+    t = np.asarray(t_cam_s, dtype=float)
+    ends = (float(np.min(t)), float(np.mean(t)), float(np.max(t)))
+    return max(clock.offset_stderr_at(x) for x in ends)
+
+
 def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncConfig, fit_config):
     """``auto`` with a coarse sync event: combine it with the hysteresis model.
 
@@ -303,8 +316,7 @@ def refined_event_clock(event: ClockModel, angles, log: EncoderLog, cfg: SyncCon
     t_cam = angles["time_s"].to_numpy(dtype=float)
     t_mid = float(np.mean(t_cam))
     sd = event.offset_stderr_at(t_mid)
-    # the clock's sd anywhere in the recording: at its ends an uncertain drift dominates
-    sd_any = max(event.offset_stderr_at(float(t)) for t in (t_cam[0], t_mid, t_cam[-1]))
+    sd_any = largest_clock_sd(event, t_cam)
     if cfg.auto_refine_stderr_s <= 0 or not series or not sd_any > cfg.auto_refine_stderr_s:
         return event
     try:

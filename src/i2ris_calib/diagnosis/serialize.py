@@ -21,17 +21,26 @@ from dataclasses import replace
 from i2ris_calib.diagnosis.effects import base_of, build_model, effects_of
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
-from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.registry import (
+    DEFAULT_DEADBAND_COUNTS,
+    DEFAULT_N_OPERATORS,
+    MODEL_KINDS,
+    model_for_kind,
+)
 
 SCHEMA = "i2ris-calib.model/1"
 
 
 def base_kind(model: Model) -> str:
-    """``"gpi"`` or ``"egpi"`` for the base models this format can rebuild."""
+    """The registry kind (``"gpi"``, ``"egpi"``, ``"egpi_c"``) of the base model: the
+    kinds this format can rebuild (:func:`~i2ris_calib.hysteresis.registry.model_for_kind`)."""
     name = base_of(model).name
-    if name in ("gpi", "egpi"):
+    if name in MODEL_KINDS:
         return name
-    raise CalibError(f"cannot save base model '{name}': only gpi and egpi are supported")
+    raise CalibError(
+        f"cannot save base model '{name}': only the model kinds {', '.join(MODEL_KINDS)} are "
+        "supported"
+    )
 
 
 def model_to_dict(model: Model) -> dict:
@@ -39,7 +48,7 @@ def model_to_dict(model: Model) -> dict:
     base = base_of(model)
     rec = {
         "kind": base_kind(model),
-        "n": int(getattr(base, "n", 30)),
+        "n": int(getattr(base, "n", DEFAULT_N_OPERATORS)),
         "params": {p.name: float(p.value) for p in base.parameters},
         "fixed": [p.name for p in base.parameters if p.fixed],
     }
@@ -54,18 +63,17 @@ def model_to_dict(model: Model) -> dict:
 
 
 def base_from_dict(rec: Mapping) -> Model:
-    """The GPI/EGPI base model described by ``rec`` (the ``base`` entry)."""
+    """The base model described by ``rec`` (the ``base`` entry), built by the one
+    kind -> model registry (:func:`~i2ris_calib.hysteresis.registry.model_for_kind`,
+    its defaults for a missing ``n`` or ``deadband_counts``)."""
     try:
         kind, params = rec["kind"], dict(rec["params"])
-        n = int(rec.get("n", 30))
-        if kind == "gpi":
-            model = gpi_model(n=n, **params)
-        elif kind == "egpi":
-            model = i2ris_egpi_model(
-                n=n, deadband_counts=float(rec.get("deadband_counts", 0.0)), **params
-            )
-        else:
-            raise CalibError(f"model file: unknown base kind '{kind}' (use gpi or egpi)")
+        model = model_for_kind(
+            kind,
+            n=int(rec.get("n", DEFAULT_N_OPERATORS)),
+            deadband_counts=float(rec.get("deadband_counts", DEFAULT_DEADBAND_COUNTS)),
+            **params,
+        )
         fixed = set(rec.get("fixed", []))
     except (KeyError, TypeError, ValueError) as exc:
         raise CalibError(f"model file: bad 'base' record ({exc}); see docs/diagnosis.md") from None

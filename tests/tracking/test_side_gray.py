@@ -1,10 +1,12 @@
-"""The second camera's grey level (sync flash) keeps its own frame time in angles.csv."""
+"""A second camera triggered later than the first: its grey level keeps its own frame
+time (sync flash), its corners can be extrapolated from either side of a step."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from i2ris_calib.io.track import nearest_frame_gray
+from i2ris_calib.io.track import nearest_frame_gray, one_sided_corners, resample_corners
 from i2ris_calib.tracking.config import TrackingConfig
 
 
@@ -28,3 +30,22 @@ def test_no_frame_within_the_gap_gives_nan():
     )
     np.testing.assert_array_equal(g[[0, 2]], [1.0, 3.0])
     assert np.isnan(g[1]) and np.isnan(t[1])  # 0.217 s from the nearest frame > 0.1 s
+
+
+def test_one_sided_corners_follow_each_side_of_a_step():
+    """Side frames 5 ms after the top frames, corners moving linearly then jumping by
+    10 px between two side frames: extrapolation from the frames before reproduces the
+    pre-step line exactly, from the frames after the post-step line; the two-sided
+    interpolation is neither (the fused frame then disagrees with the top view)."""
+    cfg = TrackingConfig()
+    t_side = np.arange(20) / 30.0 + 0.005
+    x = 100.0 + 3.0 * t_side * 30.0 + np.where(t_side > 0.32, 10.0, 0.0)
+    c = np.repeat(x[:, None, None], 4, axis=1).repeat(2, axis=2)
+    t = np.array([10 / 30.0])  # top frame 10; side frame 10 (5 ms later) is past the step
+    before = one_sided_corners(t_side, c, t, "before", cfg)[0, 0, 0]
+    after = one_sided_corners(t_side, c, t, "after", cfg)[0, 0, 0]
+    both = resample_corners(t_side, c, t, cfg)[0, 0, 0]
+    assert before == pytest.approx(100.0 + 3.0 * 10)
+    assert after == pytest.approx(110.0 + 3.0 * 10)
+    assert not np.isclose(both, before) and not np.isclose(both, after)
+    assert np.isnan(one_sided_corners(t_side, c, np.array([0.0]), "before", cfg)).all()

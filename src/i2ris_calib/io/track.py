@@ -348,6 +348,119 @@ def resample_corners(
     return out
 
 
+#: a measured frame whose reprojection error exceeds this many times the session's median
+#: (and :data:`REFIT_MIN_PX`) is refitted with the second camera's corners extrapolated
+#: from the frames on one side (:func:`refit_lagged_frames`)
+REFIT_FACTOR = 5.0
+REFIT_MIN_PX = 0.1
+
+
+def one_sided_corners(
+    t_src: np.ndarray, c_src: np.ndarray, t_dst: np.ndarray, side: str, cfg: TrackingConfig
+) -> np.ndarray:
+    """Corners (n_dst, 4, 2) at ``t_dst`` from the two frames before (``side="before"``:
+    the last two at or before ``t_dst``) or after (``"after"``), linearly extrapolated.
+
+    NaN where those frames are missing, more than ``max_interp_gap_s`` apart, or the
+    nearer one is more than ``max_interp_gap_s`` from ``t_dst``.
+    """
+    n = len(t_src)
+    if side == "before":
+        i1 = np.searchsorted(t_src, t_dst, side="right") - 1
+        i0 = i1 - 1
+    else:
+        i0 = np.searchsorted(t_src, t_dst, side="left")
+        i1 = i0 + 1
+    ok = (i0 >= 0) & (i1 < n) & (i1 >= 0) & (i0 < n)
+    a, b = np.clip(i0, 0, n - 1), np.clip(i1, 0, n - 1)
+    span = t_src[b] - t_src[a]
+    near = np.minimum(np.abs(t_dst - t_src[a]), np.abs(t_dst - t_src[b]))
+    ok &= (span > 0) & (span <= cfg.max_interp_gap_s) & (near <= cfg.max_interp_gap_s)
+    w = (t_dst - t_src[a]) / np.where(span > 0, span, 1.0)
+    out = c_src[a] + w[:, None, None] * (c_src[b] - c_src[a])
+    out[~ok] = np.nan
+    return out
+
+
+def refit_lagged_frames(
+    res: fz.FusionResult, va: fz.ViewData, alternatives: list[fz.ViewData], allowed: np.ndarray,
+    cfg: TrackingConfig,
+) -> tuple[fz.FusionResult, np.ndarray]:  # fmt: skip
+    """Refit frames where the second camera's interpolated corners disagree with the first.
+
+    The second camera's corners are interpolated linearly to the first camera's frame
+    times. Where the angle changes faster than linearly between two of its frames (a
+    step, a sharp turn) the interpolated corners show a pose the first camera never saw,
+    and the fused frame's reprojection error jumps far above the session's. Such frames
+    (error > :data:`REFIT_FACTOR` x the median of the measured frames and >
+    :data:`REFIT_MIN_PX`) are refitted with the camera-to-camera rotation held, once per
+    alternative set of corners (extrapolated from the two frames before, and from the
+    two after: one of them lies on the first camera's side of the change); the best fit
+    is kept when it halves the error and is below ``max_reproj_err_px``.
+
+    Parameters
+    ----------
+    res : FusionResult
+        After the reference fit (final ``R_ba``).
+    va : ViewData
+        First camera.
+    alternatives : list of ViewData
+        The second camera with other corners (NaN where none).
+    allowed : ndarray of bool, shape (n,)
+        Frames that may be refitted (fusion statuses measured or rejected, valid times).
+
+    Returns
+    -------
+    FusionResult, ndarray of int
+        Updated result (status ``measured`` for accepted frames) and the accepted frames.
+    """
+    meas = res.status == fz.MEASURED
+    if not meas.any():
+        return res, np.zeros(0, dtype=int)
+    thr = max(REFIT_FACTOR * float(np.nanmedian(res.rms_px[meas])), REFIT_MIN_PX)
+    finite = np.isfinite(res.Q).all(axis=(1, 2)) & np.isfinite(res.t_a).all(axis=1)
+    finite &= np.isfinite(res.t_b).all(axis=1)
+    cand = np.flatnonzero(allowed & finite & np.isfinite(res.rms_px) & (res.rms_px > thr) & va.ok)
+    if cand.size == 0:
+        return res, np.zeros(0, dtype=int)
+    best = res.rms_px[cand].copy()
+    Q, ta, tb = res.Q[cand].copy(), res.t_a[cand].copy(), res.t_b[cand].copy()
+    cov = res.cov_rot[cand].copy()
+    for vb in alternatives:
+        k = np.flatnonzero(vb.ok[cand])
+        if k.size == 0:
+            continue
+        idx = cand[k]
+        A, B = fz._subset(va, idx), fz._subset(vb, idx)
+        q, a, b, cost = fz.joint_fit(res.Q[idx], res.t_a[idx], res.t_b[idx], res.R_ba, A, B,
+                                     cfg.iterations)  # fmt: skip
+        rms = np.sqrt(cost / 16.0)
+        better = rms < best[k]
+        if better.any():
+            kb = k[better]
+            best[kb], Q[kb], ta[kb], tb[kb] = rms[better], q[better], a[better], b[better]
+            cv = fz.rotation_covariance(q, a, b, res.R_ba, A, B)
+            cov[kb] = cv[better]
+    accept = (best < 0.5 * res.rms_px[cand]) & (best <= cfg.max_reproj_err_px)
+    idx = cand[accept]
+    if idx.size == 0:
+        return res, idx
+    newQ, rms_px, cen_a, cen_b = res.Q.copy(), res.rms_px.copy(), res.t_a.copy(), res.t_b.copy()
+    cov_rot, status = res.cov_rot.copy(), res.status.copy()
+    newQ[idx], cen_a[idx], cen_b[idx] = Q[accept], ta[accept], tb[accept]
+    rms_px[idx], cov_rot[idx], status[idx] = best[accept], cov[accept], fz.MEASURED
+    return replace(res, Q=newQ, rms_px=rms_px, t_a=cen_a, t_b=cen_b, cov_rot=cov_rot,
+                   status=status), idx  # fmt: skip
+
+
+def nearest_time(t_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    """Time of the frame of ``t_src`` (sorted) nearest to each of ``t_dst``."""
+    j = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
+    return np.where(
+        np.abs(t_dst - t_src[j - 1]) <= np.abs(t_src[j] - t_dst), t_src[j - 1], t_src[j]
+    )
+
+
 def nearest_frame_gray(
     t_src: np.ndarray, gray_src: np.ndarray, t_dst: np.ndarray, cfg: TrackingConfig
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -386,6 +499,8 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
         raise CalibError("no frame time where both markers are measured: cannot fuse the two views")
     res = fz.fuse_views(va, vb, t, cfg)
     views = view_check(res, ca, cb, intr[a_name], intr[b_name], t, spec, cfg)
+    res_fused_status = res.status.copy()
+    tb_t = tb["time_s"].to_numpy()
     status = res.status.copy()
     status[~ta["valid"].to_numpy()] = fz.REJECTED
     ref = reference_mask(t, cfg)
@@ -398,6 +513,18 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             f"{cfg.reference_start_s + cfg.reference_duration_s} s after the first frame); move "
             "[track] reference_start_s to a time where the tip is straight and both markers are visible"
         ) from None
+    fused = np.isin(res_fused_status, (fz.MEASURED, fz.REJECTED)) & ta["valid"].to_numpy()
+    refit_frames = np.zeros(0, dtype=int)
+    lagged = np.nanmax(np.abs(nearest_time(tb_t[keep_b], t) - t), initial=0.0)
+    if lagged > cfg.same_frame_tol_s and res.t_a is not None and res.t_b is not None:
+        sel = fused & (np.nan_to_num(res.rms_px) > REFIT_MIN_PX)  # every candidate is here
+        alts = []
+        for side in ("before", "after"):
+            c_alt = np.full_like(cb, np.nan)
+            c_alt[sel] = one_sided_corners(tb_t[keep_b], cb_src[keep_b], t[sel], side, cfg)
+            alts.append(_view(c_alt, intr[b_name], cams[b_name].view, spec))
+        res, refit_frames = refit_lagged_frames(res, va, alts, fused, cfg)
+        status = res.status.copy()
     ang = fz.relative_angles(res.Q, M)
     ang[status != fz.MEASURED] = np.nan
     df = pd.DataFrame({"frame": ta["frame"].to_numpy(), "time_s": t, "yaw_deg": ang[:, 0],
@@ -417,6 +544,7 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             df[f"pitch_plain_{name}_deg"] = pa[:, 1]
     summary = _summary(df, res, streams, names, M, ref, cfg)
     summary["reference"].update(reference_record(refit))
+    summary["lagged_camera_refit_frames"] = [int(k) for k in ta["frame"].to_numpy()[refit_frames]]
     for n in names:
         summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
     summary["view_check"] = views

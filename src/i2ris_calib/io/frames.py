@@ -102,7 +102,6 @@ def find_sequence(folder: Path) -> ImageSequence:
 
 def read_image(path: Path) -> np.ndarray:
     """One frame as stored (uint8 or uint16, grey or colour); CalibError if unreadable."""
-
     img = cv2.imread(str(path), cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if img is None:
         raise CalibError(f"cannot read image {path} (corrupt or unsupported file)")
@@ -136,7 +135,6 @@ def to_uint8(img: np.ndarray, bits: int) -> np.ndarray:
 
     Values above ``2**bits - 1`` saturate at 255.
     """
-
     scale = 255.0 / float(2**bits - 1)
     return cv2.convertScaleAbs(img, alpha=scale)  # rounds and saturates
 

@@ -39,7 +39,6 @@ def read_angles(path: Path) -> pd.DataFrame:
     reset; their number is in ``df.attrs["n_backward_rejected"]`` (sync.json). A time
     that goes backwards on a frame not flagged so is still refused.
     """
-
     if not path.is_file():
         raise CalibError(
             f"tracked angles not found: {path} (run 'i2ris-calib track SESSION' first, or pass --angles)"
@@ -106,7 +105,6 @@ def sync_summary(clock, table: pd.DataFrame, n_dropped: int, log, t_cam: np.ndar
 
 def xcorr_comparison(angles: pd.DataFrame, log, sync_cfg) -> dict | None:
     """Plain cross-correlation result for comparison (None when it cannot run)."""
-
     if not axis_series(angles):
         return None
     try:
@@ -137,7 +135,6 @@ def sync_session(
     Path
         The output folder.
     """
-
     root = Path(session)
     spec = load_session(root)
     angles_path = Path(angles) if angles is not None else root / "track" / "angles.csv"

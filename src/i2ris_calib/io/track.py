@@ -190,7 +190,6 @@ def read_timestamps(path: Path) -> pd.DataFrame:
 
 def check_calibration(session: Path, name: str, cam: CameraSpec) -> None:
     """A pinhole camera's calibration file exists and parses (before any decoding)."""
-
     if cam.model != "pinhole":
         return
     if not cam.calibration:
@@ -205,7 +204,6 @@ def intrinsics(
     session: Path, cam: CameraSpec, shape: tuple[int, int], cfg: TrackingConfig
 ) -> CameraIntrinsics:
     """Camera model of one camera: pinhole from its calibration file, or weak perspective."""
-
     h, w = shape
     if cam.model == "weak_perspective":
         return weak_perspective_intrinsics(w, h, cfg.weak_perspective_focal_px)
@@ -236,7 +234,6 @@ def detect_stream(
     video: Path, dictionary: str, marker_id: int, cfg: TrackingConfig
 ) -> StreamResult:
     """Decode one video and detect its marker in every frame (runs in a worker)."""
-
     cv2.setNumThreads(1)
     det = MarkerDetector(dictionary, marker_id, cfg)
     corners, gray, border, others = [], [], [], {}
@@ -266,7 +263,6 @@ def detect_stream(
 
 def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: bool) -> dict:
     """Detect in every camera stream, in parallel processes when ``cfg.workers > 1``."""
-
     aruco_dictionary(spec.marker.dictionary)  # fail early on a bad name
     total = sum(max(header_frame_count(v), 1) for v in videos.values())
     jobs = {
@@ -314,7 +310,6 @@ def _view(
     corners_raw: np.ndarray, intr: CameraIntrinsics, view: str, spec: SessionSpec
 ) -> fz.ViewData:
     """Undistorted corners and IPPE candidates of one camera at the fused frames."""
-
     c = intr.undistort(corners_raw)
     n = len(c)
     R = np.full((n, 2, 3, 3), np.nan)

@@ -56,7 +56,6 @@ def sync_log_level() -> None:
     running a command, but a library or test may have imported cv2 earlier. Without the
     variable nothing is changed.
     """
-
     name = os.environ.get("OPENCV_LOG_LEVEL", "").strip().upper()
     levels = {
         "SILENT": cv2.utils.logging.LOG_LEVEL_SILENT,
@@ -85,7 +84,6 @@ def open_writer(path: Path, fps: float, size_wh: tuple[int, int], codec: str | N
     codec : str, optional
         Four-character code (e.g. ``"MJPG"``, ``"FFV1"``), overriding the suffix.
     """
-
     sync_log_level()
     code = codec or FOURCC.get(Path(path).suffix.lower())
     if code is None:
@@ -121,7 +119,6 @@ def open_reader(path: Path, threads: int = 0):
         (frames come out (h, w)); other streams deliver BGR (h, w, 3). Use
         :func:`as_gray` on every frame.
     """
-
     sync_log_level()
     p = Path(path)
     _check_file(p)
@@ -144,13 +141,11 @@ def open_reader(path: Path, threads: int = 0):
 
 def stream_is_grey(cap) -> bool:
     """Whether the opened stream's codec pixel format is single-channel grey."""
-
     return fourcc_text(cap.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT)) in GREY_PIXEL_FORMATS
 
 
 def describe(path: Path) -> dict:
     """Codec, pixel format, size and header frame count of a video file or sequence."""
-
     p = Path(path)
     if p.is_dir():
         seq = frames.find_sequence(p)
@@ -185,7 +180,6 @@ def as_gray(frame: np.ndarray, bits: int = 16) -> np.ndarray:
         Significant bits of a uint16 frame: grey levels ``0 .. 2**bits - 1`` map
         linearly onto ``0 .. 255`` (:func:`i2ris_calib.io.frames.to_uint8`). Ignored for uint8.
     """
-
     if frame.ndim == 3:
         if frame.shape[2] == 1:
             frame = frame[:, :, 0]
@@ -296,7 +290,6 @@ def iter_frames(
     ndarray (h, w) uint8
     CalibError if no frame decodes.
     """
-
     p = Path(path)
     if bits is None and p.is_dir():
         bits = frames.sequence_bits(frames.find_sequence(p))
@@ -319,7 +312,6 @@ def iter_frames(
 
 def header_frame_count(path: Path) -> int:
     """Frame count claimed by the container header, or the number of sequence images (-1 if unknown)."""
-
     p = Path(path)
     if p.is_dir():
         return len(frames.find_sequence(p).files)
@@ -333,6 +325,5 @@ def header_frame_count(path: Path) -> int:
 
 def input_files(path: Path) -> list[Path]:
     """The files a video input consists of: the file itself, or a sequence's images."""
-
     p = Path(path)
     return list(frames.find_sequence(p).files) if p.is_dir() else [p]

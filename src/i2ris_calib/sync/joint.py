@@ -316,7 +316,6 @@ def start_as_fit(
     kind: str, v: np.ndarray, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None
 ):
     """:class:`StartEval` of ``values`` on (v, theta): the fallback when a refit is worse."""
-
     model = build_model(kind, v, fit_config, deadband).with_values(values)
     free = tuple(p.name for p in model.parameters if not p.fixed)
     return StartEval(model, model.evaluate(v, model.values) - theta, free)
@@ -435,7 +434,6 @@ def noise_sd(residuals: list[np.ndarray]) -> float:
 def _param_jacobian(model, v: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d(model output)/d(free least-squares parameters), shape (m, q), central differences
     (the profiled flag point ``v_f`` excluded: the output is piecewise constant in it)."""
-
     cols = []
     for i, p in enumerate(model.parameters):
         if p.fixed or p.name in PROFILE_PARAMS:
@@ -464,7 +462,6 @@ def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3
         kept); ``cycle`` is the loading-cycle number of each frame
         (:func:`i2ris_calib.fitting.cycles.cycle_index` of the direction's input).
     """
-
     out = []
     for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
         model, x = f.model, np.asarray(f.model.values, dtype=float)
@@ -612,7 +609,6 @@ def drift_gauss_newton(
     ``A_i r_i``, ``Omega`` by Newey-West and by loading-cycle clusters (residual
     autocorrelation, as :func:`offset_stderr`).
     """
-
     fits = profile.fits(offset_c_s)
     o, d = offset_c_s, drift_ppm
     eps_o, eps_d = 1e-3, 50.0
@@ -685,7 +681,6 @@ def cycle_offsets(
     block : ndarray of int, shape (g,)
         Index of the block (axis and direction) of each cycle in ``profile.blocks``.
     """
-
     ts, os_, sds, blk = [], [], [], []
     for k, (b, f) in enumerate(zip(profile.blocks, profile.fits(offset_c_s), strict=True)):
         x = np.asarray(f.model.values, dtype=float)
@@ -876,7 +871,6 @@ def clock_from_model(
         With the offset profile (offsets at ``t_c``, RSS) and the uncertainty terms
         (:func:`offset_stderr`) as evidence.
     """
-
     fit_config = replace(fit_config or FitConfig(), holdout_fraction=0.0)
     t_c = float(np.mean(np.concatenate([s.t_cam_s for s in series])))
     step = cfg.profile_step_s

@@ -193,7 +193,6 @@ def find_glitches(t_s: np.ndarray, values: np.ndarray, limit_per_s: float) -> np
     -------
     ndarray of bool, shape (n,)
     """
-
     n = values.size
     w = GLITCH_HALF_WINDOW
     if n < 2 * w + 1 or not np.isfinite(limit_per_s):

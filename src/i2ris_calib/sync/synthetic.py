@@ -57,7 +57,6 @@ def egpi_truth_params(rng: np.random.Generator, backlash_deg: float) -> dict[str
     offsets follow the recipe (loading from rest starts at ~0 deg, both families meet
     at v = 0). 0 gives a hysteresis-free (linear) truth.
     """
-
     p = random_i2ris_egpi_params(rng)
     r = thresholds(p["r1"], p["rn"], 30)
     w = density(r, p["lam"], p["sigma"])

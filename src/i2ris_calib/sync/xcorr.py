@@ -67,7 +67,6 @@ def coarse_xcorr_offset(series: list[AxisSeries], log: EncoderLog, cfg: SyncConf
     correlated by FFT over the whole search range (:func:`offset_search_range`);
     the peak is refined by a parabola through its neighbours.
     """
-
     fs = cfg.xcorr_rate_hz
     lo, hi = offset_search_range(series, log, cfg)
     lo_log, hi_log = log.time_range()
@@ -111,7 +110,6 @@ def smooth_derivative(x: np.ndarray, dt_s: float, smooth_s: float) -> np.ndarray
     The same symmetric filter is applied to angle and encoder, so it adds no delay
     between them; it only suppresses the noise that differentiation amplifies.
     """
-
     n = max(int(round(smooth_s / dt_s)) | 1, 5)
     if x.size <= n:
         return np.gradient(x, dt_s)

@@ -42,7 +42,6 @@ class Intrinsics:
 
 def charuco_board(spec: CharucoSpec):
     """The ``cv2.aruco.CharucoBoard`` of ``spec``."""
-
     return cv2.aruco.CharucoBoard(
         (spec.squares_x, spec.squares_y),
         spec.square_mm,
@@ -53,7 +52,6 @@ def charuco_board(spec: CharucoSpec):
 
 def board_points(board, gray: np.ndarray, min_corners: int = 6):
     """Matched (object (k, 3), image (k, 2)) ChArUco corners of one view, or None."""
-
     det = cv2.aruco.CharucoDetector(board)
     cc, ids, _, _ = det.detectBoard(gray)
     if ids is None or len(ids) < min_corners:
@@ -69,7 +67,6 @@ def calibrate_from_views(
 
     Raises CalibError when fewer than 3 views show enough corners.
     """
-
     board = charuco_board(spec)
     objs, imgs = [], []
     for g in views:

@@ -24,7 +24,6 @@ _REFINE = {"edges": "CORNER_REFINE_SUBPIX", "none": "CORNER_REFINE_NONE", "subpi
 
 def aruco_dictionary(name: str):
     """``cv2.aruco.Dictionary`` for a name such as ``DICT_4X4_50``; CalibError if unknown."""
-
     if not name.startswith("DICT_") or not hasattr(cv2.aruco, name):
         valid = [n for n in dir(cv2.aruco) if n.startswith("DICT_")]
 

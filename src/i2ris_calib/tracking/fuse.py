@@ -403,7 +403,6 @@ def _twist_free_residuals(g, L, M0, R_ba0, a: ViewData, b: ViewData) -> np.ndarr
     ``g = (e, w_ba)``: reference roll (rad) and camera-rotation update (rotation vector);
     ``L`` (n, 8): yaw, pitch (rad), cube centre in camera a and b (mm).
     """
-
     M = M0 @ rot_x(-g[0])
     Q = M @ _rz_ry(L[:, 0], L[:, 1])
     return _residuals(Q, L[:, 2:5], L[:, 5:8], rodrigues(g[1:4]) @ R_ba0, a, b)
@@ -542,7 +541,6 @@ def fit_reference(res: FusionResult, a: ViewData, b: ViewData, window: np.ndarra
     ValueError
         No measured frame in the reference window.
     """
-
     meas = res.status == MEASURED
     M0 = reference_rotation(res.Q, window & meas)
     n_win = int((window & meas).sum())

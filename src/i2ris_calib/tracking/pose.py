@@ -50,7 +50,6 @@ class CameraIntrinsics:
 
 def weak_perspective_intrinsics(width_px: int, height_px: int, focal_px: float) -> CameraIntrinsics:
     """The weak-perspective camera as a very long pinhole centred on the image."""
-
     return CameraIntrinsics(camera_matrix(focal_px, width_px, height_px), np.zeros(0), width_px, height_px,
                             "weak_perspective")  # fmt: skip
 
@@ -74,7 +73,6 @@ def ippe_candidates(corners: np.ndarray, K: np.ndarray, marker_size_mm: float):
     err : ndarray (2,)
         RMS reprojection errors (px).
     """
-
     obj = marker_corners_mm(marker_size_mm)
     img = np.ascontiguousarray(corners, dtype=np.float64).reshape(4, 1, 2)
     n, rvecs, tvecs, errs = cv2.solvePnPGeneric(obj, img, K, None, flags=cv2.SOLVEPNP_IPPE_SQUARE)

@@ -52,10 +52,21 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from i2ris_calib.config import PipelineConfig  # noqa: E402
+from i2ris_calib.data.dataset import direction_input, direction_of_samples, input_bands  # noqa: E402
+from i2ris_calib.hysteresis.models import i2ris_egpi_model  # noqa: E402
+from i2ris_calib.io.encoders import read_encoder_log  # noqa: E402
+from i2ris_calib.io.session import load_session  # noqa: E402
+from i2ris_calib.io.sync import read_angles  # noqa: E402
+from i2ris_calib.io.track import track_session  # noqa: E402
 from i2ris_calib.sync.config import SyncConfig  # noqa: E402
 from i2ris_calib.sync.estimate import estimate_clock  # noqa: E402
 from i2ris_calib.sync.log import make_encoder_log  # noqa: E402
-from i2ris_calib.sync.synthetic import SyntheticSync, make_sync_case  # noqa: E402
+from i2ris_calib.sync.synthetic import (  # noqa: E402
+    SyntheticSync,
+    egpi_truth_params,
+    make_sync_case,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE_SESSION = ROOT / "sample_data" / "session"
@@ -139,9 +150,6 @@ def signed_holds_case(
     excursions and ``-y-(max(-enc, 0))`` on those of "-" excursions, a rest at zero
     belonging to the excursion before it (``data.dataset``), so each model keeps its
     state through the other direction's excursions; no sync event."""
-    from i2ris_calib.data.dataset import direction_input, direction_of_samples, input_bands
-    from i2ris_calib.hysteresis.models import i2ris_egpi_model
-    from i2ris_calib.sync.synthetic import egpi_truth_params
 
     rng = np.random.default_rng(1000 + seed)
     drift = 1.0 + drift_ppm * 1e-6
@@ -297,10 +305,6 @@ def main(argv: list[str] | None = None) -> int:
 
 def issue_session_check(folder: Path) -> bool:
     """Event / auto / model-only sync of the issue's session against its truth (prints)."""
-    from i2ris_calib.config import PipelineConfig
-    from i2ris_calib.io.encoders import read_encoder_log
-    from i2ris_calib.io.session import load_session
-    from i2ris_calib.io.sync import read_angles
 
     cfg = PipelineConfig()
     spec = load_session(folder)
@@ -357,17 +361,9 @@ def issue_session_check(folder: Path) -> bool:
 
 def rendered_check(angles_csv: Path | None) -> bool:
     """Model-only sync of the rendered sample session against its truth (prints)."""
-    from dataclasses import replace
-
-    from i2ris_calib.config import PipelineConfig
-    from i2ris_calib.io.encoders import read_encoder_log
-    from i2ris_calib.io.session import load_session
-    from i2ris_calib.io.sync import read_angles
 
     cfg = PipelineConfig()
     if angles_csv is None:
-        from i2ris_calib.io.track import track_session
-
         tmp = Path(tempfile.mkdtemp(prefix="bench_sync_"))
         t0 = time.perf_counter()
         track_session(SAMPLE_SESSION, tmp / "track", cfg)

@@ -31,13 +31,28 @@ angle off by > 1 deg, >= 100 frames/s per stream on one core.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
+import os
 import shutil
 import tempfile
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pandas as pd
+from issue_session import ensure_session, tracking_figures
+
+from i2ris_calib.config import PipelineConfig
+from i2ris_calib.io.session import load_session
+from i2ris_calib.io.simulate import build_session
+from i2ris_calib.io.track import track, track_session
+from i2ris_calib.io.video import iter_frames, open_writer
+from i2ris_calib.simulation.presets import preset_config
+from i2ris_calib.tracking.config import TrackingConfig
+from i2ris_calib.tracking.detect import MarkerDetector
+from i2ris_calib.tracking.geometry import euler_zyx_deg
 
 
 def evaluate(session: Path, angles: pd.DataFrame) -> dict:
@@ -68,9 +83,6 @@ def evaluate(session: Path, angles: pd.DataFrame) -> dict:
 
 def decode_speed(video: Path, frames: int, out: Path) -> list[dict]:
     """Decode-only figures of ``frames`` frames of ``video`` re-encoded in each format."""
-    import cv2
-
-    from i2ris_calib.io.video import iter_frames, open_writer
 
     imgs = []
     for img in iter_frames(video):
@@ -131,15 +143,6 @@ def cross_axis(args) -> None:
     """The reference-roll leak (issue 11): rendered sessions with compound moves, three
     misalignments and focal lengths, each tracked with the pinhole and the
     weak-perspective camera model; ``--before`` adds the window-only reference."""
-    import dataclasses
-    import json
-
-    from i2ris_calib.io.session import load_session
-    from i2ris_calib.io.simulate import build_session
-    from i2ris_calib.io.track import track
-    from i2ris_calib.simulation.presets import preset_config
-    from i2ris_calib.tracking.config import TrackingConfig
-    from i2ris_calib.tracking.geometry import euler_zyx_deg
 
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench_cross_axis_"))
     print("case | model | reference | yaw RMS / beyond-15 / max | pitch RMS / beyond-15 / max"
@@ -175,12 +178,6 @@ def cross_axis(args) -> None:
 def issue_session(folder: Path, seed: int, sim: list[str] | None = None) -> None:
     """The issue's session (``issue_session.py``): render once, track (written to
     ``folder/track`` for ``bench_sync.py --issue-session``), print the issue's figures."""
-    import json
-
-    from issue_session import ensure_session, tracking_figures
-
-    from i2ris_calib.config import PipelineConfig
-    from i2ris_calib.io.track import track_session
 
     over = {}
     for item in sim or []:  # KEY=VALUE overrides of the issue's [simulate] settings
@@ -229,11 +226,6 @@ def issue_session(folder: Path, seed: int, sim: list[str] | None = None) -> None
 
 def overlap_speed(video: Path, dictionary: str, marker_id: int, frames: int) -> list[dict]:
     """One stream, decode + marker detection: serial vs decode-ahead thread (1 FFmpeg thread)."""
-    import cv2
-
-    from i2ris_calib.io.video import iter_frames
-    from i2ris_calib.tracking.config import TrackingConfig
-    from i2ris_calib.tracking.detect import MarkerDetector
 
     cv2.setNumThreads(1)
     rows = []
@@ -251,11 +243,6 @@ def overlap_speed(video: Path, dictionary: str, marker_id: int, frames: int) -> 
 
 
 def main() -> None:
-    from i2ris_calib.io.session import load_session
-    from i2ris_calib.io.simulate import build_session
-    from i2ris_calib.io.track import track
-    from i2ris_calib.simulation.presets import preset_config
-    from i2ris_calib.tracking.config import TrackingConfig
 
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -316,8 +303,6 @@ def main() -> None:
     else:
         render_s = float("nan")
     if args.decode:
-        import os
-
         print(f"decode-only, {args.decode_frames} frames of top camera, {os.cpu_count()} CPUs:")
         tmp = Path(tempfile.mkdtemp(prefix="bench_decode_"))
         rows = decode_speed(folder / f"top.{args.format}", args.decode_frames, tmp)

@@ -221,6 +221,7 @@ class _Counter:
         self.model, self.signals, self.theta, self.used = model, signals, theta, used
         self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
+        self.jac_fn = _analytic_jacobian(model)
 
     def cost(self, full: np.ndarray) -> float:
         """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
@@ -236,6 +237,27 @@ class _Counter:
         y = self.model.evaluate(self.signals, full)
         r = (y - self.theta)[self.used]
         return np.where(np.isfinite(r), r, _BIG)
+
+    def jacobian(self, full: np.ndarray) -> np.ndarray:
+        """d residual / d parameters at the fitted samples, shape (n_used, p) (the
+        model's exact Jacobian; counted as one evaluation)."""
+        self.n += 1
+        jac = self.jac_fn(self.signals, full)[self.used]
+        return np.where(np.isfinite(jac), jac, 0.0)
+
+
+def _analytic_jacobian(model):
+    """``model.jacobian`` when the model's class defines it together with the
+    ``evaluate`` it differentiates (a subclass overriding only ``evaluate`` falls back
+    to finite differences), else None."""
+    cls = type(model)
+
+    def owner(name):
+        return next((c for c in cls.__mro__ if name in c.__dict__), None)
+
+    if owner("jacobian") is None or owner("jacobian") is not owner("evaluate"):
+        return None
+    return model.jacobian
 
 
 def _validate(signals: Signals, theta: np.ndarray, n_free: int, used: np.ndarray) -> None:
@@ -264,6 +286,15 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
         full[free] = x
         return counter.residuals(full)
 
+    jac = "2-point"
+    if counter.jac_fn is not None:
+        # the model's exact Jacobian: one pass instead of one evaluation per free
+        # parameter (the finite-difference columns were ~80 % of a fit's time)
+        def jac(x):
+            full = x0_full.copy()
+            full[free] = x
+            return counter.jacobian(full)[:, free]
+
     x0 = x0_full[free]
     if method == "trf":
         lo, hi = lower[free], upper[free]
@@ -271,6 +302,7 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
         res = least_squares(
             fun,
             x0,
+            jac=jac,
             bounds=(lo, hi),
             method="trf",
             x_scale="jac",
@@ -280,7 +312,9 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
             f_scale=counter.f_scale,
         )
     elif method == "lm":
-        res = least_squares(fun, x0, method="lm", x_scale="jac", max_nfev=max_nfev, ftol=ftol)
+        res = least_squares(
+            fun, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev, ftol=ftol
+        )
     else:
         raise CalibError(f"fit: unknown method '{method}'; use 'lm' or 'trf'")
     full = x0_full.copy()

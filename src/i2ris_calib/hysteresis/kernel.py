@@ -276,3 +276,125 @@ def play_numpy(v, gamma_l, r_l, gamma_r, r_r, p):
             w = np.minimum(gr[k] + r_r, w)
         out[k] = w @ p
     return out
+
+
+#: Columns of :func:`play_jacobian`'s derivative array.
+JAC_COLUMNS = ("a_l", "b_l", "a_r1", "b_r1", "a_r2", "b_r2", "r1", "rn", "kappa", "sigma")
+
+
+@njit(cache=True)
+def play_jacobian(
+    v, a_l, b_l, a_r1, b_r1, a_r2, b_r2, r, kappa, v_f, mode, p, dp_dr, dr_dr1, dr_drn
+):  # pragma: no cover - compiled
+    """Output of one play-operator family and its derivatives, in one pass.
+
+    The output is piecewise linear in the envelope parameters and thresholds: every
+    operator state ``w_i`` is the boundary that last moved it, evaluated at the input
+    where it did (``a v_j + b -/+ k r_i``) or 0 (the clamped initial state). The loop
+    tracks, per operator, which boundary that was and at which input, and sums the
+    exact derivatives (the one-sided derivatives a small finite-difference step sees,
+    except where two boundaries tie).
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+    a_l, b_l, a_r1, b_r1, a_r2, b_r2 : float
+        Loading, stage-1 and stage-2 unloading envelopes (slope, offset).
+    r : ndarray, shape (m,)
+        Thresholds (Eq14).
+    kappa, v_f : float
+        Stage-2 threshold factor and flag point (``mode`` 2).
+    mode : int
+        0: unloading always on stage 1 (GPI, the EGPI's first family); 1: always on
+        stage 2 with ``kappa r`` (the EGPI's second family); 2: stage 1 above ``v_f``,
+        stage 2 at or below it (:func:`play_switched`).
+    p, dp_dr, dr_dr1, dr_drn : ndarray, shape (m,)
+        Weights, their derivative in ``r_i``, and the derivatives of ``r_i`` in r1, rn.
+
+    Returns
+    -------
+    y : ndarray, shape (n,)
+    jac : ndarray, shape (n, 10)
+        d y / d (a_l, b_l, a_r1, b_r1, a_r2, b_r2, r1, rn, kappa, sigma)
+        (:data:`JAC_COLUMNS`; ``d y / d lam = y / lam`` is not included).
+    """
+    ns = v.size
+    m = p.size
+    y = np.empty(ns)
+    jac = np.zeros((ns, 10))
+    if ns == 0:
+        return y, jac
+    w = np.empty(m)
+    src = np.zeros(m, dtype=np.int8)  # 0: zero, 1: loading, 2: stage-1 / 3: stage-2 unloading
+    vs = np.zeros(m)  # input at which the boundary set w_i
+    stage2 = mode == 1 or (mode == 2 and not v[0] > v_f)
+    g_l = a_l * v[0] + b_l
+    g_r, kr = (a_r2 * v[0] + b_r2, kappa) if stage2 else (a_r1 * v[0] + b_r1, 1.0)
+    for i in range(m):
+        lo = g_l - r[i]
+        hi = g_r + kr * r[i]
+        if hi < max(0.0, lo):
+            w[i], src[i] = hi, 3 if stage2 else 2
+        elif lo > 0.0:
+            w[i], src[i] = lo, 1
+        else:
+            w[i], src[i] = 0.0, 0
+        vs[i] = v[0]
+    for k in range(ns):
+        if k > 0:
+            if v[k] > v[k - 1]:
+                g = a_l * v[k] + b_l
+                for i in range(m):
+                    c = g - r[i]
+                    if c > w[i]:
+                        w[i], src[i], vs[i] = c, 1, v[k]
+            elif v[k] < v[k - 1]:
+                stage2 = mode == 1 or (mode == 2 and not v[k] > v_f)
+                if stage2:
+                    g, kr, code = a_r2 * v[k] + b_r2, kappa, 3
+                else:
+                    g, kr, code = a_r1 * v[k] + b_r1, 1.0, 2
+                cross = mode == 2 and v[k - 1] > v_f and v_f >= v[k]
+                g1 = a_r1 * v_f + b_r1
+                for i in range(m):
+                    c = g + kr * r[i]
+                    if cross:
+                        c1 = g1 + r[i]
+                        if c1 < w[i] and c1 < c:
+                            w[i], src[i], vs[i] = c1, 2, v_f
+                            continue
+                    if c < w[i]:
+                        w[i], src[i], vs[i] = c, code, v[k]
+            else:
+                y[k] = y[k - 1]
+                jac[k] = jac[k - 1]
+                continue
+        acc = j0 = j1 = j2 = j3 = j4 = j5 = j6 = j7 = j8 = j9 = 0.0
+        for i in range(m):
+            wi = w[i]
+            pi = p[i]
+            acc += pi * wi
+            s = src[i]
+            if s == 0:
+                dwdr = 0.0
+            elif s == 1:
+                j0 += pi * vs[i]
+                j1 += pi
+                dwdr = -1.0
+            elif s == 2:
+                j2 += pi * vs[i]
+                j3 += pi
+                dwdr = 1.0
+            else:
+                j4 += pi * vs[i]
+                j5 += pi
+                j8 += pi * r[i]
+                dwdr = kappa
+            t = dp_dr[i] * wi + pi * dwdr
+            j6 += t * dr_dr1[i]
+            j7 += t * dr_drn[i]
+            j9 -= r[i] * pi * wi
+        jac[k, 0], jac[k, 1], jac[k, 2], jac[k, 3], jac[k, 4] = j0, j1, j2, j3, j4
+        jac[k, 5], jac[k, 6], jac[k, 7], jac[k, 8], jac[k, 9] = j5, j6, j7, j8, j9
+        y[k] = acc
+    return y, jac

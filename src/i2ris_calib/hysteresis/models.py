@@ -40,6 +40,7 @@ from numba import njit
 from i2ris_calib.hysteresis.kernel import (
     density,
     motion_direction,
+    play_jacobian,
     play_numpy,
     play_operators,
     play_switched,
@@ -221,6 +222,41 @@ def _per_run(output, v: np.ndarray, **params) -> np.ndarray:
     return output(vc, **params)[idx]
 
 
+def _jac_blocks(r1, rn, lam, sigma, n):
+    """(r, p, dp/dr, dr/dr1, dr/drn), shape (n + 1,) each, for :func:`~.kernel.play_jacobian`."""
+    r = thresholds(r1, rn, n)
+    p = density(r, lam, sigma)
+    i = np.arange(n + 1, dtype=float)
+    if n > 1:
+        dr_drn = np.where(i >= 1, (i - 1) / (n - 1), 0.0)
+        dr_dr1 = np.where(i >= 1, 1.0 - dr_drn, 0.0)
+    else:
+        dr_dr1, dr_drn = (i >= 1).astype(float), np.zeros(n + 1)
+    return r, p, -sigma * p, dr_dr1, dr_drn
+
+
+def _jacobian(model, signals, values, columns):
+    """d output / d parameters, shape (n_samples, p), of a linear-envelope model:
+    ``columns(v, **named values)`` on the input without held samples, spread back."""
+    v = _input(signals)
+    runs = _held_runs(v)
+    vc, idx = (v, None) if runs is None else runs
+    jac = columns(vc, model.n, **model.named(values))
+    return jac if idx is None else jac[idx]
+
+
+def _gpi_columns(v, n, a1, a2, a3, a4, lam, sigma, r1, rn):
+    r, p, dp, d1, dn = _jac_blocks(r1, rn, lam, sigma, n)
+    y, j = play_jacobian(v, a1, a2, a3, a4, 0.0, 0.0, r, 1.0, 0.0, 0, p, dp, d1, dn)
+    return np.column_stack((j[:, :4], y / lam, j[:, 9], j[:, 6], j[:, 7]))
+
+
+def _egpi_columns(j, y, lam):
+    """Model-order columns (a1..a6, lam, sigma, r1, rn, kappa, v_f) from
+    :func:`~.kernel.play_jacobian`'s; v_f (a profiled step position) gets 0."""
+    return np.column_stack((j[:, :6], y / lam, j[:, 9], j[:, 6], j[:, 7], j[:, 8], 0.0 * y))
+
+
 # ------------------------------------------------------------- the equations, compiled
 # Each model's evaluate names its parameter vector and calls one of these with keyword
 # arguments; they are compiled (numba) so the envelopes, both families and the output
@@ -301,6 +337,11 @@ class GPIModel(ParametricModel):
         """Output angle (deg), shape (n_samples,), for values (a1..a4, lam, sigma, r1, rn)."""
         return _per_run(gpi_output, _input(signals), n=self.n, **self.named(values))
 
+    def jacobian(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """d output / d parameters (deg per unit), shape (n_samples, p), exact (the
+        output is piecewise linear in the envelopes and thresholds)."""
+        return _jacobian(self, signals, values, _gpi_columns)
+
 
 def gpi_model(n: int = 30, **values: float) -> GPIModel:
     """A GPI model with default (paper-like yaw+) values, overridden by ``values``."""
@@ -343,6 +384,21 @@ class I2RISEGPIModel(ParametricModel):
             **self.named(values),
         )
 
+    def jacobian(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """d output / d parameters (deg per unit), shape (n_samples, p), exact (the
+        output is piecewise linear in the envelopes and thresholds); 0 for ``v_f``
+        (the output steps in it: profiled)."""
+        db = float(self.deadband_counts)
+
+        def columns(v, n, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f):
+            r, p, dp, d1, dn = _jac_blocks(r1, rn, lam, sigma, n)
+            y1, j1 = play_jacobian(v, a1, a2, a3, a4, a5, a6, r, kappa, v_f, 0, p, dp, d1, dn)
+            y2, j2 = play_jacobian(v, a1, a2, a3, a4, a5, a6, r, kappa, v_f, 1, p, dp, d1, dn)
+            sel = (motion_direction(v, db) < 0) & (v <= v_f)  # Eq20
+            return _egpi_columns(np.where(sel[:, None], j2, j1), np.where(sel, y2, y1), lam)
+
+        return _jacobian(self, signals, values, columns)
+
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:
     """An I2RIS EGPI with default (paper-like yaw+) values, overridden by ``values``."""
@@ -384,6 +440,16 @@ class ContinuousEGPIModel(I2RISEGPIModel):
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,)."""
         return _per_run(continuous_egpi_output, _input(signals), n=self.n, **self.named(values))
+
+    def jacobian(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """d output / d parameters, shape (n_samples, p), exact; 0 for ``v_f``."""
+
+        def columns(v, n, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f):
+            r, p, dp, d1, dn = _jac_blocks(r1, rn, lam, sigma, n)
+            y, j = play_jacobian(v, a1, a2, a3, a4, a5, a6, r, kappa, v_f, 2, p, dp, d1, dn)
+            return _egpi_columns(j, y, lam)
+
+        return _jacobian(self, signals, values, columns)
 
 
 def continuous_egpi_model(

@@ -222,6 +222,7 @@ class _Counter:
         self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
         self.jac_fn = _analytic_jacobian(model)
+        self.used_idx = None
 
     def cost(self, full: np.ndarray) -> float:
         """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
@@ -242,8 +243,10 @@ class _Counter:
         """d residual / d parameters at the fitted samples, shape (n_used, p) (the
         model's exact Jacobian; counted as one evaluation)."""
         self.n += 1
-        jac = self.jac_fn(self.signals, full)[self.used]
-        return np.where(np.isfinite(jac), jac, 0.0)
+        if self.used_idx is None:
+            self.used_idx = np.flatnonzero(self.used)
+        jac = self.jac_fn(self.signals, full, rows=self.used_idx)
+        return jac if np.isfinite(jac).all() else np.where(np.isfinite(jac), jac, 0.0)
 
 
 def _analytic_jacobian(model):
@@ -495,7 +498,11 @@ def _fit_model(
         raise CalibError(
             f"fit: loss '{loss}' needs method 'trf' (MINPACK LM is plain least squares)"
         )
-    counter = _Counter(model, s, theta, used, loss, f_scale_deg)
+    # the model runs on a read-only copy of the input: it cannot change during the fit,
+    # so the models keep what they derive from it (runs of held samples)
+    v_frozen = np.array(s.v, dtype=float)
+    v_frozen.flags.writeable = False
+    counter = _Counter(model, replace(s, v=v_frozen), theta, used, loss, f_scale_deg)
     starts = [np.array([p.value for p in params], dtype=float)] if not starts else starts
 
     def run(x0, nfev_limit, steps, how=method):

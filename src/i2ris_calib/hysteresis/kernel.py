@@ -278,13 +278,30 @@ def play_numpy(v, gamma_l, r_l, gamma_r, r_r, p):
     return out
 
 
-#: Columns of :func:`play_jacobian`'s derivative array.
-JAC_COLUMNS = ("a_l", "b_l", "a_r1", "b_r1", "a_r2", "b_r2", "r1", "rn", "kappa", "sigma")
+#: What :func:`play_jacobian` differentiates by, in the order of its ``cols`` argument.
+JAC_QUANTITIES = ("a_l", "b_l", "a_r1", "b_r1", "a_r2", "b_r2", "r1", "rn", "kappa", "sigma", "lam")
 
 
 @njit(cache=True)
 def play_jacobian(
-    v, a_l, b_l, a_r1, b_r1, a_r2, b_r2, r, kappa, v_f, mode, p, dp_dr, dr_dr1, dr_drn
+    v,
+    a_l,
+    b_l,
+    a_r1,
+    b_r1,
+    a_r2,
+    b_r2,
+    r,
+    kappa,
+    v_f,
+    mode,
+    p,
+    dp_dr,
+    dr_dr1,
+    dr_drn,
+    lam,
+    cols,
+    jac,
 ):  # pragma: no cover - compiled
     """Output of one play-operator family and its derivatives, in one pass.
 
@@ -310,20 +327,24 @@ def play_jacobian(
         stage 2 at or below it (:func:`play_switched`).
     p, dp_dr, dr_dr1, dr_drn : ndarray, shape (m,)
         Weights, their derivative in ``r_i``, and the derivatives of ``r_i`` in r1, rn.
+    lam : float
+        Density scale (``d y / d lam = y / lam``).
+    cols : ndarray of int, shape (11,)
+        Column of ``jac`` receiving the derivative in each of :data:`JAC_QUANTITIES`
+        (-1: not written).
+    jac : ndarray, shape (n, q)
+        Written in place (columns not named in ``cols`` are left as they are).
 
     Returns
     -------
     y : ndarray, shape (n,)
-    jac : ndarray, shape (n, 10)
-        d y / d (a_l, b_l, a_r1, b_r1, a_r2, b_r2, r1, rn, kappa, sigma)
-        (:data:`JAC_COLUMNS`; ``d y / d lam = y / lam`` is not included).
     """
     ns = v.size
     m = p.size
     y = np.empty(ns)
-    jac = np.zeros((ns, 10))
     if ns == 0:
-        return y, jac
+        return y
+    d = np.zeros(11)
     w = np.empty(m)
     src = np.zeros(m, dtype=np.int8)  # 0: zero, 1: loading, 2: stage-1 / 3: stage-2 unloading
     vs = np.zeros(m)  # input at which the boundary set w_i
@@ -365,10 +386,6 @@ def play_jacobian(
                             continue
                     if c < w[i]:
                         w[i], src[i], vs[i] = c, code, v[k]
-            else:
-                y[k] = y[k - 1]
-                jac[k] = jac[k - 1]
-                continue
         acc = j0 = j1 = j2 = j3 = j4 = j5 = j6 = j7 = j8 = j9 = 0.0
         for i in range(m):
             wi = w[i]
@@ -394,7 +411,10 @@ def play_jacobian(
             j6 += t * dr_dr1[i]
             j7 += t * dr_drn[i]
             j9 -= r[i] * pi * wi
-        jac[k, 0], jac[k, 1], jac[k, 2], jac[k, 3], jac[k, 4] = j0, j1, j2, j3, j4
-        jac[k, 5], jac[k, 6], jac[k, 7], jac[k, 8], jac[k, 9] = j5, j6, j7, j8, j9
         y[k] = acc
-    return y, jac
+        d[0], d[1], d[2], d[3], d[4], d[5] = j0, j1, j2, j3, j4, j5
+        d[6], d[7], d[8], d[9], d[10] = j6, j7, j8, j9, acc / lam
+        for c in range(11):
+            if cols[c] >= 0:
+                jac[k, cols[c]] = d[c]
+    return y

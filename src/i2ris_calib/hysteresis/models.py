@@ -201,6 +201,26 @@ def _held_runs(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     evaluated once per run of equal inputs. A direction dataset's input rests at 0
     while the motor is on the other side of zero: about half of a recording.
     """
+    # a read-only array owning its data (the fitter's copy of the input) cannot change:
+    # its runs are kept (a fit evaluates the model thousands of times on one input)
+    frozen = not v.flags.writeable and v.base is None
+    if frozen:
+        for key, runs in _RUNS_CACHE:
+            if key is v:
+                return runs
+    runs = _find_runs(v)
+    if frozen:
+        _RUNS_CACHE.insert(0, (v, runs))
+        del _RUNS_CACHE[4:]
+    return runs
+
+
+#: (input, its runs) of the last read-only inputs seen by :func:`_held_runs`.
+_RUNS_CACHE: list = []
+
+
+def _find_runs(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`_held_runs` without the cache."""
     new = np.empty(v.size, dtype=bool)
     if v.size == 0:
         return None
@@ -235,26 +255,30 @@ def _jac_blocks(r1, rn, lam, sigma, n):
     return r, p, -sigma * p, dr_dr1, dr_drn
 
 
-def _jacobian(model, signals, values, columns):
-    """d output / d parameters, shape (n_samples, p), of a linear-envelope model:
-    ``columns(v, **named values)`` on the input without held samples, spread back."""
+def _jacobian(model, signals, values, columns, rows):
+    """d output / d parameters, shape (n_samples, p) or (len(rows), p), of a
+    linear-envelope model: ``columns(v, n, **named values)`` on the input without
+    held samples (shape (n_runs, p)), spread back to the samples ``rows``."""
     v = _input(signals)
     runs = _held_runs(v)
     vc, idx = (v, None) if runs is None else runs
     jac = columns(vc, model.n, **model.named(values))
-    return jac if idx is None else jac[idx]
+    if rows is None:
+        return jac if idx is None else jac[idx]
+    rows = np.asarray(rows)
+    return jac[rows] if idx is None else jac[idx[rows]]
+
+
+#: play_jacobian's quantities (kernel.JAC_QUANTITIES) -> GPI / EGPI parameter columns
+_GPI_COLS = np.array([0, 1, 2, 3, -1, -1, 6, 7, -1, 5, 4])
+_EGPI_COLS = np.array([0, 1, 2, 3, 4, 5, 8, 9, 10, 7, 6])
 
 
 def _gpi_columns(v, n, a1, a2, a3, a4, lam, sigma, r1, rn):
     r, p, dp, d1, dn = _jac_blocks(r1, rn, lam, sigma, n)
-    y, j = play_jacobian(v, a1, a2, a3, a4, 0.0, 0.0, r, 1.0, 0.0, 0, p, dp, d1, dn)
-    return np.column_stack((j[:, :4], y / lam, j[:, 9], j[:, 6], j[:, 7]))
-
-
-def _egpi_columns(j, y, lam):
-    """Model-order columns (a1..a6, lam, sigma, r1, rn, kappa, v_f) from
-    :func:`~.kernel.play_jacobian`'s; v_f (a profiled step position) gets 0."""
-    return np.column_stack((j[:, :6], y / lam, j[:, 9], j[:, 6], j[:, 7], j[:, 8], 0.0 * y))
+    jac = np.zeros((v.size, 8))
+    play_jacobian(v, a1, a2, a3, a4, 0.0, 0.0, r, 1.0, 0.0, 0, p, dp, d1, dn, lam, _GPI_COLS, jac)
+    return jac
 
 
 # ------------------------------------------------------------- the equations, compiled
@@ -337,10 +361,13 @@ class GPIModel(ParametricModel):
         """Output angle (deg), shape (n_samples,), for values (a1..a4, lam, sigma, r1, rn)."""
         return _per_run(gpi_output, _input(signals), n=self.n, **self.named(values))
 
-    def jacobian(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+    def jacobian(
+        self, signals: Signals, values: np.ndarray, rows: np.ndarray | None = None
+    ) -> np.ndarray:
         """d output / d parameters (deg per unit), shape (n_samples, p), exact (the
-        output is piecewise linear in the envelopes and thresholds)."""
-        return _jacobian(self, signals, values, _gpi_columns)
+        output is piecewise linear in the envelopes and thresholds); ``rows``: sample
+        indices, shape (k,), to return only those rows."""
+        return _jacobian(self, signals, values, _gpi_columns, rows)
 
 
 def gpi_model(n: int = 30, **values: float) -> GPIModel:
@@ -384,20 +411,26 @@ class I2RISEGPIModel(ParametricModel):
             **self.named(values),
         )
 
-    def jacobian(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+    def jacobian(
+        self, signals: Signals, values: np.ndarray, rows: np.ndarray | None = None
+    ) -> np.ndarray:
         """d output / d parameters (deg per unit), shape (n_samples, p), exact (the
         output is piecewise linear in the envelopes and thresholds); 0 for ``v_f``
-        (the output steps in it: profiled)."""
+        (the output steps in it: profiled); ``rows``: sample indices, shape (k,), to
+        return only those rows."""
         db = float(self.deadband_counts)
 
         def columns(v, n, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f):
             r, p, dp, d1, dn = _jac_blocks(r1, rn, lam, sigma, n)
-            y1, j1 = play_jacobian(v, a1, a2, a3, a4, a5, a6, r, kappa, v_f, 0, p, dp, d1, dn)
-            y2, j2 = play_jacobian(v, a1, a2, a3, a4, a5, a6, r, kappa, v_f, 1, p, dp, d1, dn)
+            args = (a1, a2, a3, a4, a5, a6, r, kappa, v_f)
+            j1, j2 = np.zeros((v.size, 12)), np.zeros((v.size, 12))
+            play_jacobian(v, *args, 0, p, dp, d1, dn, lam, _EGPI_COLS, j1)
+            play_jacobian(v, *args, 1, p, dp, d1, dn, lam, _EGPI_COLS, j2)
             sel = (motion_direction(v, db) < 0) & (v <= v_f)  # Eq20
-            return _egpi_columns(np.where(sel[:, None], j2, j1), np.where(sel, y2, y1), lam)
+            j1[sel] = j2[sel]
+            return j1
 
-        return _jacobian(self, signals, values, columns)
+        return _jacobian(self, signals, values, columns, rows)
 
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:
@@ -441,15 +474,20 @@ class ContinuousEGPIModel(I2RISEGPIModel):
         """Output angle (deg), shape (n_samples,)."""
         return _per_run(continuous_egpi_output, _input(signals), n=self.n, **self.named(values))
 
-    def jacobian(self, signals: Signals, values: np.ndarray) -> np.ndarray:
-        """d output / d parameters, shape (n_samples, p), exact; 0 for ``v_f``."""
+    def jacobian(
+        self, signals: Signals, values: np.ndarray, rows: np.ndarray | None = None
+    ) -> np.ndarray:
+        """d output / d parameters, shape (n_samples, p) (or (len(rows), p)), exact;
+        0 for ``v_f``."""
 
         def columns(v, n, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f):
             r, p, dp, d1, dn = _jac_blocks(r1, rn, lam, sigma, n)
-            y, j = play_jacobian(v, a1, a2, a3, a4, a5, a6, r, kappa, v_f, 2, p, dp, d1, dn)
-            return _egpi_columns(j, y, lam)
+            jac = np.zeros((v.size, 12))
+            args = (a1, a2, a3, a4, a5, a6, r, kappa, v_f)
+            play_jacobian(v, *args, 2, p, dp, d1, dn, lam, _EGPI_COLS, jac)
+            return jac
 
-        return _jacobian(self, signals, values, columns)
+        return _jacobian(self, signals, values, columns, rows)
 
 
 def continuous_egpi_model(

@@ -222,7 +222,8 @@ class _Counter:
         self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
         self.jac_fn = _analytic_jacobian(model)
-        self.used_idx = None
+        self.used_idx = np.flatnonzero(used)
+        self.theta_used = theta[self.used_idx]
 
     def cost(self, full: np.ndarray) -> float:
         """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
@@ -236,15 +237,13 @@ class _Counter:
     def residuals(self, full: np.ndarray) -> np.ndarray:
         self.n += 1
         y = self.model.evaluate(self.signals, full)
-        r = (y - self.theta)[self.used]
-        return np.where(np.isfinite(r), r, _BIG)
+        r = y[self.used_idx] - self.theta_used
+        return r if np.isfinite(r).all() else np.where(np.isfinite(r), r, _BIG)
 
     def jacobian(self, full: np.ndarray) -> np.ndarray:
         """d residual / d parameters at the fitted samples, shape (n_used, p) (the
         model's exact Jacobian; counted as one evaluation)."""
         self.n += 1
-        if self.used_idx is None:
-            self.used_idx = np.flatnonzero(self.used)
         jac = self.jac_fn(self.signals, full, rows=self.used_idx)
         return jac if np.isfinite(jac).all() else np.where(np.isfinite(jac), jac, 0.0)
 

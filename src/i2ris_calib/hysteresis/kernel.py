@@ -282,7 +282,7 @@ def play_numpy(v, gamma_l, r_l, gamma_r, r_r, p):
 JAC_QUANTITIES = ("a_l", "b_l", "a_r1", "b_r1", "a_r2", "b_r2", "r1", "rn", "kappa", "sigma", "lam")
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=True)
 def play_jacobian(
     v,
     a_l,
@@ -346,71 +346,82 @@ def play_jacobian(
         return y
     d = np.zeros(11)
     w = np.empty(m)
-    src = np.zeros(m, dtype=np.int8)  # 0: zero, 1: loading, 2: stage-1 / 3: stage-2 unloading
-    vs = np.zeros(m)  # input at which the boundary set w_i
+    # per operator, which boundary set w_i (as 0/1 weights: loading, stage-1, stage-2
+    # unloading; all 0 for the clamped zero), the input where it did, and d w_i / d r_i
+    on_l, on_1, on_2 = np.zeros(m), np.zeros(m), np.zeros(m)
+    vs, dwdr = np.zeros(m), np.zeros(m)
     stage2 = mode == 1 or (mode == 2 and not v[0] > v_f)
     g_l = a_l * v[0] + b_l
     g_r, kr = (a_r2 * v[0] + b_r2, kappa) if stage2 else (a_r1 * v[0] + b_r1, 1.0)
     for i in range(m):
         lo = g_l - r[i]
         hi = g_r + kr * r[i]
-        if hi < max(0.0, lo):
-            w[i], src[i] = hi, 3 if stage2 else 2
-        elif lo > 0.0:
-            w[i], src[i] = lo, 1
-        else:
-            w[i], src[i] = 0.0, 0
         vs[i] = v[0]
+        if hi < max(0.0, lo):
+            w[i], dwdr[i] = hi, kr
+            if stage2:
+                on_2[i] = 1.0
+            else:
+                on_1[i] = 1.0
+        elif lo > 0.0:
+            w[i], dwdr[i], on_l[i] = lo, -1.0, 1.0
+        else:
+            w[i] = 0.0
+    pr = p * r
     for k in range(ns):
         if k > 0:
-            if v[k] > v[k - 1]:
-                g = a_l * v[k] + b_l
-                for i in range(m):
+            vk = v[k]
+            if vk > v[k - 1]:
+                g = a_l * vk + b_l
+                for i in range(m):  # branch-free selects: vectorised
                     c = g - r[i]
-                    if c > w[i]:
-                        w[i], src[i], vs[i] = c, 1, v[k]
-            elif v[k] < v[k - 1]:
-                stage2 = mode == 1 or (mode == 2 and not v[k] > v_f)
+                    up = c > w[i]
+                    w[i] = c if up else w[i]
+                    vs[i] = vk if up else vs[i]
+                    dwdr[i] = -1.0 if up else dwdr[i]
+                    on_l[i] = 1.0 if up else on_l[i]
+                    on_1[i] = 0.0 if up else on_1[i]
+                    on_2[i] = 0.0 if up else on_2[i]
+            elif vk < v[k - 1]:
+                stage2 = mode == 1 or (mode == 2 and not vk > v_f)
                 if stage2:
-                    g, kr, code = a_r2 * v[k] + b_r2, kappa, 3
+                    g, kr, f1, f2 = a_r2 * vk + b_r2, kappa, 0.0, 1.0
                 else:
-                    g, kr, code = a_r1 * v[k] + b_r1, 1.0, 2
-                cross = mode == 2 and v[k - 1] > v_f and v_f >= v[k]
-                g1 = a_r1 * v_f + b_r1
+                    g, kr, f1, f2 = a_r1 * vk + b_r1, 1.0, 1.0, 0.0
+                if mode == 2 and v[k - 1] > v_f and v_f >= vk:
+                    # the step crossed v_f: the stage-1 boundary at v_f comes first
+                    g1 = a_r1 * v_f + b_r1
+                    for i in range(m):
+                        c1 = g1 + r[i]
+                        if c1 < w[i]:
+                            w[i], vs[i], dwdr[i] = c1, v_f, 1.0
+                            on_l[i], on_1[i], on_2[i] = 0.0, 1.0, 0.0
                 for i in range(m):
                     c = g + kr * r[i]
-                    if cross:
-                        c1 = g1 + r[i]
-                        if c1 < w[i] and c1 < c:
-                            w[i], src[i], vs[i] = c1, 2, v_f
-                            continue
-                    if c < w[i]:
-                        w[i], src[i], vs[i] = c, code, v[k]
+                    dn = c < w[i]
+                    w[i] = c if dn else w[i]
+                    vs[i] = vk if dn else vs[i]
+                    dwdr[i] = kr if dn else dwdr[i]
+                    on_l[i] = 0.0 if dn else on_l[i]
+                    on_1[i] = f1 if dn else on_1[i]
+                    on_2[i] = f2 if dn else on_2[i]
         acc = j0 = j1 = j2 = j3 = j4 = j5 = j6 = j7 = j8 = j9 = 0.0
-        for i in range(m):
-            wi = w[i]
+        for i in range(m):  # branch-free: vectorised
             pi = p[i]
+            wi = w[i]
             acc += pi * wi
-            s = src[i]
-            if s == 0:
-                dwdr = 0.0
-            elif s == 1:
-                j0 += pi * vs[i]
-                j1 += pi
-                dwdr = -1.0
-            elif s == 2:
-                j2 += pi * vs[i]
-                j3 += pi
-                dwdr = 1.0
-            else:
-                j4 += pi * vs[i]
-                j5 += pi
-                j8 += pi * r[i]
-                dwdr = kappa
-            t = dp_dr[i] * wi + pi * dwdr
+            pv = pi * vs[i]
+            j0 += pv * on_l[i]
+            j1 += pi * on_l[i]
+            j2 += pv * on_1[i]
+            j3 += pi * on_1[i]
+            j4 += pv * on_2[i]
+            j5 += pi * on_2[i]
+            j8 += pr[i] * on_2[i]
+            t = dp_dr[i] * wi + pi * dwdr[i]
             j6 += t * dr_dr1[i]
             j7 += t * dr_drn[i]
-            j9 -= r[i] * pi * wi
+            j9 -= pr[i] * wi
         y[k] = acc
         d[0], d[1], d[2], d[3], d[4], d[5] = j0, j1, j2, j3, j4, j5
         d[6], d[7], d[8], d[9], d[10] = j6, j7, j8, j9, acc / lam

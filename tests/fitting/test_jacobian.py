@@ -55,3 +55,19 @@ def test_subclass_overriding_evaluate_falls_back_to_finite_differences():
     shifted = Shifted("shifted", base.parameters, n=base.n)
     assert _analytic_jacobian(base) is not None
     assert _analytic_jacobian(shifted) is None
+
+
+@pytest.mark.parametrize("seed", [3, 4])
+def test_flag_point_families_give_the_output_for_every_flag_point(seed):
+    """The EGPI's flag point only switches between two outputs: the fitter's profile
+    over v_f uses them, and must see exactly (bit for bit) what evaluate gives."""
+    _, v = loading_trajectory(np.random.default_rng(seed), n_cycles=5, n_samples=3000)
+    v = np.round(v)
+    m = i2ris_egpi_model(**random_i2ris_egpi_params(np.random.default_rng(seed)))
+    y1, y2, unloading = m.flag_point_families(v, m.values)
+    assert np.any(y1 != y2)
+    x = m.values
+    for v_f in np.linspace(v.min(), v.max(), 25):
+        x[-1] = v_f
+        assert np.array_equal(np.where(unloading & (v <= v_f), y2, y1), m.evaluate(v, x))
+    assert _analytic_jacobian(continuous_egpi_model(), "flag_point_families") is None

@@ -221,13 +221,45 @@ class _Counter:
         self.model, self.signals, self.theta, self.used = model, signals, theta, used
         self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
-        self.jac_fn = _analytic_jacobian(model)
+        self.jac_fn = _analytic_jacobian(model, "jacobian")
+        self.families_fn = _analytic_jacobian(model, "flag_point_families")
+        names = [p.name for p in model.parameters]
+        self.vf_index = names.index("v_f") if "v_f" in names else -1
         self.used_idx = np.flatnonzero(used)
         self.theta_used = theta[self.used_idx]
 
     def cost(self, full: np.ndarray) -> float:
         """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
-        z = (self.residuals(full) / self.f_scale) ** 2
+        return self._rho_sum(self.residuals(full))
+
+    def held_cost(self, full: np.ndarray, idx: int):
+        """The cost as a function of parameter ``idx`` alone, the others held at
+        ``full``. For a model whose flag point only switches between two fixed outputs
+        (``flag_point_families``, the paper's EGPI) one model run serves every value;
+        the costs are the same to the last bit as :meth:`cost`."""
+        if self.families_fn is not None and idx == self.vf_index:
+            self.n += 1
+            u = self.used_idx
+            y1, y2, unloading = (a[u] for a in self.families_fn(self.signals, full))
+            vu = np.asarray(self.signals.v)[u]
+
+            def flag_cost(x):
+                r = np.where(unloading & (vu <= x), y2, y1) - self.theta_used
+                return self._rho_sum(
+                    r if np.isfinite(r).all() else np.where(np.isfinite(r), r, _BIG)
+                )
+
+            return flag_cost
+
+        def cost(x):
+            trial = full.copy()
+            trial[idx] = x
+            return self.cost(trial)
+
+        return cost
+
+    def _rho_sum(self, r: np.ndarray) -> float:
+        z = (r / self.f_scale) ** 2
         if self.loss == "soft_l1":
             z = 2.0 * (np.sqrt(1.0 + z) - 1.0)
         elif self.loss == "huber":
@@ -248,18 +280,18 @@ class _Counter:
         return jac if np.isfinite(jac).all() else np.where(np.isfinite(jac), jac, 0.0)
 
 
-def _analytic_jacobian(model):
-    """``model.jacobian`` when the model's class defines it together with the
-    ``evaluate`` it differentiates (a subclass overriding only ``evaluate`` falls back
-    to finite differences), else None."""
+def _analytic_jacobian(model, method: str = "jacobian"):
+    """``model.<method>`` (``jacobian``, ``flag_point_families``) when the model's class
+    defines it together with the ``evaluate`` it stands for (a subclass overriding only
+    ``evaluate`` falls back to finite differences / plain evaluations), else None."""
     cls = type(model)
 
     def owner(name):
         return next((c for c in cls.__mro__ if name in c.__dict__), None)
 
-    if owner("jacobian") is None or owner("jacobian") is not owner("evaluate"):
+    if owner(method) is None or owner(method) is not owner("evaluate"):
         return None
-    return model.jacobian
+    return getattr(model, method)
 
 
 def _validate(signals: Signals, theta: np.ndarray, n_free: int, used: np.ndarray) -> None:
@@ -324,13 +356,13 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
     return full, res
 
 
-def _profile(counter, full, idx, grid):
-    """Best value of parameter ``idx`` on ``grid`` with the others held; returns (value, cost)."""
-    best = (full[idx], counter.cost(full))
-    trial = full.copy()
+def _profile(counter, full, idx, grid, cost=None):
+    """Best value of parameter ``idx`` on ``grid`` with the others held; returns (value, cost).
+    ``cost``: :meth:`_Counter.held_cost` of ``full`` and ``idx`` (made here by default)."""
+    cost = counter.held_cost(full, idx) if cost is None else cost
+    best = (full[idx], cost(full[idx]))
     for g in grid:
-        trial[idx] = g
-        c = counter.cost(trial)
+        c = cost(g)
         if c < best[1]:
             best = (g, c)
     return best
@@ -351,9 +383,10 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
     vals = np.unique(v[counter.used])
     for idx in pidx:
         lo, hi = max(lower[idx], v.min()), min(upper[idx], v.max())
+        cost = counter.held_cost(full, idx)  # only parameter idx changes below
         if wide:
             grid = np.clip(np.linspace(full[idx] - 0.2 * span, full[idx] + 0.2 * span, 41), lo, hi)
-            best, _ = _profile(counter, full, idx, grid)
+            best, _ = _profile(counter, full, idx, grid, cost)
             full = full.copy()
             full[idx] = best
         # the fitted input values within +-1 % of the range, and one more on each side:
@@ -364,12 +397,8 @@ def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
         if near.size < 2:
             continue
         cands = 0.5 * (near[1:] + near[:-1])
-        costs = np.empty(cands.size)
-        trial = full.copy()
-        for j, c in enumerate(cands):
-            trial[idx] = c
-            costs[j] = counter.cost(trial)
-        if costs.min() > counter.cost(full) * (1 + 1e-12):
+        costs = np.array([cost(c) for c in cands])
+        if costs.min() > cost(full[idx]) * (1 + 1e-12):
             continue  # never worse than where it is
         tied = np.flatnonzero(costs <= costs.min() * (1 + 1e-12))
         run = tied[np.concatenate(([0], np.flatnonzero(np.diff(tied) > 1) + 1))[0] :]

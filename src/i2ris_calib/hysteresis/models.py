@@ -298,11 +298,11 @@ def gpi_output(v, a1, a2, a3, a4, lam, sigma, r1, rn, n):  # pragma: no cover - 
 
 
 @njit(cache=True)
-def egpi_output(
-    v, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f, n, deadband
+def egpi_families(
+    v, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, n, deadband
 ):  # pragma: no cover
-    """The paper's I2RIS EGPI output y (deg), shape (len(v),) (Eq14-23); ``deadband``:
-    the ``v'`` dead band (counts, :func:`~.kernel.motion_direction`)."""
+    """The I2RIS EGPI's two family outputs y1, y2, shape (2, len(v)) (Eq16-19, Eq21-23),
+    and the motion direction ``v'``, int8 (len(v),) (:func:`~.kernel.motion_direction`)."""
     r = thresholds(r1, rn, n)  # Eq14
     p = density(r, lam, sigma)  # Eq15
     y = np.empty((2, v.size))  # y1, y2 (one buffer: fewer fresh memory pages)
@@ -310,7 +310,16 @@ def egpi_output(
     play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a3, b_r=a4, r_r=r, p=p, out=y[0])
     # Eq17, Eq19: F_{r,2} on gamma_l, gamma_r2 = a5 v + a6 (Eq23) with kappa r; y2
     play_operators(v, a_l=a1, b_l=a2, r_l=r, a_r=a5, b_r=a6, r_r=kappa * r, p=p, out=y[1])
-    direction = motion_direction(v, deadband)  # v' (a hold keeps the direction)
+    return y, motion_direction(v, deadband)  # v' (a hold keeps the direction)
+
+
+@njit(cache=True)
+def egpi_output(
+    v, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, v_f, n, deadband
+):  # pragma: no cover
+    """The paper's I2RIS EGPI output y (deg), shape (len(v),) (Eq14-23); ``deadband``:
+    the ``v'`` dead band (counts, :func:`~.kernel.motion_direction`)."""
+    y, direction = egpi_families(v, a1, a2, a3, a4, a5, a6, lam, sigma, r1, rn, kappa, n, deadband)
     # Eq20: y1 while loading (v' > 0) or above v_f, y2 while unloading (v' <= 0) at v <= v_f
     return np.where((direction < 0) & (v <= v_f), y[1], y[0])
 
@@ -431,6 +440,24 @@ class I2RISEGPIModel(ParametricModel):
             return j1
 
         return _jacobian(self, signals, values, columns, rows)
+
+    def flag_point_families(
+        self, signals: Signals, values: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(y1, y2, unloading), shape (n_samples,) each: the output for ANY flag point
+        ``v_f`` is ``where(unloading & (v <= v_f), y2, y1)`` (Eq20), equal to
+        :meth:`evaluate` with that ``v_f`` to the last bit (the fitter's flag-point
+        profile: one model run for every candidate v_f)."""
+        v = _input(signals)
+        val = self.named(values)
+        del val["v_f"]
+        runs = _held_runs(v)
+        vc, idx = (v, None) if runs is None else runs
+        y, direction = egpi_families(vc, n=self.n, deadband=float(self.deadband_counts), **val)
+        y1, y2, unloading = y[0], y[1], direction < 0
+        if idx is None:
+            return y1, y2, unloading
+        return y1[idx], y2[idx], unloading[idx]
 
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:

@@ -27,7 +27,8 @@ b. A rendered session with an exact EGPI truth (preset ``exact``: 640x512 mp4,
    leaves no synced table, the session is synced with the known true clock (said so).
 c. Fit speed (one process, kernels warm): GPI + EGPI + EGPI_C on the four direction
    datasets of a two-axis recording of 6.6k samples, and on one 50k-sample direction
-   dataset. Target <= 10 s each.
+   dataset. Target <= 10 s each. ``nfev``: model evaluations (an exact Jacobian counts
+   as one, see FitResult.nfev).
 
 Exit status 1 when a target is missed.
 """

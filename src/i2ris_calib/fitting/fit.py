@@ -9,6 +9,12 @@ v_f, so finite-difference derivatives are useless): a grid over v_f with the oth
 parameters fixed, then LM again, repeated. NaN angles leave the loss but the model
 always runs over the whole input sequence (the operator state needs every sample).
 
+Speed: a model that defines ``jacobian`` (with the ``evaluate`` it differentiates; GPI,
+EGPI, EGPI_C) gives LM its exact Jacobian in one pass instead of one finite-difference
+evaluation per free parameter; one that defines ``flag_point_families`` (the paper EGPI)
+gives the flag-point profile every candidate v_f from one model run. Both give the
+values ``evaluate`` gives (the profile to the last bit), so the fit is the same search.
+
 The fitted result is a new object; the input model is never changed.
 """
 
@@ -87,7 +93,10 @@ class FitResult:
         its start); should it still be worse, ``converged`` is False and the message
         says "NOT a minimum".
     nfev : int
-        Model evaluations in total (all starts, Jacobians, profile searches).
+        Model evaluations in total (all starts, Jacobians, profile searches). An
+        exact Jacobian (a model with a ``jacobian`` method: GPI, EGPI, EGPI_C) counts
+        as one evaluation, as does the paper EGPI's flag-point profile over one set of
+        family outputs; finite-difference Jacobians count one per free parameter.
     n_samples : int
         Samples in the loss.
     free : tuple of str

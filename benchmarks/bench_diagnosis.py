@@ -28,9 +28,11 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -230,8 +232,6 @@ def main() -> None:
         jobs = [(*c, starts) for c in todo]
         rows = []
         if args.j > 1:
-            from concurrent.futures import ProcessPoolExecutor
-
             with ProcessPoolExecutor(args.j) as ex:
                 it = ex.map(run_independent, jobs)
                 for r in it:
@@ -244,8 +244,6 @@ def main() -> None:
                 _line(r)
         summary(rows)
         if args.json:
-            import json
-
             Path(args.json).write_text(json.dumps(rows, indent=1))
     timing_10k(starts)
 

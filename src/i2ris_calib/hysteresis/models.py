@@ -31,6 +31,7 @@ Choices the paper leaves open (documented in docs/models.md):
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
@@ -206,16 +207,17 @@ def _held_runs(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     frozen = not v.flags.writeable and v.base is None
     if frozen:
         for key, runs in _RUNS_CACHE:
-            if key is v:
+            if key() is v:
                 return runs
     runs = _find_runs(v)
     if frozen:
-        _RUNS_CACHE.insert(0, (v, runs))
-        del _RUNS_CACHE[4:]
+        _RUNS_CACHE.insert(0, (weakref.ref(v), runs))
+        del _RUNS_CACHE[2:]
     return runs
 
 
-#: (input, its runs) of the last read-only inputs seen by :func:`_held_runs`.
+#: (weak reference to the input, its runs) of the last two read-only inputs seen by
+#: :func:`_held_runs` (a fit uses one; the input itself is not kept alive).
 _RUNS_CACHE: list = []
 
 

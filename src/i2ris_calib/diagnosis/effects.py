@@ -29,7 +29,7 @@ import numpy as np
 
 from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Model, Parameter, Signals
+from i2ris_calib.hysteresis.model import Model, NamedParameters, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
 
 
@@ -557,7 +557,7 @@ def get_effect(name: str) -> Effect:
 
 
 @dataclass(frozen=True)
-class EffectModel:
+class EffectModel(NamedParameters):
     """A model extended by one effect; satisfies the Model protocol.
 
     Parameters of the wrapped model come first, then the effect's, named
@@ -605,20 +605,6 @@ class EffectModel:
             for p, v, f in zip(self.effect.params, self.effect_values, fixed, strict=True)
         )
         return tuple(self.inner.parameters) + own
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        """Parameter names in vector order."""
-        return tuple(p.name for p in self.parameters)
-
-    @property
-    def values(self) -> np.ndarray:
-        """Current values of all parameters (wrapped model's first), shape (p,)."""
-        return np.array([p.value for p in self.parameters], dtype=float)
-
-    def value_dict(self) -> dict[str, float]:
-        """``{name: value}`` of the current parameters."""
-        return {p.name: float(p.value) for p in self.parameters}
 
     def __call__(self, signals: Signals | np.ndarray) -> np.ndarray:
         """Angle (deg), shape (n,), at the model's current values."""

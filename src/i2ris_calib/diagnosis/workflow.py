@@ -186,17 +186,28 @@ def _alternatives(best: Candidate, finals, d: SearchData, cfg) -> tuple[Alternat
     for c in sorted(others, key=lambda c: c.metrics.holdout_rmse_deg):
         comp = compare((c.model, c.metrics), (best.model, best.metrics), d, cfg)
         out.append(
-            Alternative(
-                effect=c.effect,
-                holdout_rmse_deg=c.metrics.holdout_rmse_deg,
-                z=comp.z,
-                p_value=comp.p_value,
+            _alternative(
+                c,
+                comp,
                 excluded=bool(comp.p_value < cfg.alpha),
-                params=effects_of(c.model)[-1][2],
                 experiment=separating_experiment(best.effect, c.effect),
             )
         )
     return tuple(out)
+
+
+def _alternative(c: Candidate, comp, excluded: bool, experiment: str, **extra) -> Alternative:
+    """Candidate ``c`` as an :class:`Alternative` with the held-out comparison ``comp``."""
+    return Alternative(
+        effect=c.effect,
+        holdout_rmse_deg=c.metrics.holdout_rmse_deg,
+        z=comp.z,
+        p_value=comp.p_value,
+        excluded=excluded,
+        params=effects_of(c.model)[-1][2],
+        experiment=experiment,
+        **extra,
+    )
 
 
 def _not_excluded(
@@ -236,13 +247,10 @@ def _not_excluded(
         if comp.p_value < cfg.alpha:
             continue
         out.append(
-            Alternative(
-                effect=c.effect,
-                holdout_rmse_deg=c.metrics.holdout_rmse_deg,
-                z=comp.z,
-                p_value=comp.p_value,
+            _alternative(
+                c,
+                comp,
                 excluded=False,
-                params=effects_of(c.model)[-1][2],
                 experiment=SEPARATING_FROM_BASE.get(c.effect, ""),
                 effect_rms_deg=size,
             )

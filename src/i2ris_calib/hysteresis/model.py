@@ -45,6 +45,27 @@ class Parameter:
     doc: str = ""
 
 
+class NamedParameters:
+    """``names``, ``values`` and ``value_dict`` of anything with a ``parameters``
+    tuple (hysteresis models, models extended by diagnosed effects)."""
+
+    parameters: tuple[Parameter, ...]
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Parameter names in vector order."""
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def values(self) -> np.ndarray:
+        """Current parameter values, shape (p,)."""
+        return np.array([p.value for p in self.parameters], dtype=float)
+
+    def value_dict(self) -> dict[str, float]:
+        """``{name: value}`` of the current parameters."""
+        return {p.name: float(p.value) for p in self.parameters}
+
+
 @dataclass(frozen=True)
 class Signals:
     """Everything a model may read, all arrays of shape (n,) in time order.

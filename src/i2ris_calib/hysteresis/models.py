@@ -48,7 +48,7 @@ from i2ris_calib.hysteresis.kernel import (
     select_stage,
     thresholds,
 )
-from i2ris_calib.hysteresis.model import Parameter, Signals
+from i2ris_calib.hysteresis.model import NamedParameters, Parameter, Signals
 from i2ris_calib.hysteresis.start import default_deadband, initial_values, keep_fixed
 
 __all__ = [
@@ -69,7 +69,7 @@ __all__ = [
 
 
 @dataclass(frozen=True)
-class ParametricModel:
+class ParametricModel(NamedParameters):
     """Common machinery: named parameters, ``with_values``, dict helpers.
 
     Subclasses implement ``evaluate(signals, values)``.
@@ -77,20 +77,6 @@ class ParametricModel:
 
     name: str
     parameters: tuple[Parameter, ...]
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        """Parameter names in vector order."""
-        return tuple(p.name for p in self.parameters)
-
-    @property
-    def values(self) -> np.ndarray:
-        """Current parameter values, shape (p,)."""
-        return np.array([p.value for p in self.parameters], dtype=float)
-
-    def value_dict(self) -> dict[str, float]:
-        """``{name: value}`` of the current parameters."""
-        return {p.name: float(p.value) for p in self.parameters}
 
     def named(self, values: np.ndarray) -> dict[str, float]:
         """``{name: value}`` of a parameter vector (shape (p,), model order)."""

@@ -128,3 +128,18 @@ def test_equation_table_names_exist(doc):
         assert names, row
         for test in names:
             assert f"def {test}(" in sources, f"{doc}: test {test} not found"
+
+
+def test_effects_and_diagnosis_are_public(data):
+    """`add_effect` builds a callable extended model; a time delay shifts the angle by
+    exactly tau on a uniformly sampled record (tau a whole number of samples)."""
+    from i2ris_calib import CATALOGUE, DiagnosisConfig, add_effect, diagnose, diagnose_from_starts
+
+    assert callable(diagnose) and callable(diagnose_from_starts)
+    assert "time_delay" in CATALOGUE and DiagnosisConfig().alpha > 0
+    dt = float(np.median(np.diff(data.signals.t_s)))
+    base = i2ris_egpi_model(**paper_like_params("yaw+"))
+    delayed = add_effect(base, "time_delay", {"tau_s": 10 * dt})
+    y, yd = base(data.signals), delayed(data.signals)
+    assert delayed.names[: len(base.names)] == base.names
+    np.testing.assert_allclose(yd[100:], y[90:-10], atol=1e-9)

@@ -243,7 +243,6 @@ def overlap_speed(video: Path, dictionary: str, marker_id: int, frames: int) -> 
 
 
 def main() -> None:
-
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )

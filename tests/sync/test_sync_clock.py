@@ -71,7 +71,6 @@ def test_encoder_log_validation(t, msg):
 
 
 def _clk(o, sd_o, d, sd_d, method="event"):
-
     fitted = np.isfinite(sd_d)
     cov = np.diag([sd_o**2, sd_d**2 if fitted else 0.0])
     return clock_model(o, d, cov, method, {"t_ref_cam_s": 0.0}, bool(fitted))
@@ -95,7 +94,6 @@ def test_auto_combination_is_the_product_of_likelihoods():
 
 
 def test_auto_keeps_the_event_when_the_model_disagrees_or_is_flat():
-
     event = _clk(0.5, 1e-3, 100, 50)
     clk, info = combine_clocks(event, _clk(0.505, 1e-3, 80, 10, "model"), 0.0)  # 3.5 sd apart
     assert (

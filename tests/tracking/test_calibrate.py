@@ -17,7 +17,6 @@ PX_PER_MM = 100
 
 
 def _views(spec: CharucoSpec, n: int = 8):
-
     board = charuco_board(spec)
     tex = board.generateImage((spec.squares_x * PX_PER_MM, spec.squares_y * PX_PER_MM))
     # texture pixel (u, v), centre at +0.5, -> board mm
@@ -85,7 +84,6 @@ def test_bad_yaml_is_a_clear_error(tmp_path):
 
 
 def test_calibrate_cli_from_images_and_ros_conversion(tmp_path):
-
     paths = []
     for k, img in enumerate(_views(CharucoSpec())):
         paths.append(tmp_path / f"v{k}.png")

@@ -19,7 +19,6 @@ from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
 
 @pytest.fixture(scope="module")
 def scene():
-
     cfg = preset_config("ci", width_px=400, height_px=320, marker_size_px=110.0, noise_sigma=0.0)
     cams = make_cameras(cfg, np.random.default_rng(3))
     d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
@@ -29,7 +28,6 @@ def scene():
 
 @pytest.mark.parametrize("yaw,pitch", [(0.0, 0.0), (17.0, 0.0), (0.0, -28.0), (-33.0, 6.0)])
 def test_edge_corners_are_within_five_hundredths_of_a_pixel(scene, yaw, pitch):
-
     cfg, cams, cube = scene
     for cam in cams:
         R = tip_rotation(yaw, pitch)
@@ -96,7 +94,6 @@ def test_missing_view_gives_not_found_and_nan(scene):
 
 
 def test_equal_cost_minima_resolved_by_continuity_else_ambiguous():
-
     n = 6
     t = np.arange(n) / 30.0
     good = np.stack([tip_rotation(0.1 * k, 0) for k in range(n)])

@@ -133,7 +133,6 @@ class MultiStageBacklash(Effect):
     meaning: str = "a further backlash stage with its own flag point (EGPI-like switching)"
 
     def transform_input(self, signals, p):
-
         v = np.ascontiguousarray(signals.v, dtype=float)
         return replace(signals, v=staged_backlash(v, float(p[0]), float(p[1])))
 
@@ -256,7 +255,6 @@ class RateDependentThresholds(Effect):
         return float(p[0]) * _speed(signals, RATE_WINDOW_S)
 
     def _played(self, signals: Signals, p: np.ndarray) -> np.ndarray:
-
         v = np.ascontiguousarray(signals.v, dtype=float)
         return play_varying(v, self.half_width(signals, p))
 
@@ -356,7 +354,6 @@ class Creep(Effect):
     needs: tuple[str, ...] = ("t_s",)
 
     def transform_output(self, y, signals, p):
-
         y = np.ascontiguousarray(y, dtype=float)
         t = np.ascontiguousarray(signals.t_s, dtype=float)
         return (1.0 - p[0]) * y + p[0] * first_order_lag(y, t, float(p[1]))
@@ -411,7 +408,6 @@ class LogCreep(Effect):
         return tau0_s * 10.0 ** (np.arange(m * LOG_CREEP_DECADES + 1) / m)
 
     def transform_output(self, y, signals, p):
-
         y = np.ascontiguousarray(y, dtype=float)
         t = np.ascontiguousarray(signals.t_s, dtype=float)
         gam = float(p[0]) / LOG_CREEP_PER_DECADE
@@ -480,7 +476,6 @@ class Backlash(Effect):
     meaning: str = "backlash (play): after a reversal the input moves, the tip does not"
 
     def transform_input(self, signals, p):
-
         v = np.ascontiguousarray(signals.v, dtype=float)
         h = np.full(v.shape, 0.5 * float(p[0]))
         return replace(signals, v=play_varying(v, h))

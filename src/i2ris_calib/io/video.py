@@ -207,7 +207,6 @@ def _decode_file(path: Path, threads: int) -> Iterator[np.ndarray]:
 
 
 def _raw_frames(path: Path, threads: int) -> Iterator[np.ndarray]:
-
     p = Path(path)
     _check_file(p)
     if p.is_dir():

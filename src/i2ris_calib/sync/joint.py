@@ -233,7 +233,6 @@ class OffsetProfile:
         return starts
 
     def _fit(self, offset_c_s: float) -> tuple[float, list]:
-
         total, results = 0.0, []
         cfg = self.fit_config
         for i, b in enumerate(self.blocks):

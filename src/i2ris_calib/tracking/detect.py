@@ -56,7 +56,6 @@ class MarkerDetector:
     """
 
     def __init__(self, dictionary: str, marker_id: int, cfg: TrackingConfig):
-
         self.marker_id = int(marker_id)
         self.cfg = cfg
         p = cv2.aruco.DetectorParameters()

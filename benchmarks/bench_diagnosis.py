@@ -3,7 +3,7 @@
 Default suite: ``tests/diagnosis/independent_cases.py``, generators written
 without the catalogue (a classical Prandtl-Ishlinskii base in its own
 parametrisation, each effect from its textbook definition, ramps of 2-10 s with
-holds): 11 effects x 2 strengths x 2 draws (noise 0.08 and 0.2 deg) + 8 clean
+holds): 12 effects x 2 strengths x 2 draws (noise 0.08 and 0.2 deg) + 8 clean
 cases, diagnosed with ``--start auto`` (from GPI and from EGPI, reconciled).
 Prints the confusion table (hidden effect x first named effect) and:
 
@@ -19,9 +19,9 @@ Prints the confusion table (hidden effect x first named effect) and:
 
 Usage::
 
-    python benchmarks/bench_diagnosis.py              # 52 cases + the 10k timing
+    python benchmarks/bench_diagnosis.py              # 56 cases + the 10k timing
     python benchmarks/bench_diagnosis.py -j 2         # two worker processes
-    python benchmarks/bench_diagnosis.py --quick      # 11 hidden + 2 clean cases
+    python benchmarks/bench_diagnosis.py --quick      # 12 hidden + 2 clean cases
     python benchmarks/bench_diagnosis.py --only-timing
 """
 
@@ -67,8 +67,9 @@ def run_independent(args) -> dict:
     diag = auto.diagnosis
     named = diag.named_effects
     alts = [a for s in diag.steps[:1] for a in s.alternatives if not a.excluded]
-    # what the answer says it cannot tell from its final model (nothing more named)
-    open_ = [(a.effect, round(a.z, 1), round(a.effect_rms_deg, 2)) for a in diag.not_excluded]
+    # what the answer says it cannot tell from its final model (nothing more named),
+    # over both paths (AutoDiagnosis.not_excluded: the union)
+    open_ = [(a.effect, round(a.z, 1), round(a.effect_rms_deg, 2), k) for k, a in auto.not_excluded]
     return {
         "effect": effect or "clean",
         "expected": expected_name(effect) if effect else "none",
@@ -92,15 +93,16 @@ def run_independent(args) -> dict:
 def confusion(rows: list[dict]) -> str:
     """Text table: hidden effect (rows) x first named effect (columns)."""
     cols = [*CATALOGUE, "none"]
-    short = {c: c[:9] for c in cols}
-    head = f"{'hidden | named first':<28}" + "".join(f"{short[c]:>10}" for c in cols)
+    abbrev = {"rate_dependent_thresholds": "rd_thresh", "rate_dependent_weights": "rd_weight"}
+    short = {c: abbrev.get(c, c[:9]) for c in cols}
+    head = f"{'hidden | named first':<33}" + "".join(f"{short[c]:>10}" for c in cols)
     lines = [head]
     for hidden in [*SUITE, "clean"]:
         sel = [r for r in rows if r["effect"] == hidden]
         if not sel:
             continue
         counts = [sum(r["first"] == c for r in sel) for c in cols]
-        lines.append(f"{hidden:<28}" + "".join(f"{n:>10}" for n in counts))
+        lines.append(f"{hidden:<33}" + "".join(f"{n:>10}" for n in counts))
     return "\n".join(lines)
 
 
@@ -170,7 +172,7 @@ def summary(rows: list[dict]) -> None:
         )
     print()
     print(
-        f"{'effect':<28}{'first right':>12}{'not excl.':>11}{'shrink>=50%':>13}"
+        f"{'effect':<33}{'first right':>12}{'not excl.':>11}{'shrink>=50%':>13}"
         f"{'median shrink':>15}"
     )
     for name in SUITE:
@@ -179,7 +181,7 @@ def summary(rows: list[dict]) -> None:
             continue
         b = [r for r in sel if r["effect_rms_deg"] > 2 * r["noise_deg"]]
         print(
-            f"{name:<28}{sum(r['first'] == r['expected'] for r in sel):>6}/{len(sel):<5}"
+            f"{name:<33}{sum(r['first'] == r['expected'] for r in sel):>6}/{len(sel):<5}"
             f"{sum(_not_identified(r) for r in sel):>7}/{len(sel):<3}"
             f"{sum(r['shrink'] >= 0.5 for r in b):>7}/{len(b):<5}"
             f"{100 * np.median([r['shrink'] for r in sel]):>14.0f}%"

@@ -206,7 +206,11 @@ def diagnose(
     cfg = _config(config)
     from i2ris_calib.io.diagnose import diagnose_file
 
-    diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
+    rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
+    typer.echo(f"{rec['dataset']}: {rec['summary']}")
+    if rec.get("reconciliation") and len(rec.get("paths", {})) > 1:
+        typer.echo(f"starting models: {rec['reconciliation']}")
+    typer.echo(f"wrote {out}")
 
 
 @app.command()

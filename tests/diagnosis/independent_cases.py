@@ -35,12 +35,19 @@ SUITE: dict[str, tuple[float, float]] = {
     "axis_coupling_input": (0.015, 0.04),  # deg per 100 counts of the other tendon input
     "saturation": (0.06, 0.15),  # relative flattening at the top of the range
     "multi_stage_backlash": (0.03, 0.08),  # second stage's play, fraction of the input
+    # thresholds r_i (1 + beta |v'|) (Al Janaideh, Rakheja, Su): relative threshold
+    # increase at the fastest ramp speed (last, so the other cases keep their seeds)
+    "rate_dependent_thresholds_scaled": (0.6, 1.5),
 }
 
 #: The catalogue name the diagnosis should give each generated effect.
 EXPECTED: dict[str, str] = {
     "axis_coupling_angle": "axis_coupling",
     "axis_coupling_input": "axis_coupling",
+    # the catalogue has one rate-dependent-threshold form (thresholds r_i + beta |v'|);
+    # proportional thresholds r_i (1 + beta |v'|) are the same physics (thresholds that
+    # widen with speed), fitted by it approximately (docs/diagnosis.md, Benchmark)
+    "rate_dependent_thresholds_scaled": "rate_dependent_thresholds",
 }
 
 
@@ -135,13 +142,15 @@ class PI:
     def weights(self) -> np.ndarray:
         return self.w * np.exp(-self.radii() / self.rho)
 
-    def __call__(self, v, extra_radius=None, weight_factor=None) -> np.ndarray:
+    def __call__(self, v, extra_radius=None, weight_factor=None, radius_factor=None) -> np.ndarray:
         """Output (deg); ``extra_radius`` (shape (n,)) is added to every threshold,
+        ``radius_factor`` (shape (n,)) multiplies every threshold,
         ``weight_factor`` (shape (n,)) multiplies every operator weight."""
         v = np.asarray(v, float)
         y = self.a * v
         for r, w in zip(self.radii(), self.weights(), strict=True):
             rr = r if extra_radius is None else r + extra_radius
+            rr = rr if radius_factor is None else rr * radius_factor
             f = play(v, rr)
             y = y + w * (f if weight_factor is None else weight_factor * f)
         return y
@@ -181,6 +190,10 @@ def apply_effect(effect, s, rng, t, v, v_other, th_other, pi: PI, v_max: float) 
         return pi(play(v, 0.5 * s * v_max))
     if effect == "rate_dependent_thresholds":
         return pi(v, extra_radius=s * _speed(t, v))
+    if effect == "rate_dependent_thresholds_scaled":
+        # r_i(t) = r_i (1 + beta |dv/dt|), beta = s / fastest speed; a = linear, unaffected
+        sp = _speed(t, v)
+        return pi(v, radius_factor=1.0 + s * sp / np.max(sp))
     if effect == "rate_dependent_weights":
         sp = _speed(t, v)
         return pi(v, weight_factor=1.0 + s * sp / np.max(sp))

@@ -12,7 +12,7 @@ from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of
 from i2ris_calib.diagnosis.results import Diagnosis
 
 
-def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
+def diagnosis_record(diag: Diagnosis, figures: list[str], auto=None) -> dict:
     """``diagnosis.json`` content (without schema/source/provenance, added by io).
 
     Parameters
@@ -21,6 +21,11 @@ def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
     figures : list of str
         Figure file names: ``figures[0]`` shows the starting model's residual,
         ``figures[i]`` the residual after step i.
+    auto : AutoDiagnosis, optional
+        With several paths (``--start auto``), ``summary`` is :func:`auto_summary`
+        (every path's verdicts and what it leaves open) and ``not_excluded`` the
+        union over the paths (:attr:`AutoDiagnosis.not_excluded`, each entry with
+        its ``start``).
     """
     steps = []
     for i, s in enumerate(diag.steps):
@@ -56,9 +61,30 @@ def diagnosis_record(diag: Diagnosis, figures: list[str]) -> dict:
         "decimation": diag.decimation,
         "holdout_fraction": float(np.mean(diag.holdout)),
         "notes": list(diag.notes),
-        "not_excluded": [a.as_dict() for a in diag.not_excluded],
+        "not_excluded": _open_records(diag, auto),
         "figures": figures,
-    }
+    } | ({"summary": auto_summary(auto)} if auto is not None and len(auto.paths) > 1 else {})
+
+
+def _open_records(diag: Diagnosis, auto) -> list[dict]:
+    if auto is None or len(auto.paths) < 2:
+        return [a.as_dict() for a in diag.not_excluded]
+    return [a.as_dict() | {"start": kind} for kind, a in auto.not_excluded]
+
+
+def auto_summary(auto) -> str:
+    """``--start auto`` in one paragraph: the answer's summary (its verdicts, the
+    alternatives its steps could not exclude, what it leaves open), then every other
+    start's, so that both paths' alternatives are shown, e.g. ``"time_delay; ...
+    The egpi start: time_delay; rate_dependent_thresholds not excluded, z = 1.9."``."""
+    text = diagnosis_summary(auto.diagnosis).rstrip(".") + "."
+    for kind, d in auto.paths.items():
+        if kind == auto.start:
+            continue
+        other = diagnosis_summary(d).rstrip(".") + "."
+        same = other == text
+        text += f" The {kind} start: " + ("the same." if same else other)
+    return text
 
 
 def step_verdict(effect: str, alternatives) -> str:
@@ -162,6 +188,7 @@ def diagnosis_markdown(rec: dict) -> str:
         f"**Verdict:** {rec['summary']}" if rec.get("summary") else "",
         "",
         *([f"Starting models: {rec['reconciliation']}.", ""] if rec.get("reconciliation") else []),
+        *_paths_table(rec),
         "| model | fitted RMSE (deg) | held-out RMSE (deg) | BIC |",
         "|---|---|---|---|",
         f"| start | {_fmt(b['fit_rmse_deg'])} | {_fmt(b['holdout_rmse_deg'])} | {b['bic']:.1f} |",
@@ -208,6 +235,25 @@ def diagnosis_markdown(rec: dict) -> str:
     for n in rec.get("notes", []):
         lines.append(f"Note: {n}")
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _paths_table(rec: dict) -> list[str]:
+    """Markdown table of every starting model's path (``--start auto``), [] for one."""
+    paths = rec.get("paths") or {}
+    if len(paths) < 2:
+        return []
+    lines = [
+        "| start | named | held-out RMSE start -> final (deg) | verdict and what is left open |",
+        "|---|---|---|---|",
+    ]
+    for kind, p in paths.items():
+        mark = " (answer)" if kind == rec.get("start_model") else ""
+        lines.append(
+            f"| {kind}{mark} | {', '.join(p['named_effects']) or 'nothing'} | "
+            f"{_fmt(p['baseline']['holdout_rmse_deg'])} -> {_fmt(p['final']['holdout_rmse_deg'])} | "
+            f"{p['summary'].replace('|', '/')} |"
+        )
+    return [*lines, ""]
 
 
 def _candidate_rows(cands: list[dict], chosen: str | None) -> list[str]:

@@ -166,7 +166,7 @@ def diagnose_dataset(
     models = [diag.start_model] + [s.model_after for s in diag.steps]
     labels = ["start"] + [s.effect for s in diag.steps]
     figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
-    record = diagnosis_record(diag, figures)
+    record = diagnosis_record(diag, figures, auto=auto)
     record.update(
         schema=SCHEMA,
         axis=axis,

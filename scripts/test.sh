@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Install everything the tests need into ./.venv (fresh machine OK), then run them.
 # Usage: bash scripts/test.sh [pytest args...]   e.g. bash scripts/test.sh -m slow
+#        PYTEST_WORKERS=0 bash scripts/test.sh    (one process, e.g. to debug)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
@@ -13,4 +14,7 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null
 .venv/bin/python -m pip install -q -c constraints.txt -e '.[test]'
 .venv/bin/ruff check src tests benchmarks
-exec .venv/bin/python -m pytest "$@"
+# One pytest worker per core (pytest-xdist), whole files per worker so module fixtures are
+# built once; one numba/BLAS thread per worker so the workers do not oversubscribe the cores.
+export NUMBA_NUM_THREADS=${NUMBA_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
+exec .venv/bin/python -m pytest -n "${PYTEST_WORKERS:-auto}" --dist loadfile "$@"

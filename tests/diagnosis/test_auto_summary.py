@@ -48,6 +48,9 @@ def test_not_excluded_is_the_union_over_the_paths():
     # the answer's own entry comes first and is not duplicated
     both = _auto(_path([], not_excluded=[_alt("backlash", -0.5)]), egpi)
     assert [(k, a.z) for k, a in both.not_excluded] == [("gpi", -0.5)]
+    # a path the held-out cycles exclude does not add what it left open
+    excl = AutoDiagnosis("gpi", gpi, {"gpi": gpi, "egpi": egpi}, True, 4.6, "", True)
+    assert excl.not_excluded == ()
 
 
 def test_markdown_has_one_row_per_path():

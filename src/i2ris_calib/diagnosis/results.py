@@ -315,6 +315,9 @@ class AutoDiagnosis:
         not excluded.
     sentence : str
         The reconciliation in one sentence.
+    other_excluded : bool
+        The answer's final model is significantly better on the held-out cycles
+        than the other path's (p < ``alpha``).
     """
 
     start: str
@@ -323,21 +326,24 @@ class AutoDiagnosis:
     agree: bool
     z: float
     sentence: str
+    other_excluded: bool = False
 
     @property
     def not_excluded(self) -> tuple[tuple[str, Alternative], ...]:
         """(start, alternative) of what the answer cannot rule out, over every path.
 
-        The answer's own ``not_excluded`` first, then each other path's entries for
-        effects neither listed yet nor named in the answer. An effect the base
-        absorbs (a backlash on a GPI/EGPI input) has an undetermined size along the
-        absorbed direction, so whether one path's fit makes it material (listed)
-        depends on that path's start fit; the union over the paths does not.
+        The answer's own ``not_excluded`` first, then, unless the held-out cycles
+        exclude the other path's final model (``other_excluded``: its entries were
+        judged against a model the answer beats), its entries for effects neither
+        listed yet nor named in the answer. An effect the base absorbs (a backlash
+        on a GPI/EGPI input) has an undetermined size along the absorbed direction,
+        so whether one path's fit makes it material (listed) depends on that path's
+        start fit; the union over the paths does not.
         """
         out = [(self.start, a) for a in self.diagnosis.not_excluded]
         seen = {a.effect for _, a in out} | set(self.diagnosis.named_effects)
         for kind, d in self.paths.items():
-            if kind == self.start:
+            if kind == self.start or self.other_excluded:
                 continue
             for a in d.not_excluded:
                 if a.effect not in seen:

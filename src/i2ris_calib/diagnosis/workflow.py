@@ -432,4 +432,5 @@ def diagnose_from_starts(
             f"{said(best)} (from {best}); the {other} start's answer ({said(other)}) is not "
             f"excluded, z = {comp.z:.1f}"
         )
-    return AutoDiagnosis(best, diag, paths, agree, float(comp.z), sentence)
+    excluded = bool(comp.p_value < cfg.alpha)
+    return AutoDiagnosis(best, diag, paths, agree, float(comp.z), sentence, excluded)

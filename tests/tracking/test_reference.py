@@ -89,3 +89,31 @@ def test_straight_session_keeps_the_window_reference():
     ref, _ = fz.fit_reference(res, a, b, t < 1.0, t, TrackingConfig())
     assert ref.method == "window"
     assert ref.roll_correction_deg == 0.0
+
+
+def test_axis_split_uncertainty_is_half_the_disagreement_of_the_two_axes():
+    """Frames bent about yaw say the roll is +0.02 deg, frames bent about pitch -0.01 deg
+    (each frame's reduced normal equations centred on its own value): the systematic
+    part of the roll's uncertainty is half their disagreement, 0.015 deg; with one
+    axis barely bent (< 30 frames) it cannot be told and is 0."""
+    rng = np.random.default_rng(0)
+    n_s, n_y, n_p = 50, 40, 60
+    yp = np.zeros((n_s + n_y + n_p, 2))
+    yp[n_s : n_s + n_y, 0] = np.radians(rng.uniform(12, 40, n_y)) * rng.choice([-1, 1], n_y)
+    yp[n_s + n_y :, 1] = np.radians(rng.uniform(12, 40, n_p)) * rng.choice([-1, 1], n_p)
+    target = np.zeros((len(yp), 4))
+    target[n_s : n_s + n_y, 0] = np.radians(0.02)
+    target[n_s + n_y :, 0] = np.radians(-0.01)
+    Sn = np.empty((len(yp), 4, 4))
+    for k in range(len(yp)):
+        B = rng.normal(size=(6, 4))
+        Sn[k] = B.T @ B
+    Sn[:n_s, 0, :] = Sn[:n_s, :, 0] = 0.0  # straight frames: no roll information
+    Sn[:n_s, 0, 0] = 1e-9
+    rn = -np.einsum("nij,nj->ni", Sn, target)  # gradient at g = 0
+    S, rhs = Sn.sum(0), rn.sum(0)
+    sd = fz._axis_split_sd(S, rhs, Sn, rn, yp)
+    assert sd == pytest.approx(np.radians(0.015), rel=1e-3)
+    few = yp.copy()
+    few[n_s + 29 : n_s + n_y, 0] = 0.0  # 29 yaw-bent frames left
+    assert fz._axis_split_sd(S, rhs, Sn, rn, few) == 0.0

@@ -231,11 +231,15 @@ def _init_worker(counter) -> None:
 
 
 def detect_stream(
-    video: Path, dictionary: str, marker_id: int, cfg: TrackingConfig
+    video: Path,
+    dictionary: str,
+    marker_id: int,
+    cfg: TrackingConfig,
+    margin_ratio: float | None = None,
 ) -> StreamResult:
     """Decode one video and detect its marker in every frame (runs in a worker)."""
     cv2.setNumThreads(1)
-    det = MarkerDetector(dictionary, marker_id, cfg)
+    det = MarkerDetector(dictionary, marker_id, cfg, margin_ratio)
     corners, gray, border, others = [], [], [], {}
     shape, roi_hits, edge_refined, t0 = (0, 0), 0, 0, time.perf_counter()
     c0 = time.process_time()
@@ -265,8 +269,12 @@ def run_streams(videos: dict, spec: SessionSpec, cfg: TrackingConfig, progress: 
     """Detect in every camera stream, in parallel processes when ``cfg.workers > 1``."""
     aruco_dictionary(spec.marker.dictionary)  # fail early on a bad name
     total = sum(max(header_frame_count(v), 1) for v in videos.values())
+    margin = (spec.marker.cube_size_mm - spec.marker.marker_size_mm) / (
+        2 * spec.marker.marker_size_mm
+    )
     jobs = {
-        n: (v, spec.marker.dictionary, spec.cameras[n].marker_id, cfg) for n, v in videos.items()
+        n: (v, spec.marker.dictionary, spec.cameras[n].marker_id, cfg, margin)
+        for n, v in videos.items()
     }
     if cfg.workers <= 1:
         return {n: detect_stream(*a) for n, a in jobs.items()}

@@ -53,11 +53,24 @@ class MarkerDetector:
     marker_id : int
         The marker wanted in this camera.
     cfg : TrackingConfig
+    margin_ratio : float, optional
+        White margin around the marker / marker edge (``(cube - marker) / (2 marker)``);
+        lets the edge corners keep their runs inside a foreshortened margin
+        (:func:`~.edges.refine_corners_by_edges`). None: not adapted.
     """
 
-    def __init__(self, dictionary: str, marker_id: int, cfg: TrackingConfig):
+    def __init__(
+        self,
+        dictionary: str,
+        marker_id: int,
+        cfg: TrackingConfig,
+        margin_ratio: float | None = None,
+    ):
         self.marker_id = int(marker_id)
         self.cfg = cfg
+        self.margin_ratio = margin_ratio
+        # the black border is one cell of the (markerSize + 2)-cell marker
+        self.border_ratio = 1.0 / (int(aruco_dictionary(dictionary).markerSize) + 2)
         p = cv2.aruco.DetectorParameters()
         p.cornerRefinementMethod = getattr(cv2.aruco, _REFINE[cfg.corner_refinement])
         p.cornerRefinementWinSize = int(cfg.corner_win_size_px)
@@ -77,7 +90,13 @@ class MarkerDetector:
         """
         det = self._locate(gray)
         if det.corners is not None and self.cfg.corner_refinement == "edges":
-            ref = refine_corners_by_edges(gray, det.corners, self.cfg.edge_half_width_px)
+            ref = refine_corners_by_edges(
+                gray,
+                det.corners,
+                self.cfg.edge_half_width_px,
+                margin_ratio=self.margin_ratio,
+                border_ratio=self.border_ratio,
+            )
             if ref is not None:
                 det.corners, det.edge_refined = ref, True
         return det

@@ -361,8 +361,9 @@ class ReferenceFit:
     roll_correction_deg : float
         Roll applied to the window mean: ``M = M_window Rx(-roll_correction)`` (deg).
     roll_sd_deg : float
-        Standard uncertainty of the reference roll (deg): for ``session`` the larger of
-        the least-squares and the block-jackknife figures, for ``window`` the window
+        Standard uncertainty of the reference roll (deg): for ``session`` the largest of
+        the least-squares figure, the block jackknife and half the disagreement between
+        the yaw-bent and the pitch-bent frames (:func:`_axis_split_sd`), for ``window`` the window
         mean's standard error from the per-frame covariances (noise only; optimistic
         when the faces are square to their cameras).
     camera_rotation_change_deg : float
@@ -455,7 +456,8 @@ def twist_free_fit(
     e_deg : float
         Reference roll correction (deg).
     sd_deg : float
-        Its standard uncertainty (deg): max of least-squares and block jackknife.
+        Its standard uncertainty (deg): max of least-squares, block jackknife and the
+        yaw/pitch split (:func:`_axis_split_sd`).
     R_ba : ndarray (3, 3)
         Refitted camera-to-camera rotation.
     """
@@ -516,7 +518,45 @@ def twist_free_fit(
     est = np.array([-np.linalg.solve(S - Sn[blk == k].sum(0), rhs - rn[blk == k].sum(0))[0]
                     for k in range(blocks)])  # fmt: skip
     sd_jk = float(np.sqrt((blocks - 1) / blocks * np.sum((est - est.mean()) ** 2)))
-    return float(np.degrees(g[0])), float(np.degrees(max(sd_ls, sd_jk))), rodrigues(g[1:4]) @ R_ba
+    sd_axes = _axis_split_sd(S, rhs, Sn, rn, L[:, :2])
+    sd = max(sd_ls, sd_jk, sd_axes)
+    return float(np.degrees(g[0])), float(np.degrees(sd)), rodrigues(g[1:4]) @ R_ba
+
+
+def _axis_split_sd(S, rhs, Sn, rn, yp, bent_rad=np.radians(10.0), min_frames=30) -> float:
+    """Systematic part of the roll's uncertainty (rad): yaw-bent vs pitch-bent frames.
+
+    The roll is seen through the yaw-bent frames (top face turning) and through the
+    pitch-bent frames (side face turning) independently; under the twist-free model
+    both give the same roll. Each estimate (one Gauss-Newton step from the joint
+    solution, from the near-straight frames plus the frames bent mainly about one
+    axis) carries the pose-dependent corner biases of its own strongly tilted face;
+    half their difference is a floor for the joint roll's uncertainty. 0 when either
+    axis has fewer than ``min_frames`` bent frames.
+
+    Parameters
+    ----------
+    S, rhs : ndarray (4, 4), (4,)
+        Reduced normal matrix and gradient of the global parameters (all frames).
+    Sn, rn : ndarray (n, 4, 4), (n, 4)
+        Their per-frame terms.
+    yp : ndarray (n, 2)
+        Yaw and pitch per frame (rad).
+    """
+    a = np.abs(yp)
+    straight = a.max(axis=1) <= bent_rad
+    by_yaw = ~straight & (a[:, 0] >= a[:, 1])
+    by_pitch = ~straight & (a[:, 0] < a[:, 1])
+    if by_yaw.sum() < min_frames or by_pitch.sum() < min_frames:
+        return 0.0
+    prior = S - Sn.sum(0)  # the prior's term (zero without one)
+    est = []
+    for sel in (straight | by_yaw, straight | by_pitch):
+        try:
+            est.append(-np.linalg.solve(prior + Sn[sel].sum(0), rhs - rn[~sel].sum(0))[0])
+        except np.linalg.LinAlgError:
+            return 0.0
+    return float(abs(est[0] - est[1]) / 2.0)
 
 
 def fit_reference(res: FusionResult, a: ViewData, b: ViewData, window: np.ndarray,

@@ -24,6 +24,7 @@ Usage::
     python benchmarks/bench_diagnosis.py --quick      # 12 hidden + 2 clean cases
     python benchmarks/bench_diagnosis.py --only-timing
     python benchmarks/bench_diagnosis.py --approximation   # additive vs proportional thresholds
+    python benchmarks/bench_diagnosis.py --power -j 2      # power-form thresholds, 4 cases
 """
 
 from __future__ import annotations
@@ -91,6 +92,12 @@ def run_independent(args) -> dict:
     }
 
 
+def _effects(rows: list[dict]) -> list[str]:
+    """The suite's effects, then any other generated effect in ``rows``."""
+    extra = [r["effect"] for r in rows if r["effect"] not in SUITE and r["effect"] != "clean"]
+    return [*SUITE, *dict.fromkeys(extra)]
+
+
 def confusion(rows: list[dict]) -> str:
     """Text table: hidden effect (rows) x first named effect (columns)."""
     cols = [*CATALOGUE, "none"]
@@ -98,7 +105,7 @@ def confusion(rows: list[dict]) -> str:
     short = {c: abbrev.get(c, c[:9]) for c in cols}
     head = f"{'hidden | named first':<33}" + "".join(f"{short[c]:>10}" for c in cols)
     lines = [head]
-    for hidden in [*SUITE, "clean"]:
+    for hidden in [*_effects(rows), "clean"]:
         sel = [r for r in rows if r["effect"] == hidden]
         if not sel:
             continue
@@ -176,7 +183,7 @@ def summary(rows: list[dict]) -> None:
         f"{'effect':<33}{'first right':>12}{'not excl.':>11}{'shrink>=50%':>13}"
         f"{'median shrink':>15}"
     )
-    for name in SUITE:
+    for name in _effects(rows):
         sel = [r for r in hidden if r["effect"] == name]
         if not sel:
             continue
@@ -240,12 +247,21 @@ def approximation_rdt(noise: float = 0.01) -> None:
             )
 
 
+#: (strength k, noise, seed) of the power-form cases (``--power``; not in the suite).
+POWER_CASES = [(1.0, 0.08, 8101), (1.0, 0.2, 8102), (2.0, 0.08, 8103), (2.0, 0.2, 8104)]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="strong strength, one draw")
     ap.add_argument("-j", type=int, default=1, help="worker processes")
     ap.add_argument("--start", default="auto", choices=("auto", "gpi", "egpi"))
     ap.add_argument("--only-timing", action="store_true")
+    ap.add_argument(
+        "--power",
+        action="store_true",
+        help="only: 4 cases of power-form thresholds r_i k (|v'|/max)^0.5 (not in the suite)",
+    )
     ap.add_argument(
         "--approximation",
         action="store_true",
@@ -257,6 +273,16 @@ def main() -> None:
     starts = ("gpi", "egpi") if args.start == "auto" else (args.start,)
     if args.approximation:
         approximation_rdt()
+        return
+    if args.power:
+        jobs = [
+            ("rate_dependent_thresholds_power", k, n, seed, starts) for k, n, seed in POWER_CASES
+        ]
+        with ProcessPoolExecutor(max(args.j, 1)) as ex:
+            rows = list(ex.map(run_independent, jobs))
+        for r in rows:
+            _line(r)
+        summary(rows)
         return
     if not args.only_timing:
         todo = suite()

@@ -48,6 +48,7 @@ EXPECTED: dict[str, str] = {
     # proportional thresholds r_i (1 + beta |v'|) are the same physics (thresholds that
     # widen with speed), fitted by it approximately (docs/diagnosis.md, Benchmark)
     "rate_dependent_thresholds_scaled": "rate_dependent_thresholds",
+    "rate_dependent_thresholds_power": "rate_dependent_thresholds",
 }
 
 
@@ -194,6 +195,11 @@ def apply_effect(effect, s, rng, t, v, v_other, th_other, pi: PI, v_max: float) 
         # r_i(t) = r_i (1 + beta |dv/dt|), beta = s / fastest speed; a = linear, unaffected
         sp = _speed(t, v)
         return pi(v, radius_factor=1.0 + s * sp / np.max(sp))
+    if effect == "rate_dependent_thresholds_power":
+        # r_i(t) = r_i s (|dv/dt| / fastest)^0.5: the power form (Al Janaideh, Rakheja,
+        # Su), no hysteresis at rest; not in SUITE (bench --power), linear term unaffected
+        sp = _speed(t, v)
+        return pi(v, radius_factor=s * np.sqrt(sp / np.max(sp)))
     if effect == "rate_dependent_weights":
         sp = _speed(t, v)
         return pi(v, weight_factor=1.0 + s * sp / np.max(sp))

@@ -31,6 +31,13 @@ class SyncConfig:
     # edge time in the log: "midpoint" = the LED switched somewhere between the last off and the
     # first on sample (state sampled by the logger); "first_on" = at the first on sample
     log_edge_at: Literal["first_on", "midpoint"] = "midpoint"
+    # likelihood of a logged edge given the frames: "integral" = probability that the edge
+    # lies in its log interval (interval-censored, uniform within the tick), "profile" = its
+    # best misfit inside the interval
+    event_likelihood: Literal["integral", "profile"] = "profile"
+    # event point estimate: "midrange" = smallest worst-case clock error over the recording
+    # (mid-ranges of the posterior at its first and last frame), "mean" = posterior mean
+    event_estimate: Literal["midrange", "mean"] = "mean"
     use_falling_edges: bool = True  # use LED-off edges as well as LED-on edges
     max_edge_residual_s: float = 0.02  # a camera edge farther than this from its log edge: no match
     min_drift_span_s: float = 5.0  # fit drift only if the matched edges span this long

@@ -173,3 +173,30 @@ def _piece_integrals(pc: SsePieces, s0: float, r: float):
     d = m - r
     g1, g2 = d * g0 + gx, d**2 * g0 + 2 * d * gx + gxx
     return (np.where(quad, g0, c0), np.where(quad, g1, c1), np.where(quad, g2, c2))
+
+
+def window_log_prob(pc: SsePieces, u_lo: np.ndarray, u_hi: np.ndarray) -> np.ndarray:
+    """Log posterior probability that the edge lies in each ``[u_lo, u_hi]``, shape (G,).
+
+    ``log(integral over the window of exp(-sse/2) / integral over all pieces)``, flat
+    prior on the edge time within the frames' span (the pieces): the interval-censored
+    likelihood of a logged edge known only to lie in a log interval, convolved with
+    the camera's timing error. Exact (piecewise Gaussian integrals); a window that
+    misses every likely time gets the log of its tail mass, evaluated relative to the
+    window's own smallest misfit so that it never underflows to ``-inf``.
+    """
+    s_all = pc.minimum()
+    r = 0.5 * (pc.p0[0] + pc.p1[-1])
+    log_z = np.log(float(_piece_integrals(pc, s_all, r)[0].sum()))
+    lo, hi = pc.p0[0], pc.p1[-1]
+    ua = np.clip(np.asarray(u_lo, dtype=float), lo, hi)[:, None]
+    ub = np.clip(np.asarray(u_hi, dtype=float), lo, hi)[:, None]
+    s_win = window_min_sse(pc, ua[:, 0], ub[:, 0])  # (G,)
+    a = np.minimum(np.maximum(pc.p0, ua), pc.p1)
+    b = np.maximum(np.minimum(pc.p1, ub), a)
+    clipped = SsePieces(a, b, pc.a, pc.m, pc.q)
+    s0 = np.where(np.isfinite(s_win), s_win, s_all)[:, None]
+    i0 = _piece_integrals(clipped, s0, r)[0].sum(axis=1)
+    # a window outside the frames' span (zero width after clipping): constant misfit there
+    i0 = np.where(i0 > 0, i0, 1e-12)
+    return -0.5 * (s0[:, 0] - s_all) + np.log(i0) - log_z

@@ -203,7 +203,7 @@ _OFFSET_KEYS = {
     "global_offset_s",
     "window_offsets_s",
 }
-_CAM_KEYS = {"t_ref_cam_s", "t_cam_s", "windows_t_cam_s"}
+_CAM_KEYS = {"t_ref_cam_s", "t_cam_s", "windows_t_cam_s", "span_cam_s"}
 _CTRL_KEYS = {"t_ctrl_s"}
 
 
@@ -251,7 +251,9 @@ def _estimate_local(
         lg = log_edges(log.flash, cfg.log_edge_at) if log.flash is not None else []
         cam = video_edges(angles, cfg)
         if lg and cam:
-            event = clock_from_events(cam, lg, cfg)
+            t_frames = angles["time_s"].to_numpy(dtype=float)
+            span = (float(np.nanmin(t_frames)), float(np.nanmax(t_frames)))
+            event = clock_from_events(cam, lg, cfg, span)
             if method == "auto":
                 return refined_event_clock(event, angles, log, cfg, fit_config)
             return event

@@ -24,7 +24,12 @@ from i2ris_calib.sync.matching import match_edges
 from i2ris_calib.sync.posterior import posterior_clock
 
 
-def clock_from_events(cam: list[CameraEdge], log: list[LogEdge], cfg: SyncConfig) -> ClockModel:
+def clock_from_events(
+    cam: list[CameraEdge],
+    log: list[LogEdge],
+    cfg: SyncConfig,
+    span_s: tuple[float, float] | None = None,
+) -> ClockModel:
     """Offset and drift from LED edges matched between video and encoder log.
 
     A weighted line through the per-edge times (:func:`clock_from_offsets`) gives a
@@ -36,7 +41,10 @@ def clock_from_events(cam: list[CameraEdge], log: list[LogEdge], cfg: SyncConfig
     logged edge less the fitted parameters) the likelihood is tempered by that ratio,
     as least squares scales a covariance by the reduced chi-square.
     Drift is fitted when the matched edges span at least ``cfg.min_drift_span_s``;
-    otherwise it is held at 0 ppm (stderr NaN).
+    otherwise it is held at 0 ppm (stderr NaN). ``cfg.event_likelihood`` and
+    ``cfg.event_estimate``: see :func:`posterior_clock`; ``span_s`` (camera clock, s:
+    the first and last frame; default the matched edges' span) is the span over
+    which the ``midrange`` estimate minimises the worst-case clock error.
 
     Raises
     ------
@@ -59,12 +67,20 @@ def clock_from_events(cam: list[CameraEdge], log: list[LogEdge], cfg: SyncConfig
     j = np.array([1.0, t_c * 1e-6])
     sd_c = float(np.sqrt(j @ cov0 @ j))
     halfwidth = (5 * max(sd_c, 2e-4), 5 * max(np.sqrt(cov0[1, 1]), 1.0))
-    mean, cov_c, p_exposure, misfit = posterior_clock(pairs, t_c, centre, halfwidth, fit_drift)
+    if span_s is None:
+        span_s = (float(np.min(t)), float(np.max(t)))
+    opts = {
+        "mode": cfg.event_likelihood,
+        "span_s": span_s if cfg.event_estimate == "midrange" else None,
+    }
+    mean, cov_c, p_exposure, misfit = posterior_clock(
+        pairs, t_c, centre, halfwidth, fit_drift, **opts
+    )
     n_groups = len({id(g) for _, g in pairs})
     temper = max(1.0, misfit / max(n_groups - (2 if fit_drift else 1), 1))
     if temper > 1.0:  # edges disagree beyond the grey noise (e.g. saturated bright pixels)
         mean, cov_c, p_exposure, _ = posterior_clock(
-            pairs, t_c, tuple(mean), halfwidth, fit_drift, temper=temper
+            pairs, t_c, tuple(mean), halfwidth, fit_drift, temper=temper, **opts
         )
     jac = np.array([[1.0, -t_c * 1e-6], [0.0, 1.0]])
     o, d, cov = mean[0] - mean[1] * 1e-6 * t_c, mean[1], jac @ cov_c @ jac.T
@@ -80,6 +96,9 @@ def clock_from_events(cam: list[CameraEdge], log: list[LogEdge], cfg: SyncConfig
         "exposure": exposure_evidence(pairs[0][0].exposures_s, p_exposure, cfg.exposure_s),
         "misfit": misfit,
         "likelihood_temper": temper,
+        "likelihood": cfg.event_likelihood,
+        "estimate": cfg.event_estimate,
+        "span_cam_s": list(span_s),
         "edges": [
             {
                 "camera": c.camera,

@@ -213,9 +213,8 @@ def camera_edges(
     interval = float(np.median(np.diff(t)))
     exposures = exposure_candidates(cfg.exposure_s, interval)
     change = np.flatnonzero(on[1:] != on[:-1]) + 1  # first frame of each new run
-    noise = gray_noise_sd(g)
     bounds = np.concatenate([[0], change, [t.size]])
-    edges = []
+    found = []
     for i, k in enumerate(change):
         rising = bool(on[k])
         if not rising and not cfg.use_falling_edges:
@@ -232,12 +231,16 @@ def camera_edges(
         # levels at each of those frames: the scene's grey level drifts while the tip moves
         lvl_before, var_b = _level(t, g, win_before, t[idx], dark if rising else bright)
         lvl_after, var_a = _level(t, g, win_after, t[idx], bright if rising else dark)
+        found.append((rising, idx, lvl_before, lvl_after, max(var_b, var_a)))
+    noise = level_noise_sd(t, g, bounds, change)
+    edges = []
+    for rising, idx, lvl_before, lvl_after, var in found:
         lo_lvl, hi_lvl = (lvl_before, lvl_after) if rising else (lvl_after, lvl_before)
         contrast = float(np.min(hi_lvl - lo_lvl))
         if contrast < cfg.flash_min_contrast_gray:
             continue
         frac = (g[idx] - lo_lvl) / (hi_lvl - lo_lvl)
-        frac_sd = noise / contrast * np.sqrt(1.0 + max(var_b, var_a))
+        frac_sd = noise / contrast * np.sqrt(1.0 + var)
         te, sd = subframe_edge_time(t[idx], frac, frac_sd, exposures, cfg.frame_time_ref, rising)
         edges.append(
             CameraEdge(
@@ -253,6 +256,35 @@ def camera_edges(
             )
         )
     return edges
+
+
+def level_noise_sd(t: np.ndarray, g: np.ndarray, bounds: np.ndarray, change: np.ndarray) -> float:
+    """Grey-level noise sd of single frames about the local level, from the steady runs.
+
+    Each run between LED edges (its end frames, which may straddle an edge, left out)
+    is cut into pieces of :data:`LEVEL_FRAMES` frames and a straight line fitted to
+    each; the pooled residual sd (degrees of freedom: frames less 2 per piece) is the
+    scatter the lit fractions see about the level lines of :func:`_level`. The
+    recording-wide :func:`gray_noise_sd` (second differences) is used when fewer than
+    10 degrees of freedom remain. Second differences overstate this scatter when the
+    frames alternate (a video codec's alternating frame types: +-0.03 grey about the
+    trend gives second differences of 0.12, measured on rendered mp4 sessions) and
+    would overstate every partly lit frame's timing sd by the same factor.
+    """
+    ss, dof = 0.0, 0
+    for i in range(change.size + 1):
+        run = np.arange(
+            bounds[i] + (1 if i > 0 else 0), bounds[i + 1] - (1 if i < change.size else 0)
+        )
+        for j in range(0, run.size - LEVEL_FRAMES + 1, LEVEL_FRAMES):
+            piece = run[j : j + LEVEL_FRAMES]
+            x = t[piece] - t[piece].mean()
+            y = g[piece] - g[piece].mean()
+            r = y - x * (x @ y) / (x @ x)
+            ss, dof = ss + float(r @ r), dof + piece.size - 2
+    if dof < 10:
+        return gray_noise_sd(g)
+    return float(max(np.sqrt(ss / dof), 0.005))
 
 
 def _level(

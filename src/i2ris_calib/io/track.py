@@ -358,6 +358,14 @@ REFIT_FACTOR = 5.0
 REFIT_MIN_PX = 0.1
 
 
+def interp_weight(t_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
+    """Weight of the later of the two frames of ``t_src`` bracketing each of ``t_dst``
+    in :func:`resample_corners` (0..1)."""
+    j = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
+    t0, t1 = t_src[j - 1], t_src[j]
+    return np.clip((t_dst - t0) / np.maximum(t1 - t0, 1e-12), 0, 1)
+
+
 def one_sided_corners(
     t_src: np.ndarray, c_src: np.ndarray, t_dst: np.ndarray, side: str, cfg: TrackingConfig
 ) -> np.ndarray:
@@ -456,6 +464,72 @@ def refit_lagged_frames(
                    status=status), idx  # fmt: skip
 
 
+#: a frame whose angles, fitted with the second camera's corners extrapolated from its
+#: two frames before and from its two frames after, differ by more than this (deg, yaw or
+#: pitch) is flagged ``ambiguous`` (:func:`flag_lagged_frames`)
+LAGGED_SPREAD_DEG = 0.2
+#: an alternative fit counts as possible when its cost is at most this many times the
+#: median cost of that alternative over the session (~ the 99.5 % point of the cost's
+#: chi-square spread)
+LAGGED_COST_FACTOR = 3.0
+
+
+def lagged_spread_deg(
+    res: fz.FusionResult, va: fz.ViewData, alternatives: list[fz.ViewData], w: np.ndarray,
+    M: np.ndarray, frames: np.ndarray, cfg: TrackingConfig,
+) -> np.ndarray:  # fmt: skip
+    """Per-frame uncertainty (deg) of the second camera's interpolation in time.
+
+    The second camera's corners at the first camera's frame time are interpolated
+    between its frames before and after, at weight ``w`` (0: the frame before). The
+    frame is refitted (camera-to-camera rotation held) with the second camera's corners
+    extrapolated from its two frames before (``alternatives[0]``) and from its two frames
+    after (``alternatives[1]``); ``d0``, ``d1`` are the largest yaw or pitch differences
+    to the fused angles. Motion that is linear on either side of the interpolation
+    interval makes that side's difference vanish (a change in a neighbouring interval
+    does not count). A change of size ``S`` inside the interval (a step: the true angle
+    there is either the value before or the value after) gives ``d0 = w S`` and
+    ``d1 = (1 - w) S``; its size is estimated as ``S = min(d0 / w, d1 / (1 - w))`` and the
+    interpolation is then off by up to ``max(w, 1 - w) S``, which is returned. An
+    alternative the first camera contradicts (cost above :data:`LAGGED_COST_FACTOR`
+    times that alternative's median over ``frames``) is not a possible pose: the size
+    is then estimated from the other side alone (0 when neither is possible).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        deg; NaN outside ``frames`` and where a side has no two frames.
+    """
+    n = len(res.status)
+    out = np.full(n, np.nan)
+    meas = res.status == fz.MEASURED
+    if not meas.any() or frames.size == 0:
+        return out
+    var = float(np.nanmedian(res.rms_px[meas])) ** 2  # corner noise variance (px^2)
+    base = fz.relative_angles(res.Q[frames], M)[:, :2]
+    d = np.full((2, n), np.nan)
+    for s, vb in enumerate(alternatives):
+        k = np.flatnonzero(vb.ok[frames] & va.ok[frames])
+        if k.size == 0:
+            continue
+        idx = frames[k]
+        A, B = fz._subset(va, idx), fz._subset(vb, idx)
+        q, _, _, cost = fz.joint_fit(res.Q[idx], res.t_a[idx], res.t_b[idx], res.R_ba, A, B,
+                                     cfg.iterations)  # fmt: skip
+        # possible: fits as well as this alternative usually fits on the session (its
+        # extrapolated corners are noisier than the interpolated ones)
+        possible = cost <= LAGGED_COST_FACTOR * max(float(np.nanmedian(cost)), 16.0 * var)
+        dd = np.abs(fz.relative_angles(q, M)[:, :2] - base[k]).max(axis=1)
+        d[s, idx] = np.where(possible, dd, np.inf)
+    wc = np.clip(w, 1e-3, 1 - 1e-3)
+    s0, s1 = d[0] / wc, d[1] / (1 - wc)
+    size = np.where(np.isinf(s0), s1, np.where(np.isinf(s1), s0, np.minimum(s0, s1)))
+    size = np.where(np.isinf(size), 0.0, size)  # neither side possible: interpolation only
+    ok = np.isfinite(size)
+    out[ok] = (np.maximum(wc, 1 - wc) * size)[ok]
+    return out
+
+
 def nearest_time(t_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:
     """Time of the frame of ``t_src`` (sorted) nearest to each of ``t_dst``."""
     j = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
@@ -518,6 +592,8 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
         ) from None
     fused = np.isin(res_fused_status, (fz.MEASURED, fz.REJECTED)) & ta["valid"].to_numpy()
     refit_frames = np.zeros(0, dtype=int)
+    lagged_flagged = np.zeros(0, dtype=int)
+    spread = np.full(len(t), np.nan)
     lagged = np.nanmax(np.abs(nearest_time(tb_t[keep_b], t) - t), initial=0.0)
     if lagged > cfg.same_frame_tol_s and res.t_a is not None and res.t_b is not None:
         sel = fused & (np.nan_to_num(res.rms_px) > REFIT_MIN_PX)  # every candidate is here
@@ -528,6 +604,16 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             alts.append(_view(c_alt, intr[b_name], cams[b_name].view, spec))
         res, refit_frames = refit_lagged_frames(res, va, alts, fused, cfg)
         status = res.status.copy()
+        check = np.flatnonzero(status == fz.MEASURED)
+        check = np.setdiff1d(check, refit_frames)  # refitted: chosen by the first camera
+        alts = []
+        for side in ("before", "after"):
+            c_alt = np.full_like(cb, np.nan)
+            c_alt[check] = one_sided_corners(tb_t[keep_b], cb_src[keep_b], t[check], side, cfg)
+            alts.append(_view(c_alt, intr[b_name], cams[b_name].view, spec))
+        spread = lagged_spread_deg(res, va, alts, interp_weight(tb_t[keep_b], t), M, check, cfg)
+        lagged_flagged = np.flatnonzero(np.nan_to_num(spread) > LAGGED_SPREAD_DEG)
+        status[lagged_flagged] = fz.AMBIGUOUS
     ang = fz.relative_angles(res.Q, M)
     ang[status != fz.MEASURED] = np.nan
     df = pd.DataFrame({"frame": ta["frame"].to_numpy(), "time_s": t, "yaw_deg": ang[:, 0],
@@ -548,6 +634,14 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     summary = _summary(df, res, streams, names, M, ref, cfg)
     summary["reference"].update(reference_record(refit))
     summary["lagged_camera_refit_frames"] = [int(k) for k in ta["frame"].to_numpy()[refit_frames]]
+    summary["lagged_camera_flagged_frames"] = [
+        int(k) for k in ta["frame"].to_numpy()[lagged_flagged]
+    ]
+    summary["lagged_camera_spread_deg"] = {
+        "median": _num(np.nanmedian(spread)) if np.isfinite(spread).any() else None,
+        "p99": _num(np.nanpercentile(spread, 99)) if np.isfinite(spread).any() else None,
+        "tolerance": LAGGED_SPREAD_DEG,
+    }
     for n in names:
         summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
     summary["view_check"] = views

@@ -1,0 +1,91 @@
+"""A second camera triggered later than the first: frames next to a step of the angle
+that the interpolation cannot place are flagged, smooth motion is not."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from i2ris_calib.io.track import (
+    LAGGED_SPREAD_DEG,
+    interp_weight,
+    lagged_spread_deg,
+    one_sided_corners,
+    resample_corners,
+)
+from i2ris_calib.simulation.presets import preset_config
+from i2ris_calib.simulation.scene import make_cameras
+from i2ris_calib.tracking import fuse as fz
+from i2ris_calib.tracking.config import TrackingConfig
+from i2ris_calib.tracking.geometry import face_corner_points_tip, project, tip_rotation
+from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
+
+NOISE_PX = 0.02
+FPS, LAG_S = 30.0, 0.005
+STEP_FRAME = 100  # the true pitch steps by STEP_DEG 2 ms after this top frame
+
+
+def _truth(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Yaw and pitch (deg) at times ``t``: straight 1 s, smooth excursions to +-40 deg,
+    and a pitch step near the straight pose (as at an EGPI flag point)."""
+    yaw = 20 * (1 - np.cos(2 * np.pi * np.clip(t - 1.0, 0, 3.0) / 3.0))
+    yaw = yaw - 18 * (1 - np.cos(2 * np.pi * np.clip(t - 4.0, 0, 3.0) / 3.0))
+    pitch = -17 * (1 - np.cos(2 * np.pi * np.clip(t - 5.5, 0, 3.0) / 3.0))
+    pitch = pitch + np.where(t > STEP_FRAME / FPS + 0.002, -STEP_DEG, 0.0)
+    return yaw, pitch
+
+
+STEP_DEG = 1.0
+
+
+def _corners(cfg, cam, yaw, pitch, rng):
+    X = face_corner_points_tip(cam.view, cfg.marker_size_mm, cfg.cube_size_mm)
+    c = np.array([
+        project(cam.K, cam.R_cb @ tip_rotation(y, p),
+                cam.R_cb @ (tip_rotation(y, p) @ np.array([cfg.pivot_mm, 0, 0])) + cam.t_cb, X)
+        for y, p in zip(yaw, pitch, strict=True)
+    ])  # fmt: skip
+    return c + rng.normal(0, NOISE_PX, c.shape), X
+
+
+def _view(c, cam, cfg, X) -> fz.ViewData:
+    n = len(c)
+    R, t = np.full((n, 2, 3, 3), np.nan), np.full((n, 2, 3), np.nan)
+    for k in np.flatnonzero(np.isfinite(c).all(axis=(1, 2))):
+        Rm, tm, _ = ippe_candidates(c[k], cam.K, cfg.marker_size_mm)
+        for j in range(2):
+            R[k, j], t[k, j] = tip_pose_from_marker(cam.view, Rm[j], tm[j], cfg.cube_size_mm)
+    return fz.ViewData(c, cam.K, X, R, t)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_frame_next_to_a_step_seen_by_the_lagged_camera_only_is_flagged(seed):
+    cfg = preset_config("ci", misalignment_deg=0.0, pivot_mm=0.0, marker_size_px=110.0)
+    cams = make_cameras(cfg, np.random.default_rng(seed))
+    rng = np.random.default_rng(50 + seed)
+    tc = TrackingConfig()
+    t = np.arange(int(9.5 * FPS)) / FPS  # top frame times
+    ts = t + LAG_S  # side frames, 5 ms late: side frame STEP_FRAME already shows the step
+    ca, Xa = _corners(cfg, cams[0], *_truth(t), rng)
+    cs, Xb = _corners(cfg, cams[1], *_truth(ts), rng)
+    va = _view(ca, cams[0], cfg, Xa)
+    vb = _view(resample_corners(ts, cs, t, tc), cams[1], cfg, Xb)
+    ref, res = fz.fit_reference(fz.fuse_views(va, vb, t, tc), va, vb, t < 0.8, t, tc)
+    M = ref.M  # session roll: no cross-talk at +-40 deg
+    err = np.abs(fz.relative_angles(res.Q, M)[:, :2] - np.column_stack(_truth(t))).max(axis=1)
+    frames = np.flatnonzero(res.status == fz.MEASURED)
+    alts = [_view(one_sided_corners(ts, cs, t, side, tc), cams[1], cfg, Xb)
+            for side in ("before", "after")]  # fmt: skip
+    spread = lagged_spread_deg(res, va, alts, interp_weight(ts, t), M, frames, tc)
+    # the interpolated side corners put most of the step into the frame before it,
+    # which the top camera cannot contradict: a wrong angle ...
+    assert err[STEP_FRAME] > 0.3, err[STEP_FRAME]
+    # ... that the spread of the one-sided fits flags
+    assert spread[STEP_FRAME] > LAGGED_SPREAD_DEG
+    flagged = np.flatnonzero(np.nan_to_num(spread) > LAGGED_SPREAD_DEG)
+    # and only the frames next to the step, not the smooth +-40 deg excursions
+    assert set(flagged) <= set(range(STEP_FRAME - 2, STEP_FRAME + 3)), flagged
+    # every frame not flagged is right to the noise
+    keep = np.setdiff1d(frames, flagged)
+    bad = keep[err[keep] > 0.1]
+    assert bad.size == 0, (bad, err[bad], spread[bad], res.rms_px[bad], np.median(res.rms_px))

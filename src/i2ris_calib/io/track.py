@@ -442,9 +442,7 @@ def refit_lagged_frames(
         if k.size == 0:
             continue
         idx = cand[k]
-        A, B = fz._subset(va, idx), fz._subset(vb, idx)
-        q, a, b, cost = fz.joint_fit(res.Q[idx], res.t_a[idx], res.t_b[idx], res.R_ba, A, B,
-                                     cfg.iterations)  # fmt: skip
+        A, B, q, a, b, cost = _refit_frames(res, va, vb, idx, cfg)
         rms = np.sqrt(cost / 16.0)
         better = rms < best[k]
         if better.any():
@@ -462,6 +460,18 @@ def refit_lagged_frames(
     rms_px[idx], cov_rot[idx], status[idx] = best[accept], cov[accept], fz.MEASURED
     return replace(res, Q=newQ, rms_px=rms_px, t_a=cen_a, t_b=cen_b, cov_rot=cov_rot,
                    status=status), idx  # fmt: skip
+
+
+def _refit_frames(
+    res: fz.FusionResult, va: fz.ViewData, vb: fz.ViewData, idx: np.ndarray,
+    cfg: TrackingConfig,
+):  # fmt: skip
+    """Refit frames ``idx`` from views ``va``, ``vb`` (camera-to-camera rotation held),
+    starting from the fused poses: ``(A, B, Q, t_a, t_b, cost)`` of :func:`tracking.fuse.joint_fit`."""
+    A, B = fz._subset(va, idx), fz._subset(vb, idx)
+    q, a, b, cost = fz.joint_fit(res.Q[idx], res.t_a[idx], res.t_b[idx], res.R_ba, A, B,
+                                 cfg.iterations)  # fmt: skip
+    return A, B, q, a, b, cost
 
 
 #: a frame whose angles, fitted with the second camera's corners extrapolated from its
@@ -513,9 +523,7 @@ def lagged_spread_deg(
         if k.size == 0:
             continue
         idx = frames[k]
-        A, B = fz._subset(va, idx), fz._subset(vb, idx)
-        q, _, _, cost = fz.joint_fit(res.Q[idx], res.t_a[idx], res.t_b[idx], res.R_ba, A, B,
-                                     cfg.iterations)  # fmt: skip
+        _, _, q, _, _, cost = _refit_frames(res, va, vb, idx, cfg)
         # possible: fits as well as this alternative usually fits on the session (its
         # extrapolated corners are noisier than the interpolated ones)
         possible = cost <= LAGGED_COST_FACTOR * max(float(np.nanmedian(cost)), 16.0 * var)

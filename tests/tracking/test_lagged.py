@@ -6,19 +6,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from i2ris_calib.io.track import (
-    LAGGED_SPREAD_DEG,
-    interp_weight,
-    lagged_spread_deg,
-    one_sided_corners,
-    resample_corners,
-)
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.simulation.scene import make_cameras
 from i2ris_calib.tracking import fuse as fz
 from i2ris_calib.tracking.config import TrackingConfig
 from i2ris_calib.tracking.geometry import face_corner_points_tip, project, tip_rotation
 from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
+from i2ris_calib.tracking.timing import (
+    LAGGED_SPREAD_DEG,
+    interp_weight,
+    lagged_spread_deg,
+    one_sided_corners,
+    resample_corners,
+)
 
 NOISE_PX = 0.02
 FPS, LAG_S = 30.0, 0.005

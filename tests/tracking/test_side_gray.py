@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from i2ris_calib.io.track import nearest_frame_gray, one_sided_corners, resample_corners
 from i2ris_calib.tracking.config import TrackingConfig
+from i2ris_calib.tracking.timing import nearest_frame_gray, one_sided_corners, resample_corners
 
 
 def test_lagged_camera_grey_is_its_own_frame_not_interpolated():

@@ -52,8 +52,14 @@ def quiet_pool(
     try:
         yield futures
     except BaseException:
-        for proc in list((getattr(ex, "_processes", None) or {}).values()):
+        procs = list((getattr(ex, "_processes", None) or {}).values())
+        for proc in procs:
             proc.terminate()
-        ex.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.join(timeout=10)
+        # wait for the executor's manager thread too: with shutdown(wait=False) it can
+        # close its wake-up pipe while the interpreter's exit hook still writes to it,
+        # which printed "Exception ignored ... Bad file descriptor" after the message
+        ex.shutdown(wait=True, cancel_futures=True)
         raise
     ex.shutdown(wait=True)

@@ -17,6 +17,7 @@ from i2ris_calib.tracking.timing import (
     interp_weight,
     lagged_spread_deg,
     one_sided_corners,
+    refit_lagged_frames,
     resample_corners,
 )
 
@@ -25,14 +26,17 @@ FPS, LAG_S = 30.0, 0.005
 STEP_FRAME = 100  # the true pitch steps by STEP_DEG 2 ms after this top frame
 
 
-def _truth(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _truth(t: np.ndarray, yaw_step_deg: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Yaw and pitch (deg) at times ``t``: straight 1 s, smooth excursions to +-40 deg,
-    and a pitch step near the straight pose (as at an EGPI flag point)."""
+    and a pitch step near the straight pose (as at an EGPI flag point); with
+    ``yaw_step_deg`` a yaw step at the same time instead."""
     yaw = 20 * (1 - np.cos(2 * np.pi * np.clip(t - 1.0, 0, 3.0) / 3.0))
     yaw = yaw - 18 * (1 - np.cos(2 * np.pi * np.clip(t - 4.0, 0, 3.0) / 3.0))
     pitch = -17 * (1 - np.cos(2 * np.pi * np.clip(t - 5.5, 0, 3.0) / 3.0))
-    pitch = pitch + np.where(t > STEP_FRAME / FPS + 0.002, -STEP_DEG, 0.0)
-    return yaw, pitch
+    after = t > STEP_FRAME / FPS + 0.002
+    if yaw_step_deg:
+        return yaw + np.where(after, yaw_step_deg, 0.0), pitch
+    return yaw, pitch + np.where(after, -STEP_DEG, 0.0)
 
 
 STEP_DEG = 1.0
@@ -89,3 +93,46 @@ def test_frame_next_to_a_step_seen_by_the_lagged_camera_only_is_flagged(seed):
     keep = np.setdiff1d(frames, flagged)
     bad = keep[err[keep] > 0.1]
     assert bad.size == 0, (bad, err[bad], spread[bad], res.rms_px[bad], np.median(res.rms_px))
+
+
+def test_frame_rejected_across_a_large_step_is_refitted_from_the_side_it_belongs_to():
+    """A 12 deg yaw step 2 ms after a top frame (110 px markers: 6 deg stays below the 1 px limit): the side frame 5 ms after it already
+    shows the step, so the interpolated side corners mix the two poses, the fusion
+    rejects the frame (reprojection error) and it has no pose to refit from. The refit
+    starts from the neighbouring fused poses and the top camera picks the side
+    extrapolated from the frames before: measured, right to the noise."""
+    cfg = preset_config("ci", misalignment_deg=0.0, pivot_mm=0.0, marker_size_px=110.0)
+    cams = make_cameras(cfg, np.random.default_rng(3))
+    rng = np.random.default_rng(53)
+    tc = TrackingConfig()
+    t = np.arange(int(4.0 * FPS)) / FPS
+    ts = t + LAG_S
+    ca, Xa = _corners(cfg, cams[0], *_truth(t, 12.0), rng)
+    cs, Xb = _corners(cfg, cams[1], *_truth(ts, 12.0), rng)
+    va = _view(ca, cams[0], cfg, Xa)
+    vb = _view(resample_corners(ts, cs, t, tc), cams[1], cfg, Xb)
+    ref, res = fz.fit_reference(fz.fuse_views(va, vb, t, tc), va, vb, t < 0.8, t, tc)
+    assert res.status[STEP_FRAME] == fz.REJECTED  # what the refit must repair
+    assert not np.isfinite(res.Q[STEP_FRAME]).any()
+    alts = [_view(one_sided_corners(ts, cs, t, side, tc), cams[1], cfg, Xb)
+            for side in ("before", "after")]  # fmt: skip
+    allowed = np.isin(res.status, (fz.MEASURED, fz.REJECTED))
+    out, idx = refit_lagged_frames(res, va, alts, allowed, tc)
+    assert STEP_FRAME in idx and out.status[STEP_FRAME] == fz.MEASURED
+    err = np.abs(
+        fz.relative_angles(out.Q[idx], ref.M)[:, :2] - np.column_stack(_truth(t[idx], 12.0))
+    )
+    assert err.max() < 0.1, err
+
+
+def test_resample_corners_extrapolates_half_a_frame_beyond_the_other_camera():
+    """The first top frame precedes the first side frame by 5 ms (of 33): the side
+    corners there are extrapolated from its first two frames (exact for linear motion);
+    a frame more than half an interval beyond the side frames stays NaN."""
+    tc = TrackingConfig()
+    ts = np.arange(10) / FPS + LAG_S
+    c = np.repeat((100.0 + 30.0 * ts)[:, None, None], 4, axis=1).repeat(2, axis=2)
+    t = np.array([0.0, ts[-1] + 0.01, -0.02, ts[-1] + 0.02])
+    out = resample_corners(ts, c, t, tc)
+    np.testing.assert_allclose(out[:2, 0, 0], 100.0 + 30.0 * t[:2])
+    assert np.isnan(out[2:]).all()

@@ -23,8 +23,11 @@ def resample_corners(
 ) -> np.ndarray:
     """Corners (n_dst, 4, 2) at times ``t_dst``: same frame, or linear between neighbours.
 
-    NaN when no frame is within ``same_frame_tol_s`` and the bracketing frames are
-    missing or more than ``max_interp_gap_s`` apart.
+    Before the first frame of ``t_src`` or after its last (a camera triggered later than
+    the other misses the other's first frame) the corners are extrapolated from the two
+    nearest frames, by at most half their interval. NaN when no frame is within
+    ``same_frame_tol_s`` and the bracketing frames are missing or more than
+    ``max_interp_gap_s`` apart.
     """
     out = np.full((len(t_dst), 4, 2), np.nan)
     j = np.clip(np.searchsorted(t_src, t_dst), 1, len(t_src) - 1)
@@ -36,6 +39,14 @@ def resample_corners(
     interp = ~same & (t1 - t0 <= cfg.max_interp_gap_s) & (t_dst >= t0) & (t_dst <= t1)
     ci = (1 - w)[:, None, None] * c_src[j - 1] + w[:, None, None] * c_src[j]
     out[interp] = ci[interp]
+    if len(t_src) >= 2:
+        for side, beyond, dt in (
+            ("after", t_dst < t_src[0], t_src[1] - t_src[0]),
+            ("before", t_dst > t_src[-1], t_src[-1] - t_src[-2]),
+        ):
+            k = np.flatnonzero(~same & beyond & (np.abs(t_dst - t_src[near]) <= 0.5 * dt))
+            if k.size:
+                out[k] = one_sided_corners(t_src, c_src, t_dst[k], side, cfg)
     return out
 
 
@@ -95,7 +106,9 @@ def refit_lagged_frames(
     :data:`REFIT_MIN_PX`) are refitted with the camera-to-camera rotation held, once per
     alternative set of corners (extrapolated from the two frames before, and from the
     two after: one of them lies on the first camera's side of the change); the best fit
-    is kept when it halves the error and is below ``max_reproj_err_px``.
+    is kept when it halves the error and is below ``max_reproj_err_px``. A frame the
+    fusion rejected for its error has no pose; its refit starts from the nearest fused
+    pose on the side the alternative extrapolates from (:func:`neighbour_start`).
 
     Parameters
     ----------
@@ -104,7 +117,8 @@ def refit_lagged_frames(
     va : ViewData
         First camera.
     alternatives : list of ViewData
-        The second camera with other corners (NaN where none).
+        The second camera with other corners (NaN where none): ``[0]`` extrapolated from
+        its frames before, ``[1]`` from its frames after.
     allowed : ndarray of bool, shape (n,)
         Frames that may be refitted (fusion statuses measured or rejected, valid times).
 
@@ -117,20 +131,21 @@ def refit_lagged_frames(
     if not meas.any():
         return res, np.zeros(0, dtype=int)
     thr = max(REFIT_FACTOR * float(np.nanmedian(res.rms_px[meas])), REFIT_MIN_PX)
-    finite = np.isfinite(res.Q).all(axis=(1, 2)) & np.isfinite(res.t_a).all(axis=1)
-    finite &= np.isfinite(res.t_b).all(axis=1)
-    cand = np.flatnonzero(allowed & finite & np.isfinite(res.rms_px) & (res.rms_px > thr) & va.ok)
+    cand = np.flatnonzero(allowed & np.isfinite(res.rms_px) & (res.rms_px > thr) & va.ok)
     if cand.size == 0:
         return res, np.zeros(0, dtype=int)
     best = res.rms_px[cand].copy()
     Q, ta, tb = res.Q[cand].copy(), res.t_a[cand].copy(), res.t_b[cand].copy()
     cov = res.cov_rot[cand].copy()
-    for vb in alternatives:
-        k = np.flatnonzero(vb.ok[cand])
+    for side, vb in zip(("before", "after"), alternatives, strict=False):
+        start = neighbour_start(res, side)
+        finite = np.isfinite(start.Q).all(axis=(1, 2)) & np.isfinite(start.t_a).all(axis=1)
+        finite &= np.isfinite(start.t_b).all(axis=1)
+        k = np.flatnonzero(vb.ok[cand] & finite[cand])
         if k.size == 0:
             continue
         idx = cand[k]
-        A, B, q, a, b, cost = _refit_frames(res, va, vb, idx, cfg)
+        A, B, q, a, b, cost = _refit_frames(start, va, vb, idx, cfg)
         rms = np.sqrt(cost / 16.0)
         better = rms < best[k]
         if better.any():
@@ -148,6 +163,27 @@ def refit_lagged_frames(
     rms_px[idx], cov_rot[idx], status[idx] = best[accept], cov[accept], fz.MEASURED
     return replace(res, Q=newQ, rms_px=rms_px, t_a=cen_a, t_b=cen_b, cov_rot=cov_rot,
                    status=status), idx  # fmt: skip
+
+
+def neighbour_start(res: fz.FusionResult, side: str) -> fz.FusionResult:
+    """``res`` with the pose (``Q``, ``t_a``, ``t_b``) of every frame that has none (a
+    fused frame rejected for its reprojection error) taken from the nearest frame that
+    has one on ``side`` ("before" or "after"): the start of a refit whose second-camera
+    corners are extrapolated from that side."""
+    has = np.isfinite(res.Q).all(axis=(1, 2)) & np.isfinite(res.t_a).all(axis=1)
+    has &= np.isfinite(res.t_b).all(axis=1)
+    if has.all() or not has.any():
+        return res
+    n = len(has)
+    idx = np.where(has, np.arange(n), -1 if side == "before" else n)
+    if side == "before":
+        src = np.maximum.accumulate(idx)
+    else:
+        src = np.minimum.accumulate(idx[::-1])[::-1]
+    fill = ~has & (src >= 0) & (src < n)
+    Q, ta, tb = res.Q.copy(), res.t_a.copy(), res.t_b.copy()
+    Q[fill], ta[fill], tb[fill] = res.Q[src[fill]], res.t_a[src[fill]], res.t_b[src[fill]]
+    return replace(res, Q=Q, t_a=ta, t_b=tb)
 
 
 def _refit_frames(

@@ -141,6 +141,7 @@ def sync_session(
     out_dir = Path(out) if out is not None else root / "sync"
     log_path = encoder_log_path(root, spec.encoder)
     log = read_encoder_log(root, spec.encoder, cfg.sync.max_gap_s)
+    log = replace(log, interpolation=cfg.sync.encoder_interpolation)
     df = read_angles(angles_path)
     with Progress(
         SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), transient=True

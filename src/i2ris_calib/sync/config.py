@@ -21,6 +21,11 @@ class SyncConfig:
     max_gap_s: float = 0.25  # longest allowed interval between two encoder samples
     min_overlap_frames: int = 10  # fewer mapped frames inside the log range is an error
 
+    # encoder values between log samples: "corners" = linear, with the corners of
+    # piecewise-linear motion (a reversal or stop between two samples) restored;
+    # "linear" = plain linear interpolation (cuts those corners)
+    encoder_interpolation: Literal["corners", "linear"] = "corners"
+
     # --- sync event (LED flash seen as a jump of the mean grey level)
     flash_cameras: tuple[str, ...] = ()  # cameras whose mean_gray_<camera> to use; () = all
     flash_min_contrast_gray: float = 8.0  # min jump of mean grey level (0-255) for a flash
@@ -60,7 +65,7 @@ class SyncConfig:
         0.12  # coarse profile +- around the xcorr offset (extended if needed)
     )
     profile_step_s: float = 0.01  # coarse grid step
-    profile_tol_s: float = 0.0002  # golden-section refinement tolerance
+    profile_tol_s: float = 0.00005  # golden-section refinement tolerance
     min_axis_range_counts: float = 50.0  # an axis whose encoder spans less is not used
 
     seed: int = 0  # reserved for randomised starts of the model fits

@@ -144,6 +144,7 @@ def estimate_clock(
         For the ``model`` method.
     """
     c0, l0 = time_origins(angles, log)
+    log = replace(log, interpolation=cfg.encoder_interpolation)
     try:
         local = _estimate_local(
             shift_angles(angles, c0),
@@ -430,7 +431,7 @@ def synced_table(
     -------
     table : DataFrame
         Columns :data:`SYNCED_COLUMNS`: time_s (controller clock, s), enc_yaw and
-        enc_pitch (counts, linearly interpolated), yaw_deg, pitch_deg (deg, NaN when
+        enc_pitch (counts, :meth:`EncoderLog.interpolate`), yaw_deg, pitch_deg (deg, NaN when
         not measured), status, frame, time_cam_s (camera clock, s).
     n_dropped : int
     """

@@ -7,7 +7,8 @@ time column between them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy.ndimage import median_filter
@@ -41,6 +42,63 @@ class Channel:
     t_s: np.ndarray
     values: np.ndarray
 
+    @cached_property
+    def with_corners(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sample times and values with the corners of piecewise-linear motion added
+        (:func:`corner_knots`), sorted: the knots of :meth:`EncoderLog.interpolate`."""
+        tk, vk = corner_knots(self.t_s, self.values)
+        t = np.concatenate([self.t_s, tk])
+        v = np.concatenate([self.values.astype(float), vk])
+        order = np.argsort(t, kind="stable")
+        return t[order], v[order]
+
+
+#: smallest tolerance (counts) of the straight-line test of :func:`corner_knots`: a line of
+#: whole counts has second differences of at most 1
+CORNER_MIN_TOL_COUNTS = 1.5
+
+
+def corner_knots(t_s: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Corners of piecewise-linear motion that fall between two samples.
+
+    A motor moving at constant speed that reverses or stops between two samples has its
+    corner cut by linear interpolation (up to half a sample interval times the change of
+    speed: 8 counts at 100 Hz and 1600 counts/s). Where the three samples before an
+    interval lie on one straight line and the three after it on another (second
+    differences within a tolerance), the lines' speeds differ by more than twice the
+    tolerance over the interval and the lines meet inside it, the meeting point is a
+    corner. Smooth motion (accelerating over several samples) and noise fail the
+    straight-line test and keep plain linear interpolation. The tolerance is the larger
+    of :data:`CORNER_MIN_TOL_COUNTS` and 3 robust sd of the log's second differences.
+
+    Parameters
+    ----------
+    t_s, values : ndarray, shape (n,)
+        Sample times (s, increasing) and values (counts).
+
+    Returns
+    -------
+    t_s, values : ndarray, shape (k,)
+        The corners' times and values.
+    """
+    t = np.asarray(t_s, dtype=float)
+    v = np.asarray(values, dtype=float)
+    n = t.size
+    if n < 6:
+        return np.zeros(0), np.zeros(0)
+    dt, dv = np.diff(t), np.diff(v)
+    s = dv / dt
+    d2 = dv[1:] - s[:-1] * dt[1:]  # sample k+2 off the line through samples k, k+1
+    tol = max(CORNER_MIN_TOL_COUNTS, 3 * 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))))
+    k = np.arange(2, n - 3)  # interval k: line A through samples k-2..k, line B through k+1..k+3
+    sa, sb = s[k - 1], s[k + 1]
+    ok = (np.abs(d2[k - 2]) <= tol) & (np.abs(d2[k + 1]) <= tol)
+    ok &= np.abs(sa - sb) * dt[k] > 2 * tol
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tc = (v[k + 1] - v[k] - sb * t[k + 1] + sa * t[k]) / (sa - sb)
+    ok &= (tc > t[k]) & (tc < t[k + 1])
+    return tc[ok], v[k[ok]] + sa[ok] * (tc[ok] - t[k[ok]])
+
 
 @dataclass(frozen=True)
 class EncoderLog:
@@ -54,12 +112,15 @@ class EncoderLog:
         ``sync_flash`` (1 while the sync LED is on), or None when not logged.
     source : str
         Where the log came from (for messages).
+    interpolation : {"corners", "linear"}
+        How :meth:`interpolate` fills between samples (``[sync] encoder_interpolation``).
     """
 
     channels: dict[str, Channel]
     flash: Channel | None = None
     source: str = ""
     meta: dict = field(default_factory=dict)
+    interpolation: str = "corners"
 
     def time_range(self) -> tuple[float, float]:
         """(first, last) time, s, over which every encoder channel is defined."""
@@ -69,17 +130,22 @@ class EncoderLog:
 
     def shifted(self, dt_s: float) -> EncoderLog:
         """The same log with every time plus ``dt_s`` (recording-local clocks)."""
-        return EncoderLog(
+        return replace(
+            self,
             channels={k: Channel(c.t_s + dt_s, c.values) for k, c in self.channels.items()},
             flash=None if self.flash is None else Channel(self.flash.t_s + dt_s, self.flash.values),
-            source=self.source,
-            meta=self.meta,
         )
 
     def interpolate(self, name: str, t_s: np.ndarray) -> np.ndarray:
-        """Channel ``name`` linearly interpolated at ``t_s`` (NaN outside its range)."""
+        """Channel ``name`` at ``t_s`` (NaN outside its range): linear between samples,
+        with the corners of piecewise-linear motion restored (:func:`corner_knots`)
+        unless ``interpolation = "linear"``."""
         ch = self.channels[name]
-        return np.interp(t_s, ch.t_s, ch.values.astype(float), left=np.nan, right=np.nan)
+        if self.interpolation == "linear":
+            t, v = ch.t_s, ch.values.astype(float)
+        else:
+            t, v = ch.with_corners
+        return np.interp(t_s, t, v, left=np.nan, right=np.nan)
 
 
 def check_channel(t_s: np.ndarray, values: np.ndarray, name: str, where: str, max_gap_s: float):

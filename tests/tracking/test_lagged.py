@@ -14,7 +14,9 @@ from i2ris_calib.tracking.geometry import face_corner_points_tip, project, tip_r
 from i2ris_calib.tracking.pose import ippe_candidates, tip_pose_from_marker
 from i2ris_calib.tracking.timing import (
     LAGGED_SPREAD_DEG,
+    adopt_lagged_alternatives,
     interp_weight,
+    lagged_check,
     lagged_spread_deg,
     one_sided_corners,
     refit_lagged_frames,
@@ -136,3 +138,43 @@ def test_resample_corners_extrapolates_half_a_frame_beyond_the_other_camera():
     out = resample_corners(ts, c, t, tc)
     np.testing.assert_allclose(out[:2, 0, 0], 100.0 + 30.0 * t[:2])
     assert np.isnan(out[2:]).all()
+
+
+def test_step_the_first_camera_sees_out_of_plane_takes_the_possible_side():
+    """A 1 deg pitch step 2 ms after a top frame while pitch is near -34 deg: the top
+    camera sees pitch out of its image plane, but at that tilt well enough to contradict
+    the side extrapolated from the frames after (the post-step pose the 5 ms late side
+    frame already shows). The frame takes the before-side fit (``side`` 0, spread 0) and
+    is right to the noise, where the interpolation was off by most of the step; smooth
+    frames are not touched."""
+    cfg = preset_config("ci", misalignment_deg=0.0, pivot_mm=0.0, marker_size_px=110.0)
+    cams = make_cameras(cfg, np.random.default_rng(1))
+    rng = np.random.default_rng(51)
+    tc = TrackingConfig()
+    step_frame = 210  # t = 7.0 s: the pitch excursion's extreme
+
+    def truth(t):
+        yaw, pitch = _truth(t)
+        pitch = pitch + STEP_DEG * (t > STEP_FRAME / FPS + 0.002)  # remove the step at 0 deg
+        return yaw, pitch - STEP_DEG * (t > step_frame / FPS + 0.002)
+
+    t = np.arange(int(9.5 * FPS)) / FPS
+    ts = t + LAG_S
+    ca, Xa = _corners(cfg, cams[0], *truth(t), rng)
+    cs, Xb = _corners(cfg, cams[1], *truth(ts), rng)
+    va = _view(ca, cams[0], cfg, Xa)
+    vb = _view(resample_corners(ts, cs, t, tc), cams[1], cfg, Xb)
+    ref, res = fz.fit_reference(fz.fuse_views(va, vb, t, tc), va, vb, t < 0.8, t, tc)
+    true = np.column_stack(truth(t))
+    before = np.abs(fz.relative_angles(res.Q, ref.M)[:, :2] - true).max(axis=1)
+    assert before[step_frame] > 0.5, before[step_frame]
+    frames = np.flatnonzero(res.status == fz.MEASURED)
+    alts = [_view(one_sided_corners(ts, cs, t, side, tc), cams[1], cfg, Xb)
+            for side in ("before", "after")]  # fmt: skip
+    check = lagged_check(res, va, alts, interp_weight(ts, t), ref.M, frames, tc)
+    out, idx = adopt_lagged_alternatives(res, check)
+    assert check.side[step_frame] == 0 and step_frame in idx
+    assert set(idx) <= set(range(step_frame - 2, step_frame + 3)), idx
+    after = np.abs(fz.relative_angles(out.Q, ref.M)[:, :2] - true).max(axis=1)
+    assert after[step_frame] < 0.1, after[step_frame]
+    assert np.nan_to_num(check.spread_deg[step_frame]) == 0.0

@@ -40,8 +40,9 @@ from i2ris_calib.tracking.pose import (
 from i2ris_calib.tracking.timing import (
     LAGGED_SPREAD_DEG,
     REFIT_MIN_PX,
+    adopt_lagged_alternatives,
     interp_weight,
-    lagged_spread_deg,
+    lagged_check,
     nearest_frame_gray,
     nearest_time,
     one_sided_corners,
@@ -374,6 +375,7 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     fused = np.isin(res_fused_status, (fz.MEASURED, fz.REJECTED)) & ta["valid"].to_numpy()
     refit_frames = np.zeros(0, dtype=int)
     lagged_flagged = np.zeros(0, dtype=int)
+    adopted = np.zeros(0, dtype=int)
     spread = np.full(len(t), np.nan)
     lagged = np.nanmax(np.abs(nearest_time(tb_t[keep_b], t) - t), initial=0.0)
     if lagged > cfg.same_frame_tol_s and res.t_a is not None and res.t_b is not None:
@@ -392,7 +394,9 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             c_alt = np.full_like(cb, np.nan)
             c_alt[check] = one_sided_corners(tb_t[keep_b], cb_src[keep_b], t[check], side, cfg)
             alts.append(_view(c_alt, intr[b_name], cams[b_name].view, spec))
-        spread = lagged_spread_deg(res, va, alts, interp_weight(tb_t[keep_b], t), M, check, cfg)
+        lag = lagged_check(res, va, alts, interp_weight(tb_t[keep_b], t), M, check, cfg)
+        res, adopted = adopt_lagged_alternatives(res, lag)
+        spread = lag.spread_deg
         lagged_flagged = np.flatnonzero(np.nan_to_num(spread) > LAGGED_SPREAD_DEG)
         status[lagged_flagged] = fz.AMBIGUOUS
     ang = fz.relative_angles(res.Q, M)
@@ -415,6 +419,7 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     summary = _summary(df, res, streams, names, M, ref, cfg)
     summary["reference"].update(reference_record(refit))
     summary["lagged_camera_refit_frames"] = [int(k) for k in ta["frame"].to_numpy()[refit_frames]]
+    summary["lagged_camera_one_side_frames"] = [int(k) for k in ta["frame"].to_numpy()[adopted]]
     summary["lagged_camera_flagged_frames"] = [
         int(k) for k in ta["frame"].to_numpy()[lagged_flagged]
     ]

@@ -10,7 +10,7 @@ the interpolation cannot place").
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -208,11 +208,37 @@ LAGGED_SPREAD_DEG = 0.2
 LAGGED_COST_FACTOR = 3.0
 
 
-def lagged_spread_deg(
+@dataclass(frozen=True)
+class LaggedCheck:
+    """What :func:`lagged_check` found per frame (n frames).
+
+    Attributes
+    ----------
+    spread_deg : ndarray, shape (n,)
+        Timing uncertainty of the fused angles, deg (NaN outside the checked frames and
+        where a side has no two frames; 0 where one alternative is the only possible pose).
+    side : ndarray of int, shape (n,)
+        The alternative (0: extrapolated from before, 1: from after) that the first
+        camera leaves as the only possible pose, -1 elsewhere.
+    Q, t_a, t_b, cov_rot : ndarray
+        That alternative's fit (shapes as :class:`~i2ris_calib.tracking.fuse.FusionResult`),
+        NaN where ``side`` is -1.
+    """
+
+    spread_deg: np.ndarray
+    side: np.ndarray
+    Q: np.ndarray
+    t_a: np.ndarray
+    t_b: np.ndarray
+    cov_rot: np.ndarray
+
+
+def lagged_check(
     res: fz.FusionResult, va: fz.ViewData, alternatives: list[fz.ViewData], w: np.ndarray,
     M: np.ndarray, frames: np.ndarray, cfg: TrackingConfig,
-) -> np.ndarray:  # fmt: skip
-    """Per-frame uncertainty (deg) of the second camera's interpolation in time.
+) -> LaggedCheck:  # fmt: skip
+    """Per-frame uncertainty of the second camera's interpolation in time, and the
+    frames where the first camera allows one side only.
 
     The second camera's corners at the first camera's frame time are interpolated
     between its frames before and after, at weight ``w`` (0: the frame before). The
@@ -224,30 +250,37 @@ def lagged_spread_deg(
     does not count). A change of size ``S`` inside the interval (a step: the true angle
     there is either the value before or the value after) gives ``d0 = w S`` and
     ``d1 = (1 - w) S``; its size is estimated as ``S = min(d0 / w, d1 / (1 - w))`` and the
-    interpolation is then off by up to ``max(w, 1 - w) S``, which is returned. An
-    alternative the first camera contradicts (cost above :data:`LAGGED_COST_FACTOR`
-    times that alternative's median over ``frames``) is not a possible pose: the size
-    is then estimated from the other side alone (0 when neither is possible).
+    interpolation is then off by up to ``max(w, 1 - w) S``: the spread. An alternative
+    the first camera contradicts (cost above :data:`LAGGED_COST_FACTOR` times that
+    alternative's median over ``frames``) is not a possible pose. When the spread exceeds
+    :data:`LAGGED_SPREAD_DEG` (a step, not smooth motion) and one side is possible while
+    the other was tested and is not, the step happened beyond the possible side's
+    frames, so that side's fit is the frame's pose (``side``, spread 0); when neither is
+    possible the interpolation stays (spread 0).
 
     Returns
     -------
-    ndarray, shape (n,)
-        deg; NaN outside ``frames`` and where a side has no two frames.
+    LaggedCheck
     """
     n = len(res.status)
     out = np.full(n, np.nan)
+    side = np.full(n, -1)
+    Q, ta, tb, cov = (np.full((n, *s), np.nan) for s in ((3, 3), (3,), (3,), (3, 3)))
     meas = res.status == fz.MEASURED
     if not meas.any() or frames.size == 0:
-        return out
+        return LaggedCheck(out, side, Q, ta, tb, cov)
     var = float(np.nanmedian(res.rms_px[meas])) ** 2  # corner noise variance (px^2)
     base = fz.relative_angles(res.Q[frames], M)[:, :2]
     d = np.full((2, n), np.nan)
+    fits = []
     for s, vb in enumerate(alternatives):
         k = np.flatnonzero(vb.ok[frames] & va.ok[frames])
         if k.size == 0:
+            fits.append(None)
             continue
         idx = frames[k]
-        _, _, q, _, _, cost = _refit_frames(res, va, vb, idx, cfg)
+        A, B, q, a, b, cost = _refit_frames(res, va, vb, idx, cfg)
+        fits.append((idx, A, B, q, a, b))
         # possible: fits as well as this alternative usually fits on the session (its
         # extrapolated corners are noisier than the interpolated ones)
         possible = cost <= LAGGED_COST_FACTOR * max(float(np.nanmedian(cost)), 16.0 * var)
@@ -259,7 +292,43 @@ def lagged_spread_deg(
     size = np.where(np.isinf(size), 0.0, size)  # neither side possible: interpolation only
     ok = np.isfinite(size)
     out[ok] = (np.maximum(wc, 1 - wc) * size)[ok]
-    return out
+    for s, fit in enumerate(fits):
+        if fit is None:
+            continue
+        idx, A, B, q, a, b = fit
+        # only where the interpolation would be flagged: on smooth curved motion the
+        # longer extrapolation is the one the first camera rejects, and the interpolation
+        # is then better than either side
+        only = np.isfinite(d[s, idx]) & np.isinf(d[1 - s, idx]) & (out[idx] > LAGGED_SPREAD_DEG)
+        if only.any():
+            j = idx[only]
+            side[j], out[j] = s, 0.0
+            Q[j], ta[j], tb[j] = q[only], a[only], b[only]
+            cv = fz.rotation_covariance(q, a, b, res.R_ba, A, B)
+            cov[j] = cv[only]
+    return LaggedCheck(out, side, Q, ta, tb, cov)
+
+
+def lagged_spread_deg(
+    res: fz.FusionResult, va: fz.ViewData, alternatives: list[fz.ViewData], w: np.ndarray,
+    M: np.ndarray, frames: np.ndarray, cfg: TrackingConfig,
+) -> np.ndarray:  # fmt: skip
+    """Timing uncertainty (deg, shape (n,)) of :func:`lagged_check`."""
+    return lagged_check(res, va, alternatives, w, M, frames, cfg).spread_deg
+
+
+def adopt_lagged_alternatives(
+    res: fz.FusionResult, check: LaggedCheck
+) -> tuple[fz.FusionResult, np.ndarray]:
+    """``res`` with the frames where :func:`lagged_check` left one possible side taking
+    that side's pose, and those frames."""
+    idx = np.flatnonzero(check.side >= 0)
+    if idx.size == 0:
+        return res, idx
+    Q, t_a, t_b, cov = res.Q.copy(), res.t_a.copy(), res.t_b.copy(), res.cov_rot.copy()
+    Q[idx], t_a[idx], t_b[idx] = check.Q[idx], check.t_a[idx], check.t_b[idx]
+    cov[idx] = check.cov_rot[idx]
+    return replace(res, Q=Q, t_a=t_a, t_b=t_b, cov_rot=cov), idx
 
 
 def nearest_time(t_src: np.ndarray, t_dst: np.ndarray) -> np.ndarray:

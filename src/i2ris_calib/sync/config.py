@@ -49,7 +49,7 @@ class SyncConfig:
     # auto: an event clock coarser than this (offset sd, s) is combined with the model profile
     # searched within the event's +-4 sd (product of likelihoods; the event alone when they
     # disagree; 0 = never)
-    auto_refine_stderr_s: float = 0.0005
+    auto_refine_stderr_s: float = 0.0002
 
     # --- offset search (model and xcorr)
     offset_guess_s: float = 0.0  # prior offset (ctrl - cam); used when offset_search_s > 0

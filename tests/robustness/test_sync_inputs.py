@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from robust_cli import assert_one_line_error, run_cli
 
+from i2ris_calib.sync.joint import DRIFT_TOL_PPM, DRIFT_TOL_SD
 from i2ris_calib.sync.synthetic import make_sync_case
 
 FLASHES = ((0.5, 0.4), (12.0, 0.3), (23.0, 0.5))
@@ -69,13 +70,16 @@ def test_epoch_clocks_give_the_same_clock(case, tmp_path, capsys, method):
         assert rc == 0, err
         runs[name] = (sync_json(s), pd.read_csv(s / "sync" / "synced.csv"))
     (a, syn_a), (b, syn_b) = runs["local"], runs["epoch"]
-    assert a["method"] == b["method"] == ("xcorr" if method == "xcorr" else "event")
+    expected = {"xcorr": ("xcorr",), "event": ("event",), "auto": ("event", "event+model")}
+    assert a["method"] == b["method"] and a["method"] in expected[method]
     assert b["t_ref_cam_s"] - EPOCH_S == pytest.approx(a["t_ref_cam_s"], abs=1e-6)
     # the inputs are written with 6 decimals (1 us at either epoch): the clocks agree to
-    # that; xcorr (comparison only) takes a discrete peak and moves by a few us
-    tol = 1e-5 if method == "xcorr" else 1e-6
+    # that; xcorr (comparison only) takes a discrete peak and moves by a few us; the
+    # model profile in event+model ends anywhere inside its golden-section tolerance
+    # (profile_tol_s, 50 us), which 1 us of rounding can move
+    tol = {"xcorr": 1e-5, "event+model": 5e-5}.get(a["method"], 1e-6)
     assert abs(b["offset_at_t_ref_s"] - a["offset_at_t_ref_s"]) < tol
-    assert abs(b["drift_ppm"] - a["drift_ppm"]) < 0.01
+    assert abs(b["drift_ppm"] - a["drift_ppm"]) < (0.5 if a["method"] == "event+model" else 0.01)
     # offset_s is at camera time 0 (54 years earlier): it moves by -drift * shift
     assert b["offset_s"] + b["drift_ppm"] * 1e-6 * EPOCH_S == pytest.approx(a["offset_s"], abs=1e-5)
     assert b["offset_at_t_ref_stderr_s"] == pytest.approx(a["offset_at_t_ref_stderr_s"], rel=0.05)
@@ -92,8 +96,9 @@ def test_epoch_clocks_give_the_same_clock(case, tmp_path, capsys, method):
 @pytest.mark.slow  # two model syncs, ~1-3 min each
 def test_epoch_clocks_model_method(tmp_path, capsys):
     """The hysteresis-model clock (no flash) on +1.7e9 s clocks: the same clock to a
-    hundredth of its stated sd (measured: 5.9 us of 1.4 ms, 0.24 of 73 ppm; the
-    profile's golden-section tolerance is 0.2 ms, so not to 1 us)."""
+    hundredth of its stated offset sd (measured: 5.9 us of 1.4 ms; the profile's
+    golden-section tolerance, 0.05 ms, so not to 1 us) and the drift to the stopping
+    resolution of the drift rounds (measured 6.0 ppm of a stated 83 ppm)."""
     case = make_sync_case(seed=3, duration_s=25.0, n_cycles=2, log_rate_hz=1000.0)
     runs = []
     for name, shift in (("local", 0.0), ("epoch", EPOCH_S)):
@@ -105,7 +110,10 @@ def test_epoch_clocks_model_method(tmp_path, capsys):
     assert (
         abs(b["offset_at_t_ref_s"] - a["offset_at_t_ref_s"]) < 0.01 * a["offset_at_t_ref_stderr_s"]
     )
-    assert abs(b["drift_ppm"] - a["drift_ppm"]) < 0.01 * a["drift_stderr_ppm"]
+    # the drift/offset alternation stops once the drift moves by less than DRIFT_TOL_SD of
+    # its sd (or DRIFT_TOL_PPM): the two runs agree to that stopping resolution
+    tol_d = max(DRIFT_TOL_PPM, DRIFT_TOL_SD * a["drift_stderr_ppm"])
+    assert abs(b["drift_ppm"] - a["drift_ppm"]) < tol_d
 
 
 def test_camera_and_log_on_different_epochs(case, tmp_path, capsys):

@@ -139,9 +139,7 @@ def refit_lagged_frames(
     cov = res.cov_rot[cand].copy()
     for side, vb in zip(("before", "after"), alternatives, strict=False):
         start = neighbour_start(res, side)
-        finite = np.isfinite(start.Q).all(axis=(1, 2)) & np.isfinite(start.t_a).all(axis=1)
-        finite &= np.isfinite(start.t_b).all(axis=1)
-        k = np.flatnonzero(vb.ok[cand] & finite[cand])
+        k = np.flatnonzero(vb.ok[cand] & has_pose(start)[cand])
         if k.size == 0:
             continue
         idx = cand[k]
@@ -165,13 +163,18 @@ def refit_lagged_frames(
                    status=status), idx  # fmt: skip
 
 
+def has_pose(res: fz.FusionResult) -> np.ndarray:
+    """Frames (bool, shape (n,)) with a finite pose: ``Q``, ``t_a`` and ``t_b``."""
+    has = np.isfinite(res.Q).all(axis=(1, 2)) & np.isfinite(res.t_a).all(axis=1)
+    return has & np.isfinite(res.t_b).all(axis=1)
+
+
 def neighbour_start(res: fz.FusionResult, side: str) -> fz.FusionResult:
     """``res`` with the pose (``Q``, ``t_a``, ``t_b``) of every frame that has none (a
     fused frame rejected for its reprojection error) taken from the nearest frame that
     has one on ``side`` ("before" or "after"): the start of a refit whose second-camera
     corners are extrapolated from that side."""
-    has = np.isfinite(res.Q).all(axis=(1, 2)) & np.isfinite(res.t_a).all(axis=1)
-    has &= np.isfinite(res.t_b).all(axis=1)
+    has = has_pose(res)
     if has.all() or not has.any():
         return res
     n = len(has)

@@ -1,6 +1,6 @@
 import pytest
 
-from i2ris_calib.io.atomic import atomic_dir, atomic_path, write_json
+from i2ris_calib.io.atomic import atomic_path, write_json
 
 
 def test_atomic_path_leaves_nothing_on_failure(tmp_path):
@@ -19,15 +19,6 @@ def test_atomic_path_renames_on_success(tmp_path):
         assert tmp.suffix == ".csv"
         tmp.write_text("ok")
     assert target.read_text() == "ok"
-
-
-def test_atomic_dir_replaces_whole(tmp_path):
-    d = tmp_path / "d"
-    d.mkdir()
-    (d / "old.txt").write_text("x")
-    with atomic_dir(d) as tmp:
-        (tmp / "new.txt").write_text("y")
-    assert sorted(p.name for p in d.iterdir()) == ["new.txt"]
 
 
 def test_write_json_nan_is_null(tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import importlib.util
+import json
 import re
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import pytest
 from i2ris_calib.cli import main
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.errors import CalibError
+from i2ris_calib.io.outputs import MARKER
 from i2ris_calib.io.report import load_run, png_paths, write_report
 from i2ris_calib.report.config import ReportConfig
 
@@ -36,7 +38,12 @@ def test_write_report_outputs_and_markdown_links(run_dir):
     page = write_report(run_dir, None, CFG)
     out = run_dir / "report"
     assert page == out / "report.html"
-    assert sorted(p.name for p in out.iterdir()) == ["figures", "report.html", "report.md"]
+    assert sorted(p.name for p in out.iterdir() if p.name != MARKER) == [
+        "figures",
+        "report.html",
+        "report.md",
+    ]
+    assert json.loads((out / MARKER).read_text())["command"] == "report"
     md = (out / "report.md").read_text()
     links = re.findall(r"\]\((figures/[^)]+\.png)\)", md)
     files = sorted(p.relative_to(out).as_posix() for p in (out / "figures").iterdir())
@@ -172,7 +179,7 @@ def test_missing_run_dir_and_unsafe_out(tmp_path, run_dir, capsys):
     other = tmp_path / "precious"
     other.mkdir()
     (other / "notes.txt").write_text("keep me")
-    assert "not a report" in _one_line_error(["report", str(run_dir), "--out", str(other)], capsys)
+    assert "did not write" in _one_line_error(["report", str(run_dir), "--out", str(other)], capsys)
     assert (other / "notes.txt").read_text() == "keep me"
 
 
@@ -180,12 +187,14 @@ def test_rerun_replaces_the_previous_report(tmp_path, stub_figures):
     run_dir = tmp_path / "s"
     runfolder.make_run_folder(run_dir, fit_axes=())
     write_report(run_dir, None, CFG)
-    stale = run_dir / "report" / "figures" / "stale.png"
-    stale.write_bytes(b"old")
+    assert (run_dir / "report" / "figures" / "synced_loops.png").exists()
+    mine = run_dir / "report" / "figures" / "my_sketch.png"  # a user's file: never removed
+    mine.write_bytes(b"mine")
     (run_dir / "report" / ".stamp.json").write_text("{}")  # as left by 'run'
     (run_dir / "sync" / "synced.csv").unlink()
     write_report(run_dir, None, CFG)
-    assert not stale.exists() and not (run_dir / "report" / "figures" / "synced_loops.png").exists()
+    assert mine.read_bytes() == b"mine"
+    assert not (run_dir / "report" / "figures" / "synced_loops.png").exists()  # ours, stale
     assert "sync/synced.csv: not found" in (run_dir / "report" / "report.md").read_text()
 
 

@@ -1,7 +1,7 @@
 """Write outputs under a temporary name and rename when complete.
 
 A crash or Ctrl-C never leaves a half-written file under the final name, so a
-re-run never reuses a truncated output.
+re-run never reuses a truncated output. Output folders: io/outputs.py.
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ import contextlib
 import json
 import math
 import os
-import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -60,36 +59,6 @@ def _write_error(path: Path, exc: OSError) -> CalibError:
     )
 
 
-def check_output_dir(path: str | Path, files: tuple[str, ...] = ()) -> Path:
-    """Make sure folder ``path`` can take the output ``files`` before any work is done.
-
-    Creates the folder (and parents) when missing and writes and removes a probe file
-    in it. Raises a one-line CalibError when ``path`` or a parent is a file, when it
-    cannot be created or written (permissions, read-only, /proc), or when one of
-    ``files`` exists there as a folder.
-    """
-    out = Path(path)
-    for parent in (out, *out.parents):
-        if parent.exists() and not parent.is_dir():
-            raise CalibError(
-                f"--out {out}: {parent} is a file, not a folder; give a folder path for the outputs"
-            )
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        fd, probe = tempfile.mkstemp(prefix=".write-probe-", dir=out)
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise CalibError(
-            f"--out {out}: cannot write there ({exc.strerror or type(exc).__name__}); "
-            "choose a folder you can write to"
-        ) from None
-    for name in files:
-        if (out / name).is_dir():
-            raise CalibError(f"--out {out}: {out / name} is a folder; remove or rename it")
-    return out
-
-
 def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
@@ -117,30 +86,6 @@ def write_csv(path: str | Path, frame: Any, float_format: str = "%.10g") -> None
     """Atomically write a pandas DataFrame as CSV without the index."""
     with atomic_path(path) as tmp:
         frame.to_csv(tmp, index=False, float_format=float_format)
-
-
-@contextlib.contextmanager
-def atomic_dir(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary directory; on success it replaces ``path`` as a whole."""
-    final = Path(path)
-    try:
-        final.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
-    except OSError as exc:
-        raise _write_error(final, exc) from None
-    os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp creates 0700
-    try:
-        yield tmp
-        if final.exists():
-            old = final.with_name(f".{final.name}.old-{os.getpid()}")
-            os.replace(final, old)
-            os.replace(tmp, final)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
 
 
 def _json_safe(obj: Any) -> Any:

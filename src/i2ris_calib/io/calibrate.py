@@ -13,8 +13,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from i2ris_calib import __version__
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import atomic_path
+from i2ris_calib.io.outputs import claim_output_file
 from i2ris_calib.io.video import iter_frames
 from i2ris_calib.tracking.calibrate import CharucoSpec, calibrate_from_views
 
@@ -94,6 +96,7 @@ def write_camera_yaml(
         fs.write("image_height", int(height))
         fs.write("camera_matrix", np.asarray(K, dtype=float))
         fs.write("distortion_coefficients", np.asarray(dist, dtype=float).reshape(1, -1))
+        fs.write("written_by", f"i2ris-calib {__version__}")  # io/outputs.py: ours to replace
         for k, v in (extra or {}).items():
             fs.write(k, v)
         fs.release()
@@ -113,6 +116,7 @@ def calibrate_camera_files(inputs: list[Path], out: Path, config) -> Path:
     for p in inputs:
         if not p.exists():
             raise CalibError(f"calibration input not found: {p}")
+    claim_output_file(out, inputs)
     if len(inputs) == 1 and inputs[0].suffix.lower() in YAML_SUFFIXES:
         K, dist, w, h = read_camera_yaml(inputs[0])
         write_camera_yaml(Path(out), K, dist, w, h, {"source": str(inputs[0])})

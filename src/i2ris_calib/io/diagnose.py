@@ -25,12 +25,15 @@ from i2ris_calib.diagnosis.serialize import model_to_dict
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
-from i2ris_calib.io.atomic import atomic_dir, atomic_path, write_json, write_text
+from i2ris_calib.io.atomic import atomic_path, write_json, write_text
+from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
 
 STARTS = ("auto", "gpi", "egpi")
 SCHEMA = "i2ris-calib.diagnosis/1"
+#: The files ``diagnose`` writes in its output folder (``skipped.json`` inside ``run``).
+OUTPUTS = ("diagnosis.json", "diagnosis.md", "final_model.json", "residual_*.png", "skipped.json")
 
 
 DIRECTIONS = ("auto", "+", "-", "±")
@@ -132,6 +135,8 @@ def diagnose_file(
     if start not in STARTS:
         raise CalibError(f"--start must be auto, gpi or egpi, got '{start}'")
     cfg = config or PipelineConfig()
+    claim_output_dir(Path(out) if out is not None else Path("diagnose_out"), "diagnose",
+                     [Path(data)], OUTPUTS)  # fmt: skip
     dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit)
     check_dataset(dset, cfg.diagnose)
     return diagnose_dataset(dset, axis, start, out, cfg, sources=[Path(data)])
@@ -151,7 +156,9 @@ def diagnose_dataset(
     Used by ``diagnose`` (one file) and by ``run`` (``[run] diagnose = true``, every
     axis and direction of the session).
     """
-    out = Path(out) if out is not None else Path("diagnose_out")
+    out = claim_output_dir(
+        Path(out) if out is not None else Path("diagnose_out"), "diagnose", sources, OUTPUTS
+    )
     starts = ("gpi", "egpi") if start == "auto" else (start,)
     with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {dset.name}", total=None)
@@ -188,7 +195,7 @@ def diagnose_dataset(
         },
         provenance=provenance(sources, cfg),
     )
-    with atomic_dir(out) as tmp:
+    with output_dir(out, "diagnose", sources, OUTPUTS) as tmp:
         for i, (m, name) in enumerate(zip(models, figures, strict=True)):
             title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
             _save(_figure(m, dset, dset.holdout, title), tmp / name)

@@ -21,7 +21,11 @@ from i2ris_calib.hysteresis.paper import (
     run_paper_sim,
 )
 from i2ris_calib.io.atomic import atomic_path, write_csv, write_json
+from i2ris_calib.io.outputs import output_dir
 from i2ris_calib.io.provenance import provenance
+
+#: The files ``paper-sim`` writes in its output folder.
+OUTPUTS = ("paper_sim.csv", "paper_sim.json", "fig3c.png", "fig3d.png", "fig4.png")
 
 
 def _figure(path: Path, v, y, title: str, ylabel: str, flags=None, zones=()) -> None:
@@ -57,7 +61,11 @@ def _figure(path: Path, v, y, title: str, ylabel: str, flags=None, zones=()) -> 
 
 def write_paper_sim(out: str | Path) -> dict:
     """Command body of ``paper-sim``: simulate, write CSV, figures and JSON into ``out``."""
-    out = Path(out)
+    with output_dir(out, "paper-sim", (), OUTPUTS) as tmp:
+        return _write_paper_sim(tmp)
+
+
+def _write_paper_sim(out: Path) -> dict:
     sim = run_paper_sim()
     write_csv(
         out / "paper_sim.csv",

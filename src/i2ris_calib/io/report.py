@@ -21,14 +21,16 @@ from rich.progress import Progress
 from i2ris_calib import __version__
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.atomic import atomic_dir
 from i2ris_calib.io.config_io import load_config
+from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.report.build import build_document, section_count
 from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
 from i2ris_calib.report.render import render_html, render_markdown
 
-REPORT_FILES = {"report.html", "report.md", "figures", ".stamp.json"}  # stamp: see io/run.py
+REPORT_FILES = ("report.html", "report.md", "figures")
+#: The parts of a run folder a report reads; its --out must not be or contain one.
+RUN_PARTS = ("track", "sync", "fit", "diagnose", "compensate")
 FIGURE_DIR = "figures"
 
 ANGLES_COLUMNS = {"time_s": True, "yaw_deg": True, "pitch_deg": True, "status": False}
@@ -381,21 +383,14 @@ def _template(name: str) -> str:
 
 
 def _check_out(out: Path, root: Path) -> None:
-    """Refuse an output folder that would replace anything but a previous report."""
+    """Refuse an output folder that is or contains the run folder, or holds anything
+    but a previous report (io/outputs.py)."""
     o, r = out.resolve(), root.resolve()
     if o == r or o in r.parents:
         raise CalibError(
             f"--out {out} contains the run folder {root}; choose e.g. {root / 'report'}"
         )
-    if o.exists():
-        if not o.is_dir():
-            raise CalibError(f"--out {out} is a file; give a folder")
-        extra = sorted(p.name for p in o.iterdir() if p.name not in REPORT_FILES)
-        if extra:
-            raise CalibError(
-                f"--out {out} holds files that are not a report ({', '.join(extra[:3])}); "
-                "the whole folder is replaced, so give an empty or report-only folder"
-            )
+    claim_output_dir(out, "report", [root / d for d in RUN_PARTS], REPORT_FILES)
 
 
 def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any = None) -> Path:
@@ -424,7 +419,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     doc = _build_with_progress(run, cfg.report, prov)
     page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
     markdown, files = render_markdown(doc, FIGURE_DIR)
-    with atomic_dir(out_dir) as tmp:
+    with output_dir(out_dir, "report", [root / d for d in RUN_PARTS], REPORT_FILES) as tmp:
         tmp.chmod(0o755)  # mkdtemp makes it private; a report is meant to be shared
         (tmp / "report.html").write_text(page, encoding="utf-8")
         (tmp / "report.md").write_text(markdown, encoding="utf-8")

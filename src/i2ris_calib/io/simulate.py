@@ -19,8 +19,9 @@ import pandas as pd
 from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json, write_text
+from i2ris_calib.io.atomic import write_csv, write_json, write_text
 from i2ris_calib.io.calibrate import write_camera_yaml
+from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.video import open_writer
 from i2ris_calib.io.workers import quiet_pool
@@ -43,6 +44,10 @@ class CameraPlan:
     occluded: np.ndarray  # (n_kept,) bool
     seed: int
 
+#: The names ``simulate`` writes (older, unmarked session folders are recognised by them).
+OUTPUTS = ("session.toml", "encoders.csv", "truth", "*_timestamps.csv", "*.mp4", "*.avi",
+           "*.mkv", "*.yaml")  # fmt: skip
+
 
 def write_simulated_session(
     out: Path, config, seed: int | None = None, force: bool = False
@@ -52,7 +57,8 @@ def write_simulated_session(
     Parameters
     ----------
     out : Path
-        Session folder to create; must not exist unless ``force``.
+        Session folder to create; must be new or empty, unless ``force`` and it was
+        written by ``simulate`` (a folder the tool did not write is never replaced).
     config : PipelineConfig
         Uses its ``simulate`` section.
     seed : int, optional
@@ -62,11 +68,12 @@ def write_simulated_session(
     if seed is not None:
         cfg = replace(cfg, seed=int(seed))
     out = Path(out)
-    if out.exists() and not force:
+    if out.exists() and not force and not (out.is_dir() and not any(out.iterdir())):
         raise CalibError(
             f"{out} already exists (choose another --out or pass --force to replace it)"
         )
-    with atomic_dir(out) as tmp:
+    claim_output_dir(out, "simulate", (), OUTPUTS)
+    with output_dir(out, "simulate", (), OUTPUTS) as tmp:
         build_session(tmp, cfg, name=out.name, progress=True)
     return out
 

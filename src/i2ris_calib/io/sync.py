@@ -16,6 +16,7 @@ from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json
 from i2ris_calib.io.encoders import encoder_log_path, read_encoder_log
+from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import SESSION_FILE, load_session
 from i2ris_calib.sync.axes import axis_check
@@ -29,6 +30,10 @@ from i2ris_calib.sync.estimate import (
 
 SCHEMA = "i2ris-calib.sync/1"
 CLOCK = "t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam"
+
+
+#: The files ``sync`` writes in its output folder.
+OUTPUTS = ("synced.csv", "sync.json")
 
 
 def read_angles(path: Path) -> pd.DataFrame:
@@ -140,6 +145,8 @@ def sync_session(
     angles_path = Path(angles) if angles is not None else root / "track" / "angles.csv"
     out_dir = Path(out) if out is not None else root / "sync"
     log_path = encoder_log_path(root, spec.encoder)
+    inputs = input_files(root, log_path, angles_path)
+    claim_output_dir(out_dir, "sync", [root, *inputs], OUTPUTS)
     log = read_encoder_log(root, spec.encoder, cfg.sync.max_gap_s)
     log = replace(log, interpolation=cfg.sync.encoder_interpolation)
     df = read_angles(angles_path)
@@ -167,9 +174,10 @@ def sync_session(
     for line in summary["warnings"]:
         typer.echo(f"warning: {line}", err=True)
     summary["xcorr_comparison"] = comparison
-    summary["provenance"] = provenance(input_files(root, log_path, angles_path), cfg)
-    write_csv(out_dir / "synced.csv", table, float_format="%.6f")
-    write_json(out_dir / "sync.json", summary)
+    summary["provenance"] = provenance(inputs, cfg)
+    with output_dir(out_dir, "sync", [root, *inputs], OUTPUTS) as tmp:
+        write_csv(tmp / "synced.csv", table, float_format="%.6f")
+        write_json(tmp / "sync.json", summary)
     return out_dir
 
 

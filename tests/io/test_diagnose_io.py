@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -325,8 +327,9 @@ def test_run_diagnose_stage_writes_what_the_report_reads(tmp_path):
     assert [d.axis for d in data.diagnoses] == ["yaw+"]
     assert "time_delay" in data.diagnoses[0].markdown
     # the stages exist only when asked for, after the fits and before the report
-    session = tmp_path / "session"
-    session.mkdir()
+    session = tmp_path / "session"  # the stages read the files session.toml names
+    sample = Path(__file__).resolve().parents[2] / "sample_data" / "session"
+    shutil.copytree(sample, session, ignore=shutil.ignore_patterns("truth"))
     names = [s.name for s in session_stages(session, run, PipelineConfig())]
     assert not any(n.startswith("diagnose") for n in names)
     on = PipelineConfig(run=type(PipelineConfig().run)(diagnose=True))

@@ -53,3 +53,67 @@ def test_bad_session_files_give_one_line_errors(tmp_path, text, match):
 def test_missing_folder(tmp_path):
     with pytest.raises(CalibError, match="session folder not found"):
         load_session(tmp_path / "nope")
+
+
+# --- two cameras on one video, timestamp file or marker id (issue 19) ----------------------
+def _two_cameras(folder, text):
+    """A session folder with empty named files (nothing is decoded before the check)."""
+    folder.mkdir(exist_ok=True)
+    (folder / "session.toml").write_text(text)
+    for name in ("top.mkv", "side.mkv", "top_timestamps.csv", "side_timestamps.csv"):
+        (folder / name).write_text("")
+    return folder
+
+
+def _assert_names_both(exc, key):
+    msg = str(exc.value)
+    assert "\n" not in msg and "session.toml" in msg, msg
+    assert "[cameras.top]" in msg and "[cameras.side]" in msg and key in msg, msg
+
+
+@pytest.mark.parametrize(
+    "text,key",
+    [
+        (GOOD.replace('video = "side.mkv"', 'video = "top.mkv"'), "same video"),
+        (GOOD.replace('video = "side.mkv"', 'video = "./top.mkv"'), "same video"),
+        (GOOD.replace('video = "side.mkv"', 'video = "sub/../top.mkv"'), "same video"),
+        (GOOD.replace('"side_timestamps.csv"', '"top_timestamps.csv"'), "same timestamps"),
+        (GOOD.replace("marker_id = 1", "marker_id = 0"), "same marker_id = 0"),
+        (GOOD.replace("marker_id = 1\n", ""), "same marker_id = 0"),  # a missing id is 0
+    ],
+)
+def test_two_cameras_sharing_a_video_timestamps_or_marker_id_are_refused(tmp_path, text, key):
+    from i2ris_calib.io.session import check_cameras
+
+    s = _two_cameras(tmp_path, text)
+    (s / "sub").mkdir()
+    with pytest.raises(CalibError) as exc:
+        check_cameras(s, load_session(s))
+    _assert_names_both(exc, key)
+
+
+def test_a_symlink_to_the_other_cameras_video_is_the_same_video(tmp_path):
+    from i2ris_calib.io.session import check_cameras
+
+    s = _two_cameras(tmp_path, GOOD)
+    check_cameras(s, load_session(s))  # distinct files, distinct ids: fine
+    (s / "side.mkv").unlink()
+    (s / "side.mkv").symlink_to(s / "top.mkv")
+    with pytest.raises(CalibError) as exc:
+        check_cameras(s, load_session(s))
+    _assert_names_both(exc, "same video")
+    assert "'top.mkv' and 'side.mkv', one file" in str(exc.value)
+
+
+@pytest.mark.parametrize("command", ["track", "run"])
+def test_track_and_run_refuse_one_video_for_both_cameras_before_any_work(tmp_path, capsys, command):
+    """The CLI refuses with one line naming both tables; no output folder appears."""
+    from i2ris_calib.cli import main
+
+    s = _two_cameras(tmp_path / "s", GOOD.replace('video = "side.mkv"', 'video = "top.mkv"'))
+    argv = [command, str(s)] + (["--out", str(tmp_path / "runs")] if command == "run" else [])
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("error: ") and "[cameras.top] and [cameras.side]" in err, err
+    assert "same video" in err and "give each camera its own video" in err, err
+    assert not (s / "track").exists() and not (tmp_path / "runs").exists()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -133,3 +134,84 @@ def test_unknown_dictionary_name(session, tmp_path):
     text = (s / "session.toml").read_text().replace("DICT_4X4_50", "DICT_4X4_5O")
     (s / "session.toml").write_text(text)
     assert main(["track", str(s)]) == 2
+
+
+# --- issue 19: the other camera's video; backward times are not dropped frames ------------
+def _blind_stream(other_ids: dict, n: int = 6):
+    """A stream in which the camera's own marker was never found."""
+    from i2ris_calib.io.track import StreamResult
+
+    return StreamResult(np.full((n, 4, 2), np.nan), np.zeros(n), np.zeros(n, bool), other_ids,
+                        (256, 320), 0, 0, 0.0, 0.0)  # fmt: skip
+
+
+def _two_camera_spec():
+    from i2ris_calib.session import CameraSpec, SessionSpec
+
+    return SessionSpec(cameras={
+        "top": CameraSpec(video="top.mkv", timestamps="top_timestamps.csv", marker_id=0),
+        "side": CameraSpec(video="copy.mkv", timestamps="side_timestamps.csv", marker_id=1,
+                           view="side"),
+    })  # fmt: skip
+
+
+def test_side_camera_reading_the_top_video_is_not_told_to_change_marker_id():
+    """Seeing only the top camera's id means the side camera reads the top camera's film:
+    setting its marker_id to that id would track one face twice (issue 19)."""
+    from i2ris_calib.io.track import check_stream
+
+    spec = _two_camera_spec()
+    ts = pd.DataFrame({"frame": range(6), "time_s": np.arange(6) / 30})
+    with pytest.raises(CalibError) as exc:
+        check_stream("side", Path("copy.mkv"), ts, _blind_stream({0: 6, 5: 1}),
+                     spec.cameras["side"], spec)  # fmt: skip
+    msg = str(exc.value)
+    assert "\n" not in msg and "set marker_id" not in msg, msg
+    assert "id 0 of camera 'top'" in msg and "[cameras.side] video 'copy.mkv'" in msg, msg
+    assert "films the top camera's face" in msg and "videos are swapped" in msg, msg
+    # an id of no camera (a wrong marker_id) still gets the marker_id advice
+    with pytest.raises(CalibError, match="set marker_id of camera 'side'"):
+        check_stream("side", Path("copy.mkv"), ts, _blind_stream({7: 6, 0: 1}),
+                     spec.cameras["side"], spec)  # fmt: skip
+
+
+def _timestamps(tmp_path, t):
+    p = tmp_path / "t.csv"
+    pd.DataFrame({"frame": range(len(t)), "time_s": t}).to_csv(p, index=False, float_format="%.6f")
+    return read_timestamps(p)
+
+
+@pytest.mark.parametrize(
+    "case,dropped,backward,first",
+    [
+        ("duplicates", 0, 3, 40),  # times equal to two frames earlier (test above)
+        ("swapped pair", 0, 1, 51),  # two frames' times exchanged
+        ("late spike", 0, 2, 31),  # one time too late: the next two look backwards
+        ("drop and duplicate", 5, 1, 40),  # 5 frames really dropped, one backward time
+    ],
+)
+def test_backward_times_are_not_reported_as_dropped_frames(tmp_path, case, dropped, backward,
+                                                           first):  # fmt: skip
+    from i2ris_calib.io.track import frame_gaps, track_warnings
+    from i2ris_calib.tracking.config import TrackingConfig
+
+    t = np.arange(200) / 30.0
+    if case == "duplicates":
+        for r in (40, 80, 120):
+            t[r] = t[r - 2]
+    elif case == "swapped pair":
+        t[[50, 51]] = t[[51, 50]]
+    elif case == "late spike":
+        t[30] = t[32] + 0.5 / 30
+    else:
+        t = np.delete(t, range(100, 105))
+        t[40] = t[38]
+    g = frame_gaps(_timestamps(tmp_path, t), TrackingConfig())
+    assert (g["missing_frames"], g["count"]) == (dropped, int(dropped > 0))
+    assert (g["backward_frames"], g["first_backward_frame"]) == (backward, first)
+    warnings = track_warnings({"cameras": {"top": {"gaps": g}}})
+    assert any(f"{backward} frame(s) have a timestamp that goes backwards" in w and
+               f"frame {first}" in w and "rejected" in w for w in warnings)  # fmt: skip
+    assert any("dropped" in w for w in warnings) == (dropped > 0)
+    if dropped:
+        assert any(f"dropped about {dropped} frame(s) in 1 gap(s)" in w for w in warnings)

@@ -31,18 +31,22 @@ from i2ris_calib.config import PipelineConfig
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.diagnosis.workflow import check_dataset
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.atomic import atomic_dir, write_bytes, write_json
+from i2ris_calib.io.atomic import write_bytes, write_json
 from i2ris_calib.io.compensate import compensate_files
 from i2ris_calib.io.config_io import dataclass_to_dict
+from i2ris_calib.io.diagnose import OUTPUTS as DIAGNOSE_OUTPUTS
 from i2ris_calib.io.diagnose import diagnose_dataset
 from i2ris_calib.io.encoders import encoder_log_path
 from i2ris_calib.io.fit import fit_files
+from i2ris_calib.io.outputs import check_not_input, output_dir
 from i2ris_calib.io.provenance import file_sha256
 from i2ris_calib.io.report import write_report
-from i2ris_calib.io.session import load_session, session_file
+from i2ris_calib.io.session import check_cameras, load_session, session_file
 from i2ris_calib.io.sync import sync_session
 from i2ris_calib.io.synced import load_datasets
 from i2ris_calib.io.track import track_session
+from i2ris_calib.io.video import input_files
+from i2ris_calib.session import SessionSpec
 
 STAMP = ".stamp.json"
 
@@ -87,7 +91,7 @@ def expand_inputs(paths: tuple[Path, ...]) -> list[Path]:
     return files
 
 
-@functools.lru_cache(maxsize=256)
+@functools.lru_cache(maxsize=1 << 16)  # every image of an image-sequence video
 def _sha256_keyed(path: str, size: int, mtime_ns: int) -> str:
     return file_sha256(path)
 
@@ -119,9 +123,63 @@ def run_stage(stage: Stage, force: bool) -> str:
     return "ran"
 
 
-def session_inputs(session: Path) -> tuple[Path, ...]:
-    """Every file of a session the track and sync stages read (truth/ excluded)."""
-    return tuple(sorted(p for p in session.iterdir() if p.is_file() and not p.name.startswith(".")))
+def session_inputs(session: Path, spec: SessionSpec | None = None) -> dict[str, tuple[Path, ...]]:
+    """The files of a session that the ``track`` and ``sync`` stages read, by stage.
+
+    Only files session.toml names: per camera its video (an image sequence: its
+    images), timestamps and, for ``model = "pinhole"``, calibration file (``track``);
+    the encoder log (a ROS2 bag folder: its files; ``sync``). Anything else in the
+    session folder (a target CSV, notes, ``truth/``) is no input. A named file that
+    does not exist is left out: the stage that reads it names it.
+
+    Parameters
+    ----------
+    session : Path
+        Session folder.
+    spec : SessionSpec, optional
+        Its session.toml, when already loaded.
+
+    Returns
+    -------
+    dict
+        ``{"track": paths, "sync": paths}``.
+    """
+    spec = spec if spec is not None else load_session(session)
+    track: list[Path] = []
+    for cam in spec.cameras.values():
+        track += _named_files(session, cam.video, video=True)
+        track += _named_files(session, cam.timestamps)
+        if cam.model == "pinhole":
+            track += _named_files(session, cam.calibration)
+    return {"track": tuple(track), "sync": tuple(_named_files(session, spec.encoder.file))}
+
+
+def _named_files(session: Path, relative: str, video: bool = False) -> list[Path]:
+    """The files behind one path of session.toml (none when empty or missing)."""
+    if not relative:
+        return []
+    p = session / relative
+    if p.is_dir() and video:
+        try:
+            return input_files(p)
+        except CalibError:  # not an image sequence: track names the problem
+            pass
+    return expand_inputs((p,))
+
+
+def session_settings(spec: SessionSpec) -> dict[str, dict[str, Any]]:
+    """The session.toml values each of ``track`` and ``sync`` reads (part of their stamps).
+
+    ``track``: ``[cameras.*]`` and ``[marker]``; ``sync``: ``[encoder]``. ``name`` only
+    names the run folder and ``notes`` is free text: neither is in.
+    """
+    return {
+        "track": {
+            "cameras": dataclass_to_dict(spec.cameras),
+            "marker": dataclass_to_dict(spec.marker),
+        },
+        "sync": {"encoder": dataclass_to_dict(spec.encoder)},
+    }
 
 
 def axis_moves(synced_csv: Path, axis: str, min_span_counts: float = 1.0) -> bool:
@@ -135,16 +193,22 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
     """The ordered stages for one session writing under ``run_dir``."""
     track_dir, sync_dir = run_dir / "track", run_dir / "sync"
     angles, synced = track_dir / "angles.csv", sync_dir / "synced.csv"
-    raw = session_inputs(session)
+    spec = load_session(session)
+    named, settings = session_inputs(session, spec), session_settings(spec)
     stages = [
         Stage(
-            "track", track_dir, raw, config.track, lambda: track_session(session, track_dir, config)
+            "track",
+            track_dir,
+            named["track"],
+            (config.track, settings["track"]),
+            lambda: track_session(session, track_dir, config),
         ),
         Stage(
             "sync",
             sync_dir,
-            (*raw, angles),
-            (config.sync, config.fit),  # the model-based clock estimate refits with [fit]
+            (*named["sync"], angles),
+            # the model-based clock estimate refits with [fit]
+            (config.sync, config.fit, settings["sync"]),
             lambda: sync_session(session, angles, sync_dir, config),
         ),
     ]
@@ -214,7 +278,7 @@ def diagnose_direction(
         (dset,) = load_datasets([synced], axis, config.fit, (direction,))[:1]
         check_dataset(dset, config.diagnose)
     except CalibError as exc:
-        with atomic_dir(out) as tmp:
+        with output_dir(out, "diagnose", [synced], DIAGNOSE_OUTPUTS) as tmp:
             write_json(
                 tmp / "skipped.json", {"axis": axis, "direction": direction, "reason": str(exc)}
             )
@@ -277,37 +341,132 @@ def run_one_session(
 
     A CalibError names the session folder, so a batch run says which one failed.
     """
+    existed = run_dir.exists()
     try:
-        claim_run_dir(session, run_dir)
+        note = claim_run_dir(session, run_dir)
+        if note:
+            Console(stderr=True).print(
+                f"note: {note}", markup=False, highlight=False, soft_wrap=True
+            )
         return [(st.name, run_stage(st, force)) for st in session_stages(session, run_dir, config)]
     except CalibError as exc:
         raise CalibError(f"session {session}: {exc}") from None
+    finally:
+        if not existed:
+            remove_if_unused(run_dir)
+
+
+def remove_if_unused(run_dir: Path) -> None:
+    """Remove a run folder made by this run that holds nothing but its owner record
+    (the session failed before any stage finished): no empty folder is left behind."""
+    try:
+        if [p.name for p in run_dir.iterdir()] == [OWNER]:
+            (run_dir / OWNER).unlink()
+            run_dir.rmdir()
+    except OSError:
+        pass
+
+
+def check_run_dir(session: Path, run_dir: Path) -> None:
+    """Before any work: ``run_dir`` may hold this session's run (io/outputs.py rules).
+
+    It must not be or contain the session folder nor any file the session names, and it
+    must be new, empty or a run folder (``.session.json``); whose session it is, is
+    checked by :func:`claim_run_dir`.
+    """
+    check_not_input(run_dir, [session], what="--out")
+    if run_dir.exists() and not run_dir.is_dir():
+        raise CalibError(f"--out: {run_dir} is a file; give a folder for the run outputs")
+    for parent in run_dir.parents:
+        if parent.exists() and not parent.is_dir():
+            raise CalibError(f"--out: {parent} is a file, not a folder; give a folder path")
+    if run_dir.is_dir() and not (run_dir / OWNER).is_file():
+        foreign = sorted(p.name for p in run_dir.iterdir())
+        if foreign:
+            raise CalibError(
+                f"--out: {run_dir} exists and is not a run folder (it holds "
+                f"{', '.join(foreign[:3])}); give another --out (nothing was changed)"
+            )
 
 
 OWNER = ".session.json"
 
 
+def session_record(session: Path) -> dict[str, Any]:
+    """What a run folder's ``.session.json`` records of its session.
+
+    ``settings`` (:func:`session_settings`) and, per file the pipeline reads
+    (:func:`session_inputs`, named relative to the session folder), its ``stage``,
+    ``size`` and ``sha256``; ``identity`` is the SHA-256 of the settings and the files'
+    names and sizes: the same for the session moved to another folder, different for
+    another recording. Comments, ``notes`` and files session.toml does not name are
+    in none of them.
+    """
+    spec = load_session(session)
+    files: dict[str, dict[str, Any]] = {}
+    for stage, paths in session_inputs(session, spec).items():
+        for p in paths:
+            try:
+                key = p.relative_to(session).as_posix()
+            except ValueError:  # an absolute path in session.toml
+                key = str(p)
+            files[key] = {"stage": stage, "size": p.stat().st_size, "sha256": cached_sha256(p)}
+    settings = session_settings(spec)
+    sizes = {k: v["size"] for k, v in files.items()}
+    body = json.dumps({"settings": settings, "sizes": sizes}, sort_keys=True, default=str)
+    return {
+        "identity": hashlib.sha256(body.encode()).hexdigest(),
+        "session": str(session.resolve()),
+        "settings": json.loads(json.dumps(settings, default=str)),
+        "files": files,
+    }
+
+
 def session_identity(session: Path) -> str:
-    """SHA-256 of a session's session.toml and the names and sizes of its files: the
-    same for a session moved to another folder, different for another recording."""
-    h = hashlib.sha256()
-    for p in session_inputs(session):
-        h.update(f"{p.name}\0{p.stat().st_size}\0".encode())
-        if p.name == "session.toml":
-            h.update(p.read_bytes())
-    return h.hexdigest()
+    """The session's identity (:func:`session_record`): SHA-256 of the session.toml values
+    the pipeline reads and the names and sizes of the files it names."""
+    return session_record(session)["identity"]
 
 
-def claim_run_dir(session: Path, run_dir: Path) -> None:
+def input_changes(old: dict[str, Any], new: dict[str, Any]) -> tuple[list[str], str]:
+    """What changed between two :func:`session_record` s: the inputs (file names,
+    ``session.toml [table]``) and the first stage that reads one (``""``: none)."""
+    changed: dict[str, str] = {}
+    before, after = old.get("files", {}), new["files"]
+    for name in sorted(set(before) | set(after)):
+        a, b = before.get(name), after.get(name)
+        if (a or {}).get("sha256") != (b or {}).get("sha256"):
+            changed[name] = (b or a)["stage"]
+    for stage, tables in new["settings"].items():
+        was = old.get("settings", {}).get(stage, {})
+        for key, value in tables.items():
+            parts = value if key == "cameras" else {None: value}
+            prev = was.get(key, {}) if key == "cameras" else {None: was.get(key)}
+            for sub in sorted(set(parts) | set(prev), key=str):
+                if parts.get(sub) != prev.get(sub):
+                    changed[f"session.toml [{key}{'' if sub is None else '.' + sub}]"] = stage
+    first = "track" if "track" in changed.values() else ("sync" if changed else "")
+    return list(changed), first
+
+
+def claim_run_dir(session: Path, run_dir: Path) -> str | None:
     """Record which session ``run_dir`` belongs to; refuse one made from another session.
 
-    ``run_dir/.session.json`` holds the session's identity (:func:`session_identity`)
-    and folder, written once with exclusive creation (two runs at once cannot both
-    claim it). A session moved to another folder keeps its identity and its outputs.
+    ``run_dir/.session.json`` holds the session's record (:func:`session_record`), first
+    written with exclusive creation (two runs at once cannot both claim it). The same
+    session folder with changed inputs, or the same recording moved to another folder
+    (:func:`session_identity`), keeps its run folder: the record is updated and the
+    stages whose inputs changed re-run (their stamps). Only another folder with other
+    inputs is refused.
+
+    Returns
+    -------
+    str or None
+        A one-line note for the console: which inputs changed and which stages re-run,
+        or where the moved session was; None when nothing changed.
     """
-    ident = session_identity(session)
+    record = session_record(session)
     marker = run_dir / OWNER
-    record = {"identity": ident, "session": str(session.resolve())}
     run_dir.mkdir(parents=True, exist_ok=True)
     try:
         fd = os.open(marker, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
@@ -316,18 +475,40 @@ def claim_run_dir(session: Path, run_dir: Path) -> None:
             owner = json.loads(marker.read_text())
         except (OSError, json.JSONDecodeError):
             owner = {}
-        if owner.get("identity") != ident:
+        owner = owner if isinstance(owner, dict) else {}
+        moved = owner.get("session") != record["session"]
+        if moved and owner.get("identity") != record["identity"]:
             raise CalibError(
                 f"{run_dir} holds the results of another session ({owner.get('session', '?')}) "
                 "with the same name; give this one a unique name in session.toml or use another --out"
             ) from None
-        return
+        if owner != record:
+            write_json(marker, record)
+        return change_note(run_dir, owner, record, moved)
     except OSError as exc:
         raise CalibError(
             f"{run_dir}: cannot write there ({exc.strerror}); choose another --out"
         ) from None
     with os.fdopen(fd, "w") as f:
         json.dump(record, f)
+    return None
+
+
+def change_note(
+    run_dir: Path, owner: dict[str, Any], record: dict[str, Any], moved: bool
+) -> str | None:
+    """The console note of :func:`claim_run_dir` (None: same folder, same inputs)."""
+    parts = [f"session moved from {owner.get('session', '?')}"] if moved else []
+    changed, first = input_changes(owner, record) if "files" in owner else ([], "")
+    if changed:  # (a record without files was written by an older version: stamps decide)
+        more = f" and {len(changed) - 4} more" if len(changed) > 4 else ""
+        stages = (
+            "track, sync and the stages after them re-run"
+            if first == "track"
+            else "sync and the stages after it re-run (track is up to date)"
+        )
+        parts.append(f"{', '.join(changed[:4])}{more} changed since its last run: {stages}")
+    return f"{run_dir}: {'; '.join(parts)}" if parts else None
 
 
 def checked_session_name(session: Path) -> str:
@@ -337,6 +518,7 @@ def checked_session_name(session: Path) -> str:
     (long) tracking stage rather than after it.
     """
     spec = load_session(session)
+    check_cameras(session, spec)
     for cam_name, cam in spec.cameras.items():
         session_file(session, cam.video, f"video of camera '{cam_name}'")
         session_file(session, cam.timestamps, f"timestamps of camera '{cam_name}'")
@@ -376,6 +558,11 @@ def run_sessions(
             f"two sessions share a name ({', '.join(names)}); give each a unique [name] in session.toml"
         )
     run_dirs = {name: Path(out) / name for name in names}
+    for s, name in zip(sessions, names, strict=True):
+        try:
+            check_run_dir(Path(s), run_dirs[name])
+        except CalibError as exc:
+            raise CalibError(f"session {s}: {exc}") from None
     jobs = jobs or os.cpu_count() or 1
     results: dict[str, list[tuple[str, str]]] = {}
     failed: dict[str, CalibError] = {}

@@ -20,10 +20,11 @@ import typer
 from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.atomic import atomic_dir, write_csv, write_json
+from i2ris_calib.io.atomic import write_csv, write_json
 from i2ris_calib.io.calibrate import read_camera_yaml
+from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
-from i2ris_calib.io.session import load_session, session_file
+from i2ris_calib.io.session import check_cameras, load_session, session_file
 from i2ris_calib.io.video import header_frame_count, input_files, iter_frames
 from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.session import CameraSpec, SessionSpec
@@ -56,6 +57,10 @@ MAX_NON_MONOTONIC = 0.05
 MAX_FRAME_INTERVAL_S = 2.0
 
 
+#: The files ``track`` writes in its output folder.
+OUTPUTS = ("angles.csv", "track.json")
+
+
 @dataclass
 class StreamResult:
     """Raw per-frame detections of one camera (arrays over decoded frames)."""
@@ -72,22 +77,29 @@ class StreamResult:
 
 
 def track_session(session: Path, out: Path | None, config) -> Path:
-    """Track a session folder and write angles.csv + track.json; returns the out folder."""
+    """Track a session folder and write angles.csv + track.json; returns the out folder.
+
+    ``out`` (default ``SESSION/track``) is checked before any work (io/outputs.py).
+    """
     session = Path(session)
     spec = load_session(session)
     cfg: TrackingConfig = config.track
     out = Path(out) if out is not None else session / "track"
-    result = track(session, spec, cfg, progress=True)
     inputs = [session / "session.toml"] + [  # an image-sequence video: each of its images
         f
-        for c in spec.cameras.values()
-        for f in input_files(session_file(session, c.video, "video"))
+        for n, c in spec.cameras.items()
+        for f in input_files(session_file(session, c.video, f"video of camera '{n}'"))
     ]
-    inputs += [session_file(session, c.timestamps, "timestamps") for c in spec.cameras.values()]
+    inputs += [
+        session_file(session, c.timestamps, f"timestamps of camera '{n}'")
+        for n, c in spec.cameras.items()
+    ]
+    claim_output_dir(out, "track", [session, *inputs], OUTPUTS)
+    result = track(session, spec, cfg, progress=True)
     summary = {**result["summary"], "provenance": provenance(inputs, cfg)}
     for line in track_warnings(summary):
         typer.echo(f"warning: {line}", err=True)
-    with atomic_dir(out) as tmp:
+    with output_dir(out, "track", [session, *inputs], OUTPUTS) as tmp:
         write_csv(tmp / "angles.csv", result["angles"], "%.6f")
         write_json(tmp / "track.json", summary)
     return out
@@ -103,6 +115,12 @@ def track_warnings(summary: dict) -> list[str]:
                 f"camera '{name}' dropped about {g['missing_frames']} frame(s) in {g['count']} "
                 f"gap(s), longest {g['longest_s']:.3f} s (frames inside gaps over "
                 "max_interp_gap_s are not_found, never interpolated)"
+            )
+        if g.get("backward_frames"):
+            out.append(
+                f"camera '{name}': {g['backward_frames']} frame(s) have a timestamp that goes "
+                f"backwards (first: frame {g['first_backward_frame']}) and were rejected (status "
+                "rejected, no angles; sync leaves them out); check the camera clock export"
             )
     if summary.get("view_check", {}).get("verdict") == "inconclusive":
         out.append(
@@ -127,6 +145,7 @@ def track(session: Path, spec: SessionSpec, cfg: TrackingConfig, progress: bool 
         raise CalibError(
             f'{session / "session.toml"}: the cameras need view = "top" and "side" (got {views})'
         )
+    check_cameras(session, spec)  # one video, timestamp file or marker id for both: refused
     times = {
         n: read_timestamps(session_file(session, cams[n].timestamps, f"timestamps of camera '{n}'"))
         for n in names
@@ -313,6 +332,18 @@ def check_stream(
             "(truncated/corrupt video or wrong timestamp file; they must match one row per frame)"
         )
     if not np.isfinite(s.corners).any():
+        others = {c.marker_id: other for other, c in spec.cameras.items() if other != name}
+        most = max(sorted(s.other_ids), key=s.other_ids.get, default=None)
+        if most in others:  # setting marker_id = most would track one face twice
+            other = others[most]
+            raise CalibError(
+                f"{video.name}: marker id {cam.marker_id} of camera '{name}' never found, but "
+                f"id {most} of camera '{other}' was: [cameras.{name}] video '{cam.video}' "
+                f"films the {other} camera's face (a copy of its video, or the two cameras' "
+                f"videos are swapped); set video and timestamps of [cameras.{name}] in "
+                f"session.toml to the files the {name} camera recorded (or, if it is the "
+                "marker ids that are swapped, swap the two marker_id values)"
+            )
         if s.other_ids:
             seen = ", ".join(str(i) for i in sorted(s.other_ids))
             raise CalibError(
@@ -471,22 +502,50 @@ def _num(x: float):
 def frame_gaps(ts: pd.DataFrame, cfg: TrackingConfig) -> dict:
     """Dropped frames of one camera, from its time steps (``gaps`` in track.json).
 
-    A step longer than 1.5 median frame intervals is a gap; ``missing_frames`` counts
-    the frame slots it spans. Gaps longer than ``max_interp_gap_s`` in the side camera
-    leave the top frames inside them ``not_found`` (never interpolated).
+    Frames whose timestamp goes backwards (``valid`` false, :func:`read_timestamps`)
+    are counted apart (``backward_frames``, ``first_backward_frame``): they are in the
+    video, so the hole they leave among the valid times is no dropped frame. Frames
+    were dropped where the frame slots a stretch of time spans (in median frame
+    intervals) outnumber the video's rows in it, for good: a stretch around rejected
+    rows is taken as a whole (a late time and the rows after it that look backwards
+    cancel), and an excess that later comes back is jitter. ``count`` gaps hold
+    ``missing_frames`` such frames. Gaps longer than ``max_interp_gap_s`` in the side
+    camera (``over_max_interp_gap``, whatever their cause) leave the top frames inside
+    them ``not_found`` (never interpolated).
     """
-    t = ts["time_s"].to_numpy()[ts["valid"].to_numpy()]
+    valid = ts["valid"].to_numpy()
+    back = ts["frame"].to_numpy()[~valid]
+    backward = {
+        "backward_frames": int(back.size),
+        "first_backward_frame": int(back[0]) if back.size else None,
+    }
+    rows = np.flatnonzero(valid)
+    t = ts["time_s"].to_numpy()[valid]
     dt = np.diff(t)
     if dt.size == 0:
-        return {"count": 0, "missing_frames": 0, "longest_s": 0.0, "over_max_interp_gap": 0}
+        return {"count": 0, "missing_frames": 0, "longest_s": 0.0, "over_max_interp_gap": 0,
+                **backward}  # fmt: skip
     step = float(np.median(dt))
-    big = dt > 1.5 * step
+    holey = np.diff(rows) > 1  # rejected rows between two valid ones
+    joined = holey.copy()  # such a step and its neighbours are taken as one stretch
+    joined[1:] |= holey[:-1]
+    joined[:-1] |= holey[1:]
+    inside = np.zeros(rows.size, bool)
+    inside[1:-1] = joined[:-1] & joined[1:]
+    ends = np.flatnonzero(~inside)  # valid rows that bound the stretches
+    lost = np.round(np.diff(t[ends]) / step) - np.diff(rows[ends])  # slots minus rows
+    total = np.concatenate([[0.0], np.cumsum(lost)])
+    for_good = np.minimum.accumulate(total[::-1])[::-1]  # an excess that comes back: jitter
+    dropped = np.diff(for_good)
+    gap = dropped > 0
+    longest = np.maximum.reduceat(dt, ends[:-1])  # the longest time step of each stretch
     return {
-        "count": int(big.sum()),
-        "missing_frames": int(np.sum(np.round(dt[big] / step) - 1)) if big.any() else 0,
-        "longest_s": round(float(dt.max()), 6) if big.any() else 0.0,
+        "count": int(gap.sum()),
+        "missing_frames": int(dropped[gap].sum()),
+        "longest_s": round(float(longest[gap].max()), 6) if gap.any() else 0.0,
         "over_max_interp_gap": int(np.sum(dt > cfg.max_interp_gap_s)),
         "frame_interval_s": round(step, 6),
+        **backward,
     }
 
 

@@ -62,6 +62,8 @@ _IO = {"load_synced": ("i2ris_calib.io.synced", "load_datasets"),
 
 __all__ = ["__version__", *_API, *_IO]
 
+_FRAME_HINT = "a DataFrame in memory: make_dataset(axis, direction, df['time_s'], ...)"
+
 
 def __getattr__(name: str):
     if name in _API:
@@ -69,13 +71,28 @@ def __getattr__(name: str):
     if name in _IO:
         mod, attr = _IO[name]
         obj = getattr(import_module(mod), attr)
+        v = import_module("i2ris_calib._validate")
         if name == "load_synced":
-            fit_config = import_module("i2ris_calib.fitting.config").FitConfig
+            checked_fit_config = import_module("i2ris_calib.fitting.pipeline").checked_fit_config
+            checked_directions = import_module("i2ris_calib.data.dataset").checked_directions
 
             def load_synced(path, axis, config=None, directions=None):
                 """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
-                return obj([path], axis, config or fit_config(), directions)
+                func = "load_synced"
+                v.check_path(func, "path", path, "a synced CSV", _FRAME_HINT)
+                v.check_choice(func, "axis", axis, ("yaw", "pitch"))
+                config = checked_fit_config(func, config)
+                if directions is not None:
+                    directions = checked_directions(func, directions)
+                return obj([path], axis, config, directions)
 
             return load_synced
-        return obj
+
+        def load_config(path=None):
+            """The pipeline TOML at ``path`` (defaults when None) as a PipelineConfig."""
+            if path is not None:
+                v.check_path("load_config", "path", path, "a TOML config file (docs/config.md)")
+            return obj(path)
+
+        return load_config
     raise AttributeError(f"module 'i2ris_calib' has no attribute {name!r}")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from i2ris_calib._validate import validated_config
 from i2ris_calib.compensation.config import CompensateConfig
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.fitting.config import FitConfig
@@ -31,8 +32,9 @@ class RunConfig:
     diagnose: bool = False
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on a non-boolean value."""
@@ -52,3 +54,8 @@ class PipelineConfig:
     report: ReportConfig = field(default_factory=ReportConfig)
     compensate: CompensateConfig = field(default_factory=CompensateConfig)
     run: RunConfig = field(default_factory=RunConfig)
+
+    def __post_init__(self) -> None:
+        """Every section checked on construction: ``PipelineConfig(fit="trf")`` or
+        ``PipelineConfig(fit=FitConfig)`` is a CalibError naming the section."""
+        validated_config(self)

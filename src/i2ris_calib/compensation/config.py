@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from i2ris_calib._validate import validated_config
+
 _KINDS = ("", "gpi", "egpi", "egpi_c", "diagnosed")
 _DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
 
@@ -36,8 +38,9 @@ class CompensateConfig:
     max_counts_per_s: float = 0.0
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

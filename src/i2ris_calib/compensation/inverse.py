@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2ris_calib.compensation import kernel as K
+from i2ris_calib.compensation._args import check_args
 from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Signals
@@ -230,6 +231,7 @@ def compensate(
         sequence (from ``v_initial`` when given), so it is exactly what the model
         predicts for the commands sent.
     """
+    check_args(model, target_deg, t_s, v_limits, max_rate, quantum, v_initial, tol_deg)
     target = np.ascontiguousarray(target_deg, dtype=float)
     t = None if t_s is None else np.ascontiguousarray(t_s, dtype=float)
     _check(target, t)

@@ -28,10 +28,24 @@ the input is in encoder counts or volts.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from i2ris_calib._validate import (
+    as_1d_bool,
+    as_1d_float,
+    as_real,
+    check_choice,
+    check_choices,
+    check_instance,
+    check_signals,
+    check_str,
+    describe,
+    same_length,
+)
+from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
 from i2ris_calib.hysteresis.model import Signals
 
@@ -223,6 +237,93 @@ class Dataset:
         return int(self.v.size)
 
 
+_ANGLE_HINT = "mark an unmeasured angle with NaN, never inf"
+_INPUT_HINT = "an input must be finite everywhere (angles may be NaN: unmeasured)"
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """The arrays of :func:`make_dataset` / :func:`direction_datasets`, checked."""
+
+    time_s: np.ndarray
+    enc: np.ndarray
+    theta: np.ndarray
+    enc_other: np.ndarray | None
+    theta_other: np.ndarray | None
+
+
+def _checked_inputs(
+    func, axis, time_s, enc, theta_deg, enc_other, theta_other_deg, bands, holdout_fraction,
+    source,
+) -> _Inputs:  # fmt: skip
+    """CalibError naming ``func`` and the argument on any misuse (see docs/api.md):
+    an unknown axis, arrays that are not 1-D numbers of one length, NaN or inf in an
+    input (time, encoders), inf in an angle, decreasing time, bands that are not a
+    :class:`Bands`, a held-out fraction outside [0, 1)."""
+    check_choice(func, "axis", axis, AXES)
+    t = as_1d_float(func, "time_s", time_s, min_size=1, hint=_INPUT_HINT)
+    e = as_1d_float(func, "enc", enc, hint=_INPUT_HINT)
+    th = as_1d_float(func, "theta_deg", theta_deg, nan_ok=True, hint=_ANGLE_HINT)
+    eo = None if enc_other is None else as_1d_float(func, "enc_other", enc_other, hint=_INPUT_HINT)
+    tho = (
+        None
+        if theta_other_deg is None
+        else as_1d_float(func, "theta_other_deg", theta_other_deg, nan_ok=True, hint=_ANGLE_HINT)
+    )
+    same_length(func, enc=e, time_s=t, theta_deg=th, enc_other=eo, theta_other_deg=tho)
+    back = np.flatnonzero(np.diff(t) < 0)
+    if back.size:
+        k = int(back[0]) + 1
+        raise CalibError(
+            f"{func}: time_s decreases at index {k} ({t[k - 1]:.6g} -> {t[k]:.6g} s); give "
+            "the samples in time order (sort all arrays by time)"
+        )
+    check_instance(func, "bands", bands, Bands, none_ok=True, hint="or None: derived")
+    as_real(func, "holdout_fraction", holdout_fraction, lo=0.0, hi=1.0, hi_open=True)
+    if not isinstance(source, os.PathLike):
+        check_str(func, "source", source, "runs/s/sync/synced.csv")
+    return _Inputs(t, e, th, eo, tho)
+
+
+def checked_dataset(func: str, name: str, data: object) -> Dataset:
+    """``data`` if it is a :class:`Dataset` whose arrays agree (a finite 1-D input, an
+    angle and a held-out mask of its length), else CalibError naming ``func`` and
+    ``name``: a list of datasets (``load_synced`` returns one), a (v, theta) tuple, a
+    DataFrame, None, ... each with its fix."""
+    if isinstance(data, (list, tuple)) and data and all(isinstance(d, Dataset) for d in data):
+        names = ", ".join(d.name for d in data)
+        raise CalibError(
+            f"{func}: {name} is a {type(data).__name__} of {len(data)} "
+            f"dataset{'s' if len(data) > 1 else ''} ({names}); "
+            f"give one, e.g. {name}[0]"
+        )
+    if not isinstance(data, Dataset):
+        hint = (
+            "make_dataset(axis, direction, df['time_s'], df['enc_<axis>'], df['<axis>_deg'])"
+            if _is_frame(data)
+            else "make_dataset(...) or load_synced(path, axis)[0]"
+        )
+        raise CalibError(f"{func}: {name} is {describe(data)}; give a Dataset: {hint}")
+    check_signals(func, f"{name}.signals", data.signals)
+    n = data.signals.v.size
+    th = as_1d_float(func, f"{name}.theta_deg", data.theta_deg, nan_ok=True, hint=_ANGLE_HINT)
+    as_1d_bool(func, f"{name}.holdout", data.holdout, n)
+    same_length(func, **{f"{name}.signals.v": data.signals.v, f"{name}.theta_deg": th})
+    return data
+
+
+def checked_directions(func: str, directions: object) -> tuple[str, ...]:
+    """``directions`` as a tuple of directions (a str such as ``"+"`` or ``"+-"``: its
+    characters), else CalibError."""
+    if isinstance(directions, str):
+        directions = tuple(directions)
+    return check_choices(func, "directions", directions, DIRECTIONS, "('+', '-')")
+
+
+def _is_frame(x: object) -> bool:
+    return type(x).__name__ == "DataFrame"
+
+
 def make_dataset(
     axis: str,
     direction: str,
@@ -251,9 +352,30 @@ def make_dataset(
         Default: derived from ``enc`` (:func:`input_bands`).
     holdout_fraction : float
         Fraction of this direction's loading cycles held out (0 = none).
+
+    Raises
+    ------
+    CalibError
+        On a misuse, naming the argument: an unknown axis or direction; arrays that
+        are not 1-D numbers of one length (a column (n, 1): ``.ravel()``); NaN or inf in
+        ``time_s``, ``enc`` or ``enc_other`` (only angles may be NaN: unmeasured);
+        decreasing ``time_s``; ``bands`` not a :class:`Bands`; ``holdout_fraction``
+        outside [0, 1).
     """
-    enc = np.asarray(enc, dtype=float)
-    theta = np.asarray(theta_deg, dtype=float)
+    func = "make_dataset"
+    check_choice(func, "direction", direction, DIRECTIONS)
+    x = _checked_inputs(
+        func, axis, time_s, enc, theta_deg, enc_other, theta_other_deg, bands,
+        holdout_fraction, source,
+    )  # fmt: skip
+    return _make_dataset(axis, direction, x, bands, holdout_fraction, source)
+
+
+def _make_dataset(
+    axis: str, direction: str, x: _Inputs, bands: Bands | None, holdout_fraction: float, source: str
+) -> Dataset:
+    """:func:`make_dataset` on checked inputs."""
+    enc, theta = x.enc, x.theta
     bands = input_bands(enc) if bands is None else bands
     sign = direction_sign(direction)
     v = direction_input(enc, direction)
@@ -265,12 +387,7 @@ def make_dataset(
     masked = np.where(mine, measured, np.nan)
     cyc = cycle_index(v, None)
     hold = holdout_mask(cyc, holdout_fraction, v) & mine if mine.any() else np.zeros_like(mine)
-    sig = Signals(
-        v=v,
-        t_s=np.asarray(time_s, dtype=float),
-        v_other=None if enc_other is None else np.asarray(enc_other, dtype=float),
-        theta_other_deg=None if theta_other_deg is None else np.asarray(theta_other_deg, float),
-    )
+    sig = Signals(v=v, t_s=x.time_s, v_other=x.enc_other, theta_other_deg=x.theta_other)
     fitted = np.isfinite(masked) & ~hold
     rows = {
         "total": int(enc.size),
@@ -290,7 +407,7 @@ def make_dataset(
         holdout=hold,
         enc=enc,
         bands=bands,
-        source=source,
+        source=str(source),
         rows=rows,
     )
 
@@ -315,8 +432,24 @@ def direction_datasets(
     ``signed``: one ``"±"`` dataset (the whole signed input) instead of ``"+"`` and
     ``"-"``. ``directions`` restricts to the named ones. The count of a direction is
     its samples outside the zero band (an axis at rest is not a dataset).
+
+    Raises
+    ------
+    CalibError
+        On a misuse, naming the argument (as :func:`make_dataset`; ``min_samples`` an
+        integer >= 1, ``signed`` a bool, ``directions`` a tuple of directions).
     """
-    enc = np.asarray(enc, dtype=float)
+    func = "direction_datasets"
+    x = _checked_inputs(
+        func, axis, time_s, enc, theta_deg, enc_other, theta_other_deg, bands,
+        holdout_fraction, source,
+    )  # fmt: skip
+    as_real(func, "min_samples", min_samples, integer=True, lo=1)
+    if not isinstance(signed, (bool, np.bool_)):
+        raise CalibError(f"{func}: signed is {signed!r}; give True or False")
+    if directions is not None:
+        directions = checked_directions(func, directions)
+    enc = x.enc
     bands = input_bands(enc) if bands is None else bands
     wanted = ("±",) if signed else ("+", "-")
     if directions is not None:
@@ -330,18 +463,5 @@ def direction_datasets(
         )
         if outside.sum() < min_samples:
             continue
-        out.append(
-            make_dataset(
-                axis,
-                d,
-                time_s,
-                enc,
-                theta_deg,
-                enc_other=enc_other,
-                theta_other_deg=theta_other_deg,
-                bands=bands,
-                holdout_fraction=holdout_fraction,
-                source=source,
-            )  # fmt: skip
-        )
+        out.append(_make_dataset(axis, d, x, bands, holdout_fraction, source))
     return out

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from i2ris_calib._validate import validated_config
 from i2ris_calib.diagnosis.effects import CATALOGUE
 
 
@@ -73,8 +74,9 @@ class DiagnosisConfig:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

@@ -27,6 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from i2ris_calib._validate import as_real, check_model, check_signals, describe
 from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model, NamedParameters, Parameter, Signals
@@ -603,6 +604,7 @@ class EffectModel(NamedParameters):
 
     def __call__(self, signals: Signals | np.ndarray) -> np.ndarray:
         """Angle (deg), shape (n,), at the model's current values."""
+        check_signals(f"{self.name} model", "signals", signals)
         return self.evaluate(as_signals(signals), self.values)
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
@@ -663,7 +665,18 @@ def add_effect(model: Model, name: str, values: Mapping[str, float] | None = Non
         effect's neutral default. Unknown names or values outside the declared
         bounds raise CalibError.
     """
+    func = "add_effect"
+    check_model(func, "model", model, usage="add_effect(model, name, values)")
+    if not isinstance(name, str):
+        raise CalibError(
+            f"{func}: name is {describe(name)}; give an effect name: {', '.join(CATALOGUE)}"
+        )
     effect = get_effect(name)
+    if values is not None and not isinstance(values, Mapping):
+        raise CalibError(
+            f"{func}: values is {describe(values)}; give a dict {{parameter: value}}, e.g. "
+            f"{{{effect.params[0].name!r}: {effect.params[0].value:g}}}"
+        )
     values = dict(values or {})
     known = [p.name for p in effect.params]
     for key in values:
@@ -673,7 +686,7 @@ def add_effect(model: Model, name: str, values: Mapping[str, float] | None = Non
             raise CalibError(f"effect '{name}': unknown parameter '{key}' ({hint})")
     vec = []
     for p in effect.params:
-        v = float(values.get(p.name, p.value))
+        v = float(as_real(func, f"values[{p.name!r}]", values.get(p.name, p.value)))
         if not (p.lower <= v <= p.upper) or not np.isfinite(v):
             raise CalibError(
                 f"effect '{name}': {p.name} = {v} outside [{p.lower}, {p.upper}] {p.unit}"

@@ -44,7 +44,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from i2ris_calib.data.dataset import Dataset
+from i2ris_calib._validate import check_callable, check_choices, check_instance, check_model
+from i2ris_calib.data.dataset import Dataset, checked_dataset
 from i2ris_calib.diagnosis.blas import single_threaded_blas
 from i2ris_calib.diagnosis.candidates import fit_candidate, refit_globally
 from i2ris_calib.diagnosis.config import DiagnosisConfig
@@ -65,7 +66,7 @@ from i2ris_calib.diagnosis.results import (
 from i2ris_calib.diagnosis.stats import autocovariance, compare, n_free_of, score_of
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.pipeline import fit_dataset
+from i2ris_calib.fitting.pipeline import checked_fit_config, fit_dataset
 from i2ris_calib.hysteresis.model import Model
 
 __all__ = [
@@ -295,9 +296,31 @@ def diagnose(
     Returns
     -------
     Diagnosis
+
+    Raises
+    ------
+    CalibError
+        On a misuse, naming the argument: ``start`` not a model (a factory not
+        called, a FitResult: its ``.model``), ``data`` not a Dataset (a list from
+        ``load_synced``: one of it), ``config`` not a DiagnosisConfig.
     """
+    func = "diagnose"
+    check_model(func, "start", start, usage="diagnose(start, data)")
+    checked_dataset(func, "data", data)
+    config = _diagnosis_config(func, config)
+    check_callable(func, "progress", progress)
     with single_threaded_blas():
-        return _diagnose(start, data, config or DiagnosisConfig(), progress)
+        return _diagnose(start, data, config, progress)
+
+
+def _diagnosis_config(func: str, config: object) -> DiagnosisConfig:
+    """``config`` if a :class:`DiagnosisConfig`, the defaults for None, else CalibError."""
+    if config is None:
+        return DiagnosisConfig()
+    return check_instance(
+        func, "config", config, DiagnosisConfig,
+        hint="e.g. DiagnosisConfig(max_steps=2); from a TOML file: load_config(path).diagnose",
+    )  # fmt: skip
 
 
 def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
@@ -390,7 +413,14 @@ def diagnose_from_starts(
     progress : callable, optional
         ``progress(text)`` before each fit.
     """
-    cfg = config or DiagnosisConfig()
+    func = "diagnose_from_starts"
+    checked_dataset(func, "data", data)
+    cfg = _diagnosis_config(func, config)
+    fit_config = checked_fit_config(func, fit_config, "fit_config")
+    starts = check_choices(func, "starts", starts, ("gpi", "egpi"), "('gpi', 'egpi')")
+    if not starts:
+        raise CalibError(f"{func}: starts is empty; give ('gpi',), ('egpi',) or both")
+    check_callable(func, "progress", progress)
     paths = {}
     for kind in starts:
         if progress:

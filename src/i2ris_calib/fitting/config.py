@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from i2ris_calib._validate import validated_config
+
 _METHODS = ("lm", "trf")
 
 
@@ -74,8 +76,9 @@ class FitConfig:
     f_scale_deg: float = 0.5
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

@@ -27,6 +27,15 @@ import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
+from i2ris_calib._validate import (
+    as_1d_bool,
+    as_1d_float,
+    as_real,
+    check_choice,
+    check_model,
+    check_signals,
+    describe,
+)
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
 from i2ris_calib.hysteresis.model import Model, Signals
@@ -445,6 +454,39 @@ def _reoptimised_profile(counter, full, pidx, lsq_free, v, lower, upper, how, nf
     return best
 
 
+def _check_args(model, signals, theta_deg, fit_mask, holdout_mask, starts, method, max_nfev,
+                screen_nfev, ftol, loss, f_scale_deg) -> None:  # fmt: skip
+    """CalibError naming the argument of :func:`fit_model` on a misuse (the shape and
+    finiteness of the data are :func:`_validate`'s, after the masks are combined)."""
+    func = "fit_model"
+    check_model(func, "model", model, usage="fit_model(model, signals, theta_deg)")
+    if isinstance(signals, Signals):
+        check_signals(func, "signals", signals)
+        n = np.asarray(signals.v).size
+    else:
+        n = as_1d_float(func, "signals", signals, finite=False).size
+    as_1d_float(func, "theta_deg", theta_deg, finite=False)
+    for name, mask in (("fit_mask", fit_mask), ("holdout_mask", holdout_mask)):
+        if mask is not None:
+            as_1d_bool(func, name, mask, n)
+    if starts is not None:
+        if isinstance(starts, np.ndarray) and starts.ndim == 1:
+            raise CalibError(
+                f"{func}: starts is one vector; give a list of start vectors, e.g. [x0]"
+            )
+        if not isinstance(starts, (list, tuple, np.ndarray)):
+            raise CalibError(f"{func}: starts is {describe(starts)}; give a list of vectors")
+        p = len(model.parameters)
+        for i, x0 in enumerate(starts):
+            as_1d_float(func, f"starts[{i}]", x0, size=p, finite=False)
+    check_choice(func, "method", method, ("lm", "trf"))
+    check_choice(func, "loss", loss, ("linear", "soft_l1", "huber"))
+    as_real(func, "max_nfev", max_nfev, integer=True, lo=1, none_ok=True)
+    as_real(func, "screen_nfev", screen_nfev, integer=True, lo=1)
+    as_real(func, "ftol", ftol, lo=0.0, lo_open=True)
+    as_real(func, "f_scale_deg", f_scale_deg, lo=0.0, lo_open=True)
+
+
 def fit_model(*args, **kwargs) -> FitResult:
     # BLAS is limited to one thread for the duration: the Jacobians are tall and thin
     # (n samples x p <= 13), where threads only add overhead, and on a busy 2-core
@@ -511,9 +553,13 @@ def _fit_model(
     Raises
     ------
     CalibError
-        Shape mismatch, non-finite or constant input, fewer usable samples than
-        free parameters.
+        A misuse, naming the argument (``model`` not a model, arrays that are not 1-D,
+        masks that are not bool of the input's length, starts of the wrong size, an
+        unknown method or loss); shape mismatch, non-finite or constant input, fewer
+        usable samples than free parameters.
     """
+    _check_args(model, signals, theta_deg, fit_mask, holdout_mask, starts, method, max_nfev,
+                screen_nfev, ftol, loss, f_scale_deg)  # fmt: skip
     s = as_signals(signals)
     v = np.asarray(s.v, dtype=float)
     theta = np.asarray(theta_deg, dtype=float)

@@ -10,7 +10,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from i2ris_calib.data.dataset import Dataset
+from i2ris_calib._validate import (
+    as_1d_bool,
+    as_1d_float,
+    check_instance,
+    check_model,
+    describe,
+    same_length,
+)
+from i2ris_calib.data.dataset import Dataset, checked_dataset
+from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
 from i2ris_calib.fitting.fit import FitResult, fit_model
@@ -293,10 +302,57 @@ def fit_warnings(res: FitResult, v: np.ndarray) -> tuple[str, ...]:
     return tuple(out)
 
 
+def checked_fit_config(func: str, config: object, name: str = "config") -> FitConfig:
+    """``config`` if it is a :class:`FitConfig`, the defaults for None, else CalibError
+    (a str, a DataFrame, the class not called, a whole PipelineConfig: its ``.fit``)."""
+    if config is None:
+        return FitConfig()
+    return check_instance(
+        func, name, config, FitConfig,
+        hint="e.g. FitConfig(method='trf'); from a TOML file: load_config(path).fit",
+    )  # fmt: skip
+
+
+def _fit_inputs(model, data, config, holdout):
+    """(signals, theta, held-out mask, dead band, v, config) of :func:`fit`'s arguments,
+    checked; CalibError naming the argument on a misuse."""
+    func = "fit"
+    check_model(func, "model", model, usage="fit(model, data)")
+    config = checked_fit_config(func, config)
+    if isinstance(data, Dataset):
+        checked_dataset(func, "data", data)
+        if holdout is not None:
+            raise CalibError(
+                "fit: holdout is for (v, theta_deg) data; a Dataset carries its held-out "
+                "cycles: fit(model, dataclasses.replace(data, holdout=mask))"
+            )
+        v = np.asarray(data.signals.v, dtype=float)
+        return data.signals, data.theta_deg, data.holdout, data.bands.deadband, v, config
+    if not isinstance(data, tuple):
+        checked_dataset(func, "data", data)  # raises: says what data is and what to give
+    if len(data) != 2:
+        raise CalibError(
+            f"fit: data is {describe(data)}; give a Dataset or a pair (v, theta_deg) "
+            "(times and the other axis go in a Dataset: make_dataset(...))"
+        )
+    v = as_1d_float(func, "data[0] (the input v)", data[0], min_size=2)
+    theta = as_1d_float(
+        func, "data[1] (theta_deg)", data[1], nan_ok=True,
+        hint="mark an unmeasured angle with NaN, never inf",
+    )  # fmt: skip
+    same_length(func, **{"data[0] (the input v)": v, "data[1] (theta_deg)": theta})
+    hold = (
+        split_masks(v, config)[1]
+        if holdout is None
+        else as_1d_bool(func, "holdout", holdout, v.size)
+    )
+    return Signals(v=v), theta, hold, deadband_for(v, config), v, config
+
+
 def fit(
     model: ParametricModel,
     data: Dataset | tuple[np.ndarray, np.ndarray],
-    config: FitConfig = FitConfig(),
+    config: FitConfig | None = FitConfig(),
     *,
     holdout: np.ndarray | None = None,
 ) -> FitResult:
@@ -311,26 +367,28 @@ def fit(
         A direction dataset (whole history, loss mask, held-out cycles; see
         :func:`i2ris_calib.data.make_dataset` / :func:`i2ris_calib.io.synced.load_datasets`),
         or an input array and an angle array of shape (n,) (NaN angles leave the loss).
-    config : FitConfig
-        Method, starts, seed, robust loss.
+    config : FitConfig or None
+        Method, starts, seed, robust loss (None: the defaults).
     holdout : ndarray of bool, shape (n,), optional
         Held-out samples for (v, theta) data; default: whole loading cycles
-        (:func:`split_masks`).
+        (:func:`split_masks`). A Dataset carries its own (``data.holdout``).
 
     Returns
     -------
     FitResult
         A new result; ``model`` is not changed. Starts: the model's own values and the
         data-driven ones (:meth:`guess` for GPI/EGPI models).
+
+    Raises
+    ------
+    CalibError
+        On a misuse, naming the argument (checked before any work): ``model`` not a
+        model (a factory not called: ``i2ris_egpi_model`` for ``i2ris_egpi_model()``),
+        ``data`` neither a Dataset nor a pair of 1-D arrays of one length, NaN or inf in
+        the input, inf in the angle, ``config`` not a FitConfig, ``holdout`` not a bool
+        mask of the data's length.
     """
-    if isinstance(data, tuple):
-        v = np.asarray(data[0], dtype=float)
-        signals, theta = Signals(v=v), np.asarray(data[1], dtype=float)
-        hold = split_masks(v, config)[1] if holdout is None else np.asarray(holdout, bool)
-        db = deadband_for(v, config)
-    else:
-        signals, theta, hold, db = data.signals, data.theta_deg, data.holdout, data.bands.deadband
-        v = np.asarray(signals.v, dtype=float)
+    signals, theta, hold, db, v, config = _fit_inputs(model, data, config, holdout)
     starts = [model.values]
     theta_fit = np.where(np.isfinite(theta) & ~hold, theta, np.nan)
     if recipe_of(model) is not None and np.isfinite(theta_fit).sum() > 2:

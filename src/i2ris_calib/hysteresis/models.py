@@ -31,6 +31,7 @@ Choices the paper leaves open (documented in docs/models.md):
 
 from __future__ import annotations
 
+import difflib
 import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -38,6 +39,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
+from i2ris_calib._validate import (
+    as_1d_float,
+    as_real,
+    check_choice,
+    check_signals,
+    describe,
+    same_length,
+)
+from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.kernel import (
     density,
     motion_direction,
@@ -142,10 +152,18 @@ class ParametricModel(NamedParameters):
         self, signals: Signals | np.ndarray, mapping: Mapping[str, float]
     ) -> np.ndarray:
         """Output (deg), shape (n,), from a dict of parameter values (see :meth:`vector`)."""
+        check_signals(f"{self.name}.evaluate_dict", "signals", signals)
+        if not isinstance(mapping, Mapping):
+            raise CalibError(
+                f"{self.name}.evaluate_dict: mapping is {describe(mapping)}; give a dict "
+                "{parameter name: value}"
+            )
+        check_values(f"{self.name}.evaluate_dict", self, mapping)
         return self.evaluate(as_signals(signals), self.vector(mapping))
 
     def __call__(self, signals: Signals | np.ndarray) -> np.ndarray:
         """Output at the model's current parameter values."""
+        check_signals(f"{self.name} model", "signals", signals)
         return self.evaluate(as_signals(signals), self.values)
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:  # pragma: no cover
@@ -161,10 +179,43 @@ class ParametricModel(NamedParameters):
         scale gauge). ``deadband``: the ``v'`` dead band (input unit), default derived
         from the input as the fit does.
         """
-        v = np.asarray(v, dtype=float)
+        func = f"{self.name}.guess"
+        v = as_1d_float(func, "v", v, min_size=2)
+        theta = as_1d_float(
+            func, "theta_deg", theta_deg, nan_ok=True,
+            hint="mark an unmeasured angle with NaN, never inf",
+        )  # fmt: skip
+        same_length(func, v=v, theta_deg=theta)
+        deadband = as_real(func, "deadband", deadband, none_ok=True, lo=0.0)
         db = default_deadband(v) if deadband is None else float(deadband)
-        x = initial_values(self, v, np.asarray(theta_deg, dtype=float), db)
+        x = initial_values(self, v, theta, db)
         return self.with_values(keep_fixed(self, x))
+
+
+def check_settings(func: str, n: object, deadband_counts: object = None) -> None:
+    """CalibError unless ``n`` is an integer >= 1 and ``deadband_counts`` (when given)
+    a finite number >= 0 (the arguments of the model factories)."""
+    as_real(func, "n", n, integer=True, lo=1)
+    if deadband_counts is not None:
+        as_real(func, "deadband_counts", deadband_counts, lo=0.0)
+
+
+def check_values(func: str, model: NamedParameters, values: Mapping[str, object]) -> None:
+    """CalibError unless every key of ``values`` is a parameter of ``model`` (the closest
+    name suggested) and every value a finite number."""
+    names = model.names
+    for key, x in values.items():
+        if key not in names:
+            close = difflib.get_close_matches(str(key), names, n=1)
+            hint = f"did you mean '{close[0]}'?" if close else f"valid: {', '.join(names)}"
+            raise CalibError(f"{func}: unknown parameter {key!r} for model '{model.name}' ({hint})")
+        as_real(func, str(key), x)
+
+
+def checked_values(func: str, model: ParametricModel, values: Mapping[str, object]):
+    """``model.with_values(values)`` after :func:`check_values`."""
+    check_values(func, model, values)
+    return model.with_values(values)
 
 
 def as_signals(signals: Signals | np.ndarray) -> Signals:
@@ -369,6 +420,7 @@ class GPIModel(ParametricModel):
 
 def gpi_model(n: int = 30, **values: float) -> GPIModel:
     """A GPI model with default (paper-like yaw+) values, overridden by ``values``."""
+    check_settings("gpi_model", n)
     params = (
         Parameter("a1", 7.0e-3, doc="loading envelope slope", **_SLOPE),
         Parameter("a2", 0.5, doc="loading envelope offset", **_OFFSET),
@@ -376,7 +428,7 @@ def gpi_model(n: int = 30, **values: float) -> GPIModel:
         Parameter("a4", -0.5, doc="unloading envelope offset", **_OFFSET),
         *_density_params(0.06, 0.2, 0.3, 3.0),
     )
-    return GPIModel("gpi", params, n=n).with_values(values)
+    return checked_values("gpi_model", GPIModel("gpi", params, n=n), values)
 
 
 @dataclass(frozen=True)
@@ -450,6 +502,7 @@ class I2RISEGPIModel(ParametricModel):
 
 def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float) -> I2RISEGPIModel:
     """An I2RIS EGPI with default (paper-like yaw+) values, overridden by ``values``."""
+    check_settings("i2ris_egpi_model", n, deadband_counts)
     params = (
         Parameter("a1", 7.0e-3, doc="loading envelope slope gamma_l", **_SLOPE),
         Parameter("a2", 0.5, doc="loading envelope offset gamma_l", **_OFFSET),
@@ -467,7 +520,7 @@ def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float)
         ),
     )  # fmt: skip
     model = I2RISEGPIModel("egpi", params, n=n, deadband_counts=deadband_counts)
-    return model.with_values(values)
+    return checked_values("i2ris_egpi_model", model, values)
 
 
 @dataclass(frozen=True)
@@ -509,9 +562,10 @@ def continuous_egpi_model(
     n: int = 30, deadband_counts: float = 2.0, **values: float
 ) -> ContinuousEGPIModel:
     """A continuous I2RIS EGPI (:class:`ContinuousEGPIModel`) with default values."""
+    check_settings("continuous_egpi_model", n, deadband_counts)
     base = i2ris_egpi_model(n=n, deadband_counts=deadband_counts)
     model = ContinuousEGPIModel("egpi_c", base.parameters, n=n, deadband_counts=deadband_counts)
-    return model.with_values(values)
+    return checked_values("continuous_egpi_model", model, values)
 
 
 # --------------------------------------------------------------------------- general EGPI
@@ -602,6 +656,26 @@ def egpi_model(
         Every parameter: ``l{s}_*``, ``r{s}_*``, ``kappa_l{s}``/``kappa_r{s}`` for
         s >= 2, ``vf_rise{j}``/``vf_fall{j}`` for j = 1..N-1, ``lam, sigma, r1, rn``.
     """
+    func = "egpi_model"
+    if isinstance(envelopes, str) or not isinstance(envelopes, Sequence) or not envelopes:
+        raise CalibError(
+            f"{func}: envelopes is {describe(envelopes)}; give one (kind_l, kind_r) pair per "
+            "stage, e.g. [('linear', 'linear'), ('linear', 'tanh')]"
+        )
+    for s, pair in enumerate(envelopes, start=1):
+        if isinstance(pair, str) or not isinstance(pair, Sequence) or len(pair) != 2:
+            raise CalibError(
+                f"{func}: envelopes[{s - 1}] is {describe(pair)}; give a (kind_l, kind_r) "
+                "pair, e.g. ('linear', 'tanh')"
+            )
+        for side, kind in zip("lr", pair, strict=True):
+            check_choice(func, f"envelopes[{s - 1}] kind_{side}", kind, ("linear", "tanh"))
+    if not isinstance(values, Mapping):
+        raise CalibError(
+            f"{func}: values is {describe(values)}; give a dict {{parameter name: value}}"
+        )
+    as_real(func, "n", n, integer=True, lo=1)
+    as_real(func, "deadband", deadband, lo=0.0)
     env = tuple((Envelope(a), Envelope(b)) for a, b in envelopes)
     names: list[str] = []
     for s, (el, er) in enumerate(env, start=1):
@@ -614,6 +688,11 @@ def egpi_model(
     missing = [x for x in names if x not in values]
     extra = set(values) - set(names)
     if missing or extra:
-        raise KeyError(f"EGPI values: missing {missing}, unknown {sorted(extra)}")
+        raise CalibError(
+            f"{func}: values missing {missing}, unknown {sorted(extra)}; give every "
+            f"parameter of these stages: {', '.join(names)}"
+        )
+    for x in names:
+        as_real(func, f"values[{x!r}]", values[x])
     params = tuple(Parameter(x, float(values[x])) for x in names)
     return EGPIModel("egpi_general", params, envelopes=env, n=n, deadband=deadband)

@@ -8,9 +8,12 @@ defaults (``n`` operators, the ``v'`` dead band) are the same everywhere.
 
 from __future__ import annotations
 
+from i2ris_calib._validate import describe
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.models import (
     ParametricModel,
+    check_settings,
+    checked_values,
     continuous_egpi_model,
     gpi_model,
     i2ris_egpi_model,
@@ -46,15 +49,18 @@ def model_for_kind(
     Raises
     ------
     CalibError
-        Unknown kind or unknown parameter name.
+        Unknown kind, unknown parameter name, a value that is not a finite number,
+        ``n`` not an integer >= 1, ``deadband_counts`` not a number >= 0.
     """
-    try:
-        if kind == "gpi":
-            return gpi_model(n=n, **values)
-        if kind == "egpi":
-            return i2ris_egpi_model(n=n, deadband_counts=deadband_counts, **values)
-        if kind == "egpi_c":
-            return continuous_egpi_model(n=n, deadband_counts=deadband_counts, **values)
-    except KeyError as exc:
-        raise CalibError(f"model '{kind}': {exc.args[0]}; check the parameter names") from None
-    raise CalibError(f"unknown model '{kind}'; use {', '.join(MODEL_KINDS)} or all")
+    func = "model_for_kind"
+    if not isinstance(kind, str):
+        raise CalibError(f"{func}: kind is {describe(kind)}; give one of {', '.join(MODEL_KINDS)}")
+    factories = {"gpi": gpi_model, "egpi": i2ris_egpi_model, "egpi_c": continuous_egpi_model}
+    if kind not in factories:
+        raise CalibError(f"unknown model '{kind}'; use {', '.join(MODEL_KINDS)} or all")
+    check_settings(func, n, deadband_counts)
+    if kind == "gpi":
+        model = gpi_model(n=n)
+    else:
+        model = factories[kind](n=n, deadband_counts=deadband_counts)
+    return checked_values(func, model, values)

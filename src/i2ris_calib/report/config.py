@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from i2ris_calib._validate import validated_config
+
 
 @dataclass(frozen=True)
 class ReportConfig:
@@ -26,8 +28,9 @@ class ReportConfig:
     detection_window_s: float = 1.0
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

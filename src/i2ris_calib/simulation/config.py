@@ -6,6 +6,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Literal
 
+from i2ris_calib._validate import validated_config
+
 DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
 
 
@@ -86,8 +88,9 @@ class SimulationConfig:
     effects: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from i2ris_calib._validate import validated_config
+
 
 @dataclass(frozen=True)
 class SyncConfig:
@@ -71,8 +73,9 @@ class SyncConfig:
     seed: int = 0  # reserved for randomised starts of the model fits
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

@@ -6,6 +6,8 @@ import math
 from dataclasses import dataclass
 from typing import Literal
 
+from i2ris_calib._validate import validated_config
+
 
 @dataclass(frozen=True)
 class TrackingConfig:
@@ -49,8 +51,9 @@ class TrackingConfig:
     plain: bool = True  # also write single-camera IPPE top-solution angles (comparison)
 
     def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML."""
-        self.validate()
+        """Validated on construction, not only when loaded from TOML: field types, then
+        :meth:`validate`; a CalibError either way."""
+        validated_config(self)
 
     def validate(self) -> None:
         """Raise ValueError on inconsistent settings."""

@@ -12,6 +12,7 @@ from i2ris_calib._validate import validated_config
 from i2ris_calib.compensation.config import CompensateConfig
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.fitting.config import FitConfig
+from i2ris_calib.io.columns import ColumnsConfig
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.sync.config import SyncConfig
@@ -54,6 +55,7 @@ class PipelineConfig:
     report: ReportConfig = field(default_factory=ReportConfig)
     compensate: CompensateConfig = field(default_factory=CompensateConfig)
     run: RunConfig = field(default_factory=RunConfig)
+    columns: ColumnsConfig = field(default_factory=ColumnsConfig)
 
     def __post_init__(self) -> None:
         """Every section checked on construction: ``PipelineConfig(fit="trf")`` or

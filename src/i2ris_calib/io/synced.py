@@ -6,7 +6,10 @@ diagnosed on a dataset is refitted and plotted on exactly the same samples.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import difflib
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,71 +18,202 @@ import pandas as pd
 
 from i2ris_calib.data.dataset import AXES, Dataset, direction_datasets, input_bands, other_axis
 from i2ris_calib.errors import CalibError
+from i2ris_calib.io.columns import STANDARD_COLUMNS, ColumnsConfig, parse_columns_option
 from i2ris_calib.sync.log import find_glitches, speed_limit
 
+#: a first time at or above this (s) is an epoch clock (1970 + 11.6 days or later, no
+#: recording's own clock): such times are counted from the first sample
+EPOCH_MIN_S = 1e6
+#: median sample intervals a synced recording can plausibly have, s (10 kHz .. 0.1 Hz);
+#: a slower one that becomes plausible in ms/us/ns is refused naming the time_unit_s to set
+PLAUSIBLE_STEP_S = (1e-4, 10.0)
 
-def read_synced(path: str | Path, axis: str) -> pd.DataFrame:
+_COLUMNS: ContextVar[ColumnsConfig | None] = ContextVar("i2ris_calib_synced_columns", default=None)
+
+
+@contextmanager
+def reading_columns(config, option: str | None = None) -> Iterator:
+    """Read synced CSVs with ``config.columns`` (``[columns]``), overridden key by key by
+    the ``--columns`` text ``option``, inside the ``with`` block; yields ``config`` with
+    that effective ``columns`` section (so provenance records the mapping used).
+
+    For the commands whose stage functions do not pass ``columns`` to
+    :func:`load_datasets` themselves (``fit``, ``diagnose``). Outside the block the
+    standard names are read again.
+    """
+    columns = config.columns if option is None else parse_columns_option(option, config.columns)
+    token = _COLUMNS.set(columns)
+    try:
+        yield replace(config, columns=columns)
+    finally:
+        _COLUMNS.reset(token)
+
+
+def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = None) -> pd.DataFrame:
     """Read and validate a synced CSV for ``axis``; one-line CalibError on bad input.
 
+    ``columns`` (``[columns]``, default: the one set by :func:`reading_columns`, else
+    the standard names) says which column of the file is which standard column and
+    the file's time and angle units. The frame returned has the standard columns only,
+    in s, counts and deg (time as float64 throughout; epoch times counted from the
+    first sample, the origin in ``df.attrs["time_origin_s"]``).
+
     Checks: file readable, columns ``time_s, enc_<axis>, <axis>_deg`` present (header
-    names are stripped of spaces), time and encoders numeric and finite, time
-    strictly increasing. Angles of rows whose ``status`` (if present) is not
-    ``measured`` are set to NaN (both axes). ``enc_<other>`` and ``<other>_deg`` are
-    read when present.
+    names are stripped of spaces), every column named in ``columns`` other than its
+    standard name present, time and encoders numeric and finite, time strictly
+    increasing and in a plausible unit. Angles of rows whose ``status`` (if present) is
+    not ``measured`` are set to NaN (both axes). ``enc_<other>`` and ``<other>_deg``
+    are read when present.
     """
     p = Path(path)
     if axis not in AXES:
         raise CalibError(f"--axis must be yaw or pitch, got '{axis}'")
+    cols = _COLUMNS.get() if columns is None else columns
+    cols = ColumnsConfig() if cols is None else cols
     if not p.is_file():
         raise CalibError(f"{p}: file not found (give a synced CSV, see docs/formats.md)")
     try:
-        df = pd.read_csv(p, skipinitialspace=True)
+        raw = pd.read_csv(p, skipinitialspace=True)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    df.columns = [str(c).strip() for c in df.columns]
+    raw.columns = [str(c).strip() for c in raw.columns]
     other = other_axis(axis)
     need = ["time_s", f"enc_{axis}", f"{axis}_deg"]
-    missing = [c for c in need if c not in df.columns]
+    source = cols.mapping()
+    _check_mapped_columns(p, raw, cols)
+    missing = [c for c in need if source[c] not in raw.columns]
     if missing:
         raise CalibError(
-            f"{p}: missing column(s) {', '.join(missing)} (found: {', '.join(df.columns)}); "
-            "a synced CSV has time_s, enc_yaw, enc_pitch, yaw_deg, pitch_deg, status (docs/formats.md)"
+            f"{p}: missing column(s) {', '.join(missing)} (found: {', '.join(raw.columns)}); "
+            "a synced CSV has time_s, enc_yaw, enc_pitch, yaw_deg, pitch_deg, status "
+            "(docs/formats.md); name your file's columns with --columns or [columns]"
         )
+    present = [c for c in STANDARD_COLUMNS if source[c] in raw.columns]
+    df = pd.DataFrame({c: raw[source[c]] for c in present})
+    label = {c: f"'{c}'" if source[c] == c else f"'{source[c]}' ({c})" for c in present}
     optional = [c for c in (f"enc_{other}", f"{other}_deg") if c in df.columns]
+    numeric: dict[str, pd.Series] = {}
     for col in [*need, *optional]:
         num = pd.to_numeric(df[col], errors="coerce")
         bad = num.isna() & df[col].notna()
         if bad.any():
             k = int(np.flatnonzero(bad.to_numpy())[0])
             raise CalibError(
-                f"{p}: column '{col}' is not numeric at line {k + 2} ({df[col].iloc[k]!r}); "
+                f"{p}: column {label[col]} is not numeric at line {k + 2} ({df[col].iloc[k]!r}); "
                 "fix or remove that row"
             )
+        numeric[col] = num
         df[col] = num.astype(float)
     for col in ("time_s", f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])):
         bad = np.flatnonzero(~np.isfinite(df[col].to_numpy()))
         if bad.size:
             raise CalibError(
-                f"{p}: {bad.size} row(s) with NaN/empty '{col}' (first at line {bad[0] + 2}); "
+                f"{p}: {bad.size} row(s) with NaN/empty {label[col]} (first at line {bad[0] + 2}); "
                 "drop or interpolate them (only angles may be NaN)"
             )
-    t = df["time_s"].to_numpy()
+    where = list(raw.columns).index(source["time_s"])
+    t, origin = _seconds(
+        numeric["time_s"],
+        cols.time_unit_s,
+        lambda: pd.read_csv(p, usecols=[where], dtype=str, skipinitialspace=True).iloc[:, 0],
+    )
+    df["time_s"] = t
+    df.attrs["time_origin_s"] = origin
     step = np.diff(t)
     if step.size and (step <= 0).any():
         k = int(np.flatnonzero(step <= 0)[0])
         kind = "duplicate" if step[k] == 0 else "decreasing"
         raise CalibError(
-            f"{p}: {kind} time_s at line {k + 3} ({t[k]:.6g} -> {t[k + 1]:.6g} s); "
+            f"{p}: {kind} {label['time_s']} at line {k + 3} ({t[k]:.6g} -> {t[k + 1]:.6g} s"
+            f"{' after the first sample' if origin else ''}); "
             "time must be strictly increasing (sort the rows and drop duplicates)"
         )
+    _check_time_unit(p, t, label["time_s"], cols.time_unit_s)
+    if cols.angle_unit == "rad":
+        for col in (f"{axis}_deg", f"{other}_deg"):
+            if col in df.columns:
+                df[col] = np.rad2deg(df[col].to_numpy(dtype=float))
     for col in (f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])):
-        check_encoder_jumps(t, df[col].to_numpy(), col, p)
+        check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
     if "status" in df.columns:
         not_measured = df["status"].astype(str).str.strip() != "measured"
         for col in (f"{axis}_deg", f"{other}_deg"):
             if col in df.columns:
                 df.loc[not_measured, col] = np.nan
     return df
+
+
+def _check_mapped_columns(p: Path, raw: pd.DataFrame, cols: ColumnsConfig) -> None:
+    """One line naming the file, the column and the file's columns when a column that
+    ``cols`` names (other than by its standard name) is not in the file."""
+    for key in STANDARD_COLUMNS:
+        name = cols.mapping()[key]
+        if not cols.is_mapped(key) or name in raw.columns:
+            continue
+        close = difflib.get_close_matches(name, list(raw.columns), n=1, cutoff=0.6)
+        hint = f"did you mean '{close[0]}'? " if close else ""
+        raise CalibError(
+            f"{p}: no column '{name}' (the {key} column in --columns/[columns]); the file has "
+            f"{', '.join(repr(c) for c in raw.columns)}; {hint}fix the column mapping "
+            "(docs/formats.md)"
+        )
+
+
+def _seconds(
+    values: pd.Series, unit_s: float, text: Callable[[], pd.Series] | None = None
+) -> tuple[np.ndarray, float]:
+    """(time s as float64, origin s) from the time column as read and its unit.
+
+    Times whose first value is an epoch clock (>= :data:`EPOCH_MIN_S` s) are returned
+    from the first sample (origin = that time, s), the first time subtracted before
+    anything is rounded: in the column's own type when it is integer (ns/ms stamps),
+    else on the decimal text (``text()``, the column as strings) so that
+    ``1700000000.2`` is 0.2 s after ``1700000000.0``, not 0.2000000477. Other times are
+    returned as they are (origin 0).
+    """
+    v = values.to_numpy()
+    first = v[0]
+    origin = float(first) * unit_s
+    if abs(origin) < EPOCH_MIN_S:
+        return v.astype(np.float64) * unit_s, 0.0
+    if np.issubdtype(v.dtype, np.integer):
+        rel = (v - first).astype(np.float64)
+    else:
+        exact = None if text is None else _decimal_offsets(text())
+        if exact is None or exact.size != v.size:
+            exact = v.astype(np.float64) - np.float64(first)
+        rel = exact
+    return rel * unit_s, origin
+
+
+def _decimal_offsets(text: pd.Series) -> np.ndarray | None:
+    """Each value minus the first, float64, from plain decimal text (``123.456``): the
+    integer parts subtracted exactly, then the fractions. None unless every value is
+    a plain non-negative decimal with at most 18 integer digits."""
+    parts = text.astype(str).str.strip().str.extract(r"^(\d{1,18})(?:\.(\d*))?$")
+    if parts[0].isna().any():
+        return None
+    whole = parts[0].astype(np.int64).to_numpy()
+    frac = ("0." + parts[1].fillna("")).astype(np.float64).to_numpy()
+    return (whole - whole[0]).astype(np.float64) + (frac - frac[0])
+
+
+def _check_time_unit(p: Path, t: np.ndarray, label: str, unit_s: float) -> None:
+    """CalibError naming the ``time_unit_s`` to set when the median sample interval is
+    implausibly slow in seconds but plausible in ms, us or ns (:data:`PLAUSIBLE_STEP_S`)."""
+    if t.size < 2:
+        return
+    step = float(np.median(np.diff(t)))
+    lo, hi = PLAUSIBLE_STEP_S
+    if step <= hi:
+        return
+    for unit, name in ((1e-3, "ms"), (1e-6, "us"), (1e-9, "ns")):
+        if lo <= step * unit <= hi:
+            raise CalibError(
+                f"{p}: {label} steps by {step:g} s per sample (median, with time_unit_s = "
+                f"{unit_s:g}): the times look like {name}; set time_unit_s = {unit_s * unit:g} "
+                f"in [columns] or --columns (docs/formats.md)"
+            )
 
 
 # --- encoder glitches (issue 9): 'sync' repairs them; a synced CSV made elsewhere is checked
@@ -149,21 +283,19 @@ def load_datasets(
     axis: str,
     fit_config,
     directions: tuple[str, ...] | None = None,
+    columns: ColumnsConfig | None = None,
 ) -> list[Dataset]:
     """All motion-direction datasets of ``axis`` in the given synced CSVs, uniquely
-    named (``"yaw+ (file stem)"`` when two files give the same name)."""
+    named (``"yaw+ (file stem)"`` when two files give the same name). ``columns``:
+    the column mapping and units of the files (``[columns]``; default: the one set by
+    :func:`reading_columns`, else the standard synced CSV)."""
     found: list[Dataset] = []
+    frames = []
     for path in paths:
-        found += datasets_from_frame(
-            read_synced(path, axis), axis, fit_config, str(path), directions
-        )
+        frames.append(read_synced(path, axis, columns))
+        found += datasets_from_frame(frames[-1], axis, fit_config, str(path), directions)
     if not found:
-        which = "" if directions is None else f" in direction {'/'.join(directions)}"
-        raise CalibError(
-            f"no {axis} motion{which} in {', '.join(map(str, paths))}: fewer than "
-            f"{fit_config.min_block_samples} samples leave the zero band of enc_{axis} "
-            "(check --axis, or lower [fit] min_block_samples)"
-        )
+        raise CalibError(_too_little_motion(paths, frames, axis, fit_config, directions))
     seen: dict[str, int] = {}
     unique = []
     for d in found:
@@ -172,3 +304,39 @@ def load_datasets(
             d = replace(d, name=f"{d.name} ({Path(d.source).stem})")
         unique.append(d)
     return unique
+
+
+def _too_little_motion(paths, frames, axis: str, fit_config, directions) -> str:
+    """The one line when no file gives a dataset: the samples each direction has
+    outside the zero band, the minimum (``[fit] min_block_samples``) and what that
+    is in seconds at the recording's own rate."""
+    wanted = ("±",) if fit_config.signed else ("+", "-")
+    if directions is not None:
+        wanted = tuple(d for d in wanted if d in directions)
+    counts = {d: 0 for d in wanted}
+    rates = []
+    for df in frames:
+        enc = df[f"enc_{axis}"].to_numpy(dtype=float)
+        band = input_bands(enc, fit_config.zero_band_counts, fit_config.deadband_counts).zero_band
+        side = {"+": enc > band, "-": enc < -band, "±": np.abs(enc) > band}
+        for d in wanted:
+            counts[d] += int(side[d].sum())
+        step = np.diff(df["time_s"].to_numpy(dtype=float))
+        if step.size:
+            rates.append(1.0 / float(np.median(step)))
+    need = fit_config.min_block_samples
+    files = ", ".join(map(str, paths))
+    if not any(counts.values()):
+        which = "" if directions is None else f" in direction {'/'.join(directions)}"
+        return (
+            f"no {axis} motion{which} in {files}: enc_{axis} never leaves its zero band "
+            f"(check --axis, and --columns/[columns] enc_{axis})"
+        )
+    got = ", ".join(f"{d}: {n}" for d, n in counts.items())
+    rate = f", {need / min(rates):.3g} s of motion at {min(rates):.3g} Hz" if rates else ""
+    return (
+        f"too little {axis} motion in {files}: fewer than {need} samples leave the zero band "
+        f"of enc_{axis} in each motion direction ({got}); a direction needs at least {need} "
+        f"([fit] min_block_samples{rate}): record longer or at a higher rate (or lower "
+        "[fit] min_block_samples)"
+    )

@@ -47,12 +47,14 @@ def test_write_report_outputs_and_markdown_links(run_dir):
     md = (out / "report.md").read_text()
     links = re.findall(r"\]\((figures/[^)]+\.png)\)", md)
     files = sorted(p.relative_to(out).as_posix() for p in (out / "figures").iterdir())
-    assert sorted(set(links)) == files and len(files) == 8
+    assert sorted(set(links)) == files and len(files) == 9
     html = page.read_text()
     # Every PNG beside the Markdown is also inlined in the HTML, byte for byte.
     inlined = {base64.b64decode(s) for s in re.findall(r"data:image/png;base64,([^\"]+)", html)}
     assert {(out / f).read_bytes() for f in files} == inlined
-    assert "0.250000" in html and "0.250000" in md  # sync offset (s), shown in both twins
+    # sync offset (s) with its stderr, shown in both twins; the raw sync.json only in the HTML
+    assert "0.25000 ± 0.00040 s" in html and "0.25000 ± 0.00040 s" in md
+    assert "<details><summary>sync/sync.json (raw" in html and '"offset_s": 0.25' not in md
     assert not list(run_dir.glob(".report.tmp-*"))
 
 
@@ -61,7 +63,7 @@ def stub_figures(monkeypatch):
     """Replace the matplotlib figures by a tiny PNG (figures are tested in tests/report)."""
     from i2ris_calib.report import figures
 
-    for name in ("fit_figure_png", "tracking_figure_png", "synced_figure_png"):
+    for name in ("fit_figure_png", "tracking_figure_png", "synced_figure_png", "clock_figure_png"):
         monkeypatch.setattr(figures, name, lambda *a, **k: runfolder.tiny_png())
 
 
@@ -263,3 +265,30 @@ def test_parent_of_run_folders_is_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "holds runs" in err and "s1" in err and err.count("\n") == 1
     assert not (tmp_path / "runs" / "report").exists()
+
+
+def test_fit_output_folder_gives_the_model_sections_alone(tmp_path):
+    """`report FIT_DIR`: a fit output folder (fit.json + predictions.csv) without a run."""
+    runfolder.make_run_folder(tmp_path / "r", track=False, sync=False, fit_axes=("yaw",))
+    fit_dir = tmp_path / "fit_out"
+    (tmp_path / "r" / "fit" / "yaw").rename(fit_dir)
+    run, inputs = load_run(fit_dir)
+    assert run.fit_only and [fd.axis for fd in run.fits] == ["yaw"]
+    assert sorted(p.name for p in inputs) == ["fit.json", "predictions.csv"]
+    page = write_report(fit_dir, None, CFG)
+    assert page == fit_dir / "report" / "report.html"
+    html = page.read_text()
+    anchors = re.findall(r'<section id="([a-z0-9]+)">', html)
+    assert anchors == ["overview", "accuracy", "fig6", "parameters", "provenance"]
+    assert "recommended model" in html and "Clock synchronisation" not in html
+    figs = sorted(p.name for p in (fit_dir / "report" / "figures").iterdir())
+    assert figs == ["fig6_yaw_yaw_neg.png", "fig6_yaw_yaw_pos.png"]
+    # --out may not be the fit folder itself (the input), nor contain it
+    for bad in (fit_dir, tmp_path):
+        with pytest.raises(CalibError, match="fit folder|input"):
+            write_report(fit_dir, bad, CFG)
+    # without predictions.csv the report says so instead of drawing
+    (fit_dir / "predictions.csv").unlink()
+    write_report(fit_dir, tmp_path / "rep2", CFG)
+    text = (tmp_path / "rep2" / "report.md").read_text()
+    assert "predictions.csv: not found" in text

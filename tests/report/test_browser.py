@@ -35,7 +35,16 @@ window.addEventListener('load', function () {
     title: document.title, imgs: imgs,
     sections: document.querySelectorAll('main > section').length,
     tables: document.querySelectorAll('table').length,
-    collapse: t ? getComputedStyle(t).borderCollapse : null});
+    collapse: t ? getComputedStyle(t).borderCollapse : null,
+    maxRows: Math.max.apply(null, Array.prototype.map.call(
+      document.querySelectorAll('table'), function (x) { return x.tBodies[0].rows.length; })),
+    verdicts: Array.prototype.map.call(document.querySelectorAll('p.verdict'), function (v) {
+      return {section: (v.closest('main > section') || {}).id, ok: v.classList.contains('ok'),
+              markShown: v.querySelector('.mark').getBoundingClientRect().width > 0};
+    }),
+    appendix: Array.prototype.map.call(document.querySelectorAll('#appendix details'),
+      function (d) { return {open: d.open, height: d.getBoundingClientRect().height}; }),
+    firstInSync: (document.querySelector('#sync > :nth-child(2)') || {}).className || null});
   document.body.appendChild(out);
 });
 </script>
@@ -91,9 +100,17 @@ def test_report_renders_in_headless_chromium(tmp_path):
     result = render_probe(exe, probe_page, tmp_path / "chromium-profile")
 
     assert result["title"] == "I2RIS calibration report: session_b"
-    assert result["sections"] == 8 and result["tables"] >= 20
+    assert result["sections"] == 9 and result["tables"] >= 20
     assert result["collapse"] == "collapse"  # the inline stylesheet was applied
-    assert len(result["imgs"]) == len(figures) == 8
+    assert len(result["imgs"]) == len(figures) == 9
+    assert result["maxRows"] <= 40  # no table in view longer than 40 rows
+    # the clock and tracking sections open with their one-line verdicts, marks drawn
+    assert result["firstInSync"] == "verdict info"
+    by_section = {v["section"] for v in result["verdicts"]}
+    assert {"sync", "tracking"} <= by_section and all(v["markShown"] for v in result["verdicts"])
+    # the raw JSON is there, collapsed (a closed <details> is one summary line high)
+    assert len(result["appendix"]) == 2
+    assert all(not d["open"] and d["height"] < 40 for d in result["appendix"])
     assert all(im["ok"] and im["shown"] for im in result["imgs"]), result["imgs"]
     # Decoded sizes equal the PNG files beside report.md (same images, fully decoded).
     assert sorted((im["w"], im["h"]) for im in result["imgs"]) == sorted(

@@ -28,7 +28,7 @@ def fast_figures(request, monkeypatch):
 
     from i2ris_calib.report import figures
 
-    for name in ("fit_figure_png", "tracking_figure_png", "synced_figure_png"):
+    for name in ("fit_figure_png", "tracking_figure_png", "synced_figure_png", "clock_figure_png"):
         monkeypatch.setattr(figures, name, lambda *a, **k: tiny_png())
 
 
@@ -56,16 +56,17 @@ def test_complete_run_has_every_section_and_figure(run_data):
         "tracking",
         "sync",
         "provenance",
+        "appendix",
     ]
     names = [f.name for f in doc.figures()]
-    # 4 Fig-6 figures (2 axes x 2 directions), tracking, synced loops, 2 diagnosis PNGs.
+    # 4 Fig-6 figures (2 axes x 2 directions), tracking, clock, synced loops, 2 diagnosis PNGs.
     assert sorted(n for n in names if n.startswith("fig6_")) == [
         "fig6_pitch_pitch_neg",
         "fig6_pitch_pitch_pos",
         "fig6_yaw_yaw_neg",
         "fig6_yaw_yaw_pos",
     ]
-    assert {"tracking_quality", "synced_loops"} <= set(names) and len(names) == 8
+    assert {"tracking_quality", "clock", "synced_loops"} <= set(names) and len(names) == 9
     assert not _blocks(doc, "overview", Note)
     params = next(s for s in doc.sections if s.anchor == "parameters")
     assert [s.title for s in params.subsections] == ["yaw+", "yaw-", "pitch+", "pitch-"]
@@ -93,7 +94,7 @@ def test_progress_is_called_once_per_section(run_data):
     run, _ = run_data
     calls: list[str] = []
     doc = build_document(run, CFG, progress=calls.append)
-    assert len(calls) == len(doc.sections) == section_count(run) == 8
+    assert len(calls) == len(doc.sections) == section_count(run) == 9
     empty = RunData("e")
     calls.clear()
     assert len(build_document(empty, CFG, progress=calls.append).sections) == len(calls)
@@ -165,7 +166,7 @@ def test_each_missing_part_degrades_alone(run_data, missing):
     notes = [b.text for s in _walk(doc.sections) for b in s.blocks if isinstance(b, Note)]
     assert any(label in n for n in notes)
     full = len(build_document(run_data[0], CFG).figures())
-    lost = {"angles": 1, "track": 0, "sync": 0, "synced": 1, "predictions": 2}[missing]
+    lost = {"angles": 1, "track": 0, "sync": 1, "synced": 1, "predictions": 2}[missing]
     assert len(doc.figures()) == full - lost
 
 

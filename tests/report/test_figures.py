@@ -159,7 +159,10 @@ def test_tracking_figure_without_flags_or_reprojection():
         }
     )
     png = figures.tracking_figure_png(a, 1.0, dpi=40)
-    assert png_size(png) == (400, 320)
+    assert png_size(png) == (400, 240)
+    # with a roll column a fourth panel: 7 in high
+    png = figures.tracking_figure_png(a.assign(roll_deg=0.01), 1.0, dpi=40)
+    assert png_size(png) == (400, 280)
 
 
 def test_synced_figure_size():
@@ -199,3 +202,19 @@ def test_thinning_step_bounds_points(n, max_points):
     assert k >= 1 and len(range(0, n, k)) <= max(max_points, 1)
     if k > 1:
         assert len(range(0, n, k - 1)) > max_points  # smallest such step
+
+
+def test_fig6_band_columns_are_carried_and_drawn(pred):
+    """A ``<model>_sd_deg`` column becomes that model's band, broken at the same gaps."""
+    band = pred.assign(egpi_sd_deg=0.05)
+    data = figures.fig6_data(band)
+    assert list(data.bands) == ["egpi_deg"]
+    b = data.bands["egpi_deg"]
+    assert b.shape == data.models["egpi_deg"].shape
+    gaps = np.isnan(b)  # the break rows (the model may be NaN elsewhere too)
+    assert gaps.any() and np.all(np.isnan(data.models["egpi_deg"])[gaps])
+    assert np.nanmax(b) == np.nanmin(b) == 0.05
+    assert figures.fig6_data(pred).bands == {}
+    with_band = figures.fit_figure_png(band, "yaw+", "yaw", "+", dpi=40)
+    assert with_band != figures.fit_figure_png(pred, "yaw+", "yaw", "+", dpi=40)
+    assert png_size(with_band) == png_size(figures.fit_figure_png(pred, "yaw+", "yaw", "+", dpi=40))

@@ -196,26 +196,52 @@ def test_gpi_egpi_ratio(yaw_fit):
     assert tables.gpi_egpi_ratio(d) is None
 
 
-def test_params_table_values_stderr_and_relative_error(yaw_fit):
+def test_params_table_value_pm_stderr_in_words(yaw_fit):
     d = tables.fit_datasets(yaw_fit)[0]
-    t = tables.params_table(d, {"a1": ("deg/count", "loading slope")})
+    long_doc = "flag point: unloading switches to y2 at v <= v_f (fitted by profile search)"
+    t = tables.params_table(d, {"a1": ("deg/count", "loading slope"), "v_f": ("count", long_doc)})
     labels = ("EGPI_C", "EGPI", "GPI")
     assert t.header == (
         "parameter",
         "unit",
-        *(f"{m} {c}" for m in labels for c in ("value", "stderr", "rel. stderr (%)")),
+        *(f"{m} (value ± stderr)" for m in labels),
         "meaning",
     )
     rows = {r[0]: r for r in t.rows}
     assert set(rows) == set(d["models"]["egpi"]["params"]) | set(d["models"]["gpi"]["params"])
     assert rows["a1"][1] == "deg/count" and rows["a1"][-1] == "loading slope"
     assert rows["a2"][1] == "" and rows["a2"][-1] == ""
-    # stderr was written as 1 % of the value, except each model's last parameter (null).
-    assert rows["a1"][4] == rows["a1"][7] == rows["a1"][10] == "1.0"
-    assert rows["v_f"][3] == rows["v_f"][6] == tables.DASH and rows["rn"][9] == tables.DASH
-    assert rows["kappa"][8] == tables.DASH  # GPI has no kappa
-    assert rows["a1"][2] == f"{d['models']['egpi_c']['params']['a1']:.6g}"
-    assert rows["a1"][5] == f"{d['models']['egpi']['params']['a1']:.6g}"
+    # stderr was written as 1 % of the value: value and stderr to the stderr's 2nd digit
+    for j, key in enumerate(("egpi_c", "egpi", "gpi")):
+        val = d["models"][key]["params"]["a1"]
+        assert rows["a1"][2 + j] == tables.fmt_pm(val, 0.01 * val)
+        v_txt, s_txt = rows["a1"][2 + j].split(" ± ")
+        assert abs(float(v_txt) - val) <= 0.0051 * val and float(s_txt) == pytest.approx(
+            0.01 * val, rel=0.05
+        )
+    # each model's last parameter has a null stderr: the profiled v_f says so, GPI's rn
+    # is not identified; GPI has no kappa
+    assert rows["v_f"][2].endswith("(profiled)") and rows["v_f"][3].endswith("(profiled)")
+    assert rows["rn"][4].endswith("(not identified)")
+    assert rows["kappa"][4] == tables.DASH
+    # the long meaning is cut to its head and given whole in a footnote
+    assert rows["v_f"][-1] == "flag point [1]"
+    assert t.footnotes == (f"[1] v_f: {long_doc}",)
+
+
+def test_params_table_fixed_and_unidentified(yaw_fit):
+    d = tables.fit_datasets(yaw_fit)[0]
+    rec = d["models"]["egpi"]
+    rec["params"]["lam"], rec["stderr"]["lam"] = 0.0364, 0.0
+    rec["params"]["a5"], rec["stderr"]["a5"] = 3.49926e-05, 0.163169
+    rec["free"] = [n for n in rec["params"] if n != "lam"]
+    rows = {r[0]: r for r in tables.params_table(d).rows}
+    assert rows["lam"][3] == "0.0364 (fixed)"
+    assert rows["a5"][3] == "0.00003 ± 0.16 (not identified)"
+    assert tables.unidentified(d, "egpi") == ["a5"]
+    # without a "free" list a zero stderr still means fixed
+    del rec["free"]
+    assert {r[0]: r for r in tables.params_table(d).rows}["lam"][3] == "0.0364 (fixed)"
 
 
 def test_fit_info_table(yaw_fit):

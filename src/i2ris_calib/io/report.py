@@ -22,6 +22,7 @@ from i2ris_calib import __version__
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.config_io import load_config
+from i2ris_calib.io.fit_schema import check_fit_doc
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.report.build import build_document, section_count
@@ -49,7 +50,11 @@ PREDICTION_COLUMNS = {
     "split": False,
 }
 MODEL_COLUMNS = ("gpi_deg", "egpi_deg", "egpi_c_deg", "diagnosed_deg")
-OPTIONAL_NUMERIC = ("reproj_err_px", *MODEL_COLUMNS)
+OPTIONAL_NUMERIC = (
+    "reproj_err_px",
+    *MODEL_COLUMNS,
+    *(c.removesuffix("_deg") + "_sd_deg" for c in MODEL_COLUMNS),
+)
 SPLITS = ("fit", "holdout", "other")
 
 
@@ -140,34 +145,10 @@ def read_csv_checked(path: Path, columns: Mapping[str, bool]) -> pd.DataFrame:
 
 
 def check_fit_json(fit: Mapping[str, Any], path: Path) -> None:
-    """Structural checks of a fit.json (schema i2ris-calib.fit/1); CalibError naming the file."""
-    datasets = fit.get("datasets")
-    if datasets is None and not isinstance(fit.get("models"), dict):
-        raise CalibError(f"{path}: no 'datasets' list (schema i2ris-calib.fit/1); re-run 'fit'")
-    if datasets is not None and not (
-        isinstance(datasets, list) and all(isinstance(d, dict) for d in datasets)
-    ):
-        raise CalibError(f"{path}: 'datasets' must be a list of objects; re-run 'fit'")
-    for i, d in enumerate(datasets if datasets is not None else [fit]):
-        models = d.get("models")
-        if not isinstance(models, dict):
-            raise CalibError(f"{path}: datasets[{i}] has no 'models' object; re-run 'fit'")
-        _check_numbers(d.get("rows"), f"datasets[{i}].rows", path)
-        _check_numbers(d.get("bands"), f"datasets[{i}].bands", path, skip=("derived",))
-        for key, rec in models.items():
-            if rec is None:
-                continue
-            if not isinstance(rec, dict):
-                raise CalibError(
-                    f"{path}: datasets[{i}].models.{key} is not an object; re-run 'fit'"
-                )
-            for part in ("params", "stderr", "metrics", "holdout_metrics"):
-                _check_numbers(rec.get(part), f"datasets[{i}].models.{key}.{part}", path)
-            if rec.get("converged") is not None and not isinstance(rec["converged"], bool):
-                raise CalibError(
-                    f"{path}: datasets[{i}].models.{key}.converged = {rec['converged']!r} is "
-                    "not true/false; re-run 'fit'"
-                )
+    """Check a fit.json with the one fit.json check every reader uses
+    (:func:`~i2ris_calib.io.fit_schema.check_fit_doc`; what is there, as the report
+    shows what it finds); CalibError naming the file and the key."""
+    check_fit_doc(fit, path, complete=False)
 
 
 def check_predictions(pred: pd.DataFrame, path: Path) -> None:
@@ -183,19 +164,6 @@ def check_predictions(pred: pd.DataFrame, path: Path) -> None:
             f"{path}: column 'split' has value {bad.iloc[0]!r} (row {int(bad.index[0]) + 2}); "
             f"expected one of {', '.join(SPLITS)}; re-run 'fit'"
         )
-
-
-def _check_numbers(obj: Any, where: str, path: Path, skip: tuple[str, ...] = ()) -> None:
-    """``obj`` (if present) is an object whose values are numbers or null."""
-    if obj is None:
-        return
-    if not isinstance(obj, dict):
-        raise CalibError(f"{path}: {where} is not an object; re-run 'fit'")
-    for name, val in obj.items():
-        if name in skip:
-            continue
-        if val is not None and (isinstance(val, bool) or not isinstance(val, (int, float))):
-            raise CalibError(f"{path}: {where}.{name} = {val!r} is not a number; re-run 'fit'")
 
 
 def png_paths(obj: Any) -> list[str]:
@@ -286,7 +254,8 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
     Parameters
     ----------
     run_dir : path
-        Folder laid out as in docs/report.md (track/, sync/, fit/<axis>/, diagnose/<axis>/).
+        Folder laid out as in docs/report.md (track/, sync/, fit/<axis>/, diagnose/<axis>/),
+        or a ``fit`` output folder (fit.json + predictions.csv, :func:`load_fit_folder`).
 
     Returns
     -------
@@ -298,6 +267,8 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
     root = Path(run_dir)
     if not root.is_dir():
         raise CalibError(f"run folder not found: {root} (give the folder written by 'run')")
+    if is_fit_folder(root):
+        return load_fit_folder(root)
     _check_is_run_folder(root)
     r = _Reader(root)
     angles = r.csv("track/angles.csv", ANGLES_COLUMNS)
@@ -322,6 +293,43 @@ def load_run(run_dir: str | Path) -> tuple[RunData, list[Path]]:
 
 
 STAGE_FOLDERS = ("track", "sync", "fit", "diagnose", "compensate")
+#: The files of a ``fit`` output folder the report reads.
+FIT_FILES = ("fit.json", "predictions.csv")
+
+
+def is_fit_folder(root: Path) -> bool:
+    """True for a ``fit`` output folder: ``fit.json`` in it and no stage folder."""
+    return (root / "fit.json").is_file() and not any((root / s).is_dir() for s in STAGE_FOLDERS)
+
+
+def load_fit_folder(fit_dir: str | Path) -> tuple[RunData, list[Path]]:
+    """Read a ``fit`` output folder (fit.json, predictions.csv) as a model-only run.
+
+    Returns
+    -------
+    run : RunData
+        ``fit_only`` True, one FitData named by fit.json's ``axis`` (else the folder
+        name); a missing predictions.csv is listed in ``run.absent``.
+    inputs : list of Path
+        Files read.
+    """
+    root = Path(fit_dir)
+    r = _Reader(root)
+    fit = r.json("fit.json")
+    if fit is None:  # pragma: no cover - is_fit_folder checked it
+        raise CalibError(f"{root}: no fit.json; give a folder written by 'fit'")
+    check_fit_json(fit, root / "fit.json")
+    pred = r.csv("predictions.csv", PREDICTION_COLUMNS)
+    if pred is not None:
+        check_predictions(pred, root / "predictions.csv")
+    axis = str(fit.get("axis") or root.resolve().name)
+    run = RunData(
+        name=root.resolve().name,
+        fits=(FitData(axis=axis, fit=fit, predictions=pred),),
+        absent=dict(r.absent),
+        fit_only=True,
+    )
+    return run, r.read
 
 
 def _check_is_run_folder(root: Path) -> None:
@@ -382,15 +390,19 @@ def _template(name: str) -> str:
     )
 
 
+def _inputs(root: Path) -> list[Path]:
+    """What a report of ``root`` reads: the run parts, or a fit folder's files."""
+    return [root / d for d in (FIT_FILES if is_fit_folder(root) else RUN_PARTS)]
+
+
 def _check_out(out: Path, root: Path) -> None:
-    """Refuse an output folder that is or contains the run folder, or holds anything
-    but a previous report (io/outputs.py)."""
+    """Refuse an output folder that is or contains the run (or fit) folder, or holds
+    anything but a previous report (io/outputs.py)."""
     o, r = out.resolve(), root.resolve()
     if o == r or o in r.parents:
-        raise CalibError(
-            f"--out {out} contains the run folder {root}; choose e.g. {root / 'report'}"
-        )
-    claim_output_dir(out, "report", [root / d for d in RUN_PARTS], REPORT_FILES)
+        what = "fit folder" if is_fit_folder(root) else "run folder"
+        raise CalibError(f"--out {out} contains the {what} {root}; choose e.g. {root / 'report'}")
+    claim_output_dir(out, "report", _inputs(root), REPORT_FILES)
 
 
 def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any = None) -> Path:
@@ -399,9 +411,10 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     Parameters
     ----------
     run_dir : path
-        The run folder.
+        The run folder, or a ``fit`` output folder (the report then holds the model
+        sections alone).
     out : path, optional
-        Output folder (default ``RUN_DIR/report``); replaced as a whole.
+        Output folder (default ``RUN_DIR/report``, ``FIT_DIR/report``); replaced as a whole.
     config : PipelineConfig, optional
         Its ``report`` section sets figure DPI and sizes; recorded in provenance.
 
@@ -419,7 +432,7 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     doc = _build_with_progress(run, cfg.report, prov)
     page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
     markdown, files = render_markdown(doc, FIGURE_DIR)
-    with output_dir(out_dir, "report", [root / d for d in RUN_PARTS], REPORT_FILES) as tmp:
+    with output_dir(out_dir, "report", _inputs(root), REPORT_FILES) as tmp:
         tmp.chmod(0o755)  # mkdtemp makes it private; a report is meant to be shared
         (tmp / "report.html").write_text(page, encoding="utf-8")
         (tmp / "report.md").write_text(markdown, encoding="utf-8")

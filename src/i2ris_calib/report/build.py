@@ -15,7 +15,8 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
-from i2ris_calib.report import figures, tables
+from i2ris_calib.report import figures, tables, verdicts
+from i2ris_calib.report.clock import angle_rate_p95, clock_view
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
 from i2ris_calib.report.document import (
@@ -28,6 +29,7 @@ from i2ris_calib.report.document import (
     Section,
     Table,
 )
+from i2ris_calib.report.recommend import CONTINUOUS_MARGIN, recommend
 
 STAGE_INPUTS = (
     ("track", "track/angles.csv"),
@@ -64,6 +66,9 @@ def build_document(
         ("Fig 6 figures", lambda: fit_figures_section(run, cfg)),
         ("parameters", lambda: parameters_section(run)),
     ]
+    if run.fit_only:
+        builders.append(("provenance", lambda: provenance_section(run, provenance)))
+        return _assemble(run, builders, progress, "GPI / EGPI hysteresis models (Yue et al.)")
     if run.diagnoses:
         builders.append(("diagnosis", lambda: diagnosis_section(run.diagnoses)))
     if run.compensation is not None:
@@ -72,22 +77,37 @@ def build_document(
         ("tracking quality", lambda: tracking_section(run, cfg)),
         ("clock sync", lambda: sync_section(run, cfg)),
         ("provenance", lambda: provenance_section(run, provenance)),
+        ("appendix", lambda: appendix_section(run)),
     ]
+    return _assemble(
+        run,
+        builders,
+        progress,
+        "GPI / EGPI hysteresis models (Yue et al.), tracking, clock sync and provenance",
+    )
+
+
+def _assemble(run: RunData, builders, progress, subtitle: str) -> Document:
     sections = []
     for label, build in builders:
         if progress is not None:
             progress(label)
         sections.append(build())
     return Document(
-        title=f"I2RIS calibration report: {run.name}",
-        subtitle="GPI / EGPI hysteresis models (Yue et al.), tracking, clock sync and provenance",
-        sections=tuple(sections),
+        title=f"I2RIS calibration report: {run.name}", subtitle=subtitle, sections=tuple(sections)
     )
 
 
 def section_count(run: RunData) -> int:
     """Number of top-level sections (= progress calls) :func:`build_document` makes."""
-    return 7 + bool(run.diagnoses) + (run.compensation is not None)
+    if run.fit_only:
+        return 5
+    return 8 + bool(run.diagnoses) + (run.compensation is not None)
+
+
+def _pred_label(run: RunData, fd: FitData) -> str:
+    """How predictions.csv of ``fd`` is named in ``run.absent`` and in the report."""
+    return "predictions.csv" if run.fit_only else f"fit/{fd.axis}/predictions.csv"
 
 
 def _missing(run: RunData, label: str) -> Note:
@@ -99,7 +119,7 @@ def _missing(run: RunData, label: str) -> Note:
 def overview_section(run: RunData) -> Section:
     """Which stage outputs were found, and the headline result per dataset."""
     rows = []
-    for stage, label in STAGE_INPUTS:
+    for stage, label in () if run.fit_only else STAGE_INPUTS:
         rows.append(
             (stage, label, "missing: " + run.absent[label] if label in run.absent else "found")
         )
@@ -107,10 +127,10 @@ def overview_section(run: RunData) -> Section:
         pred = (
             "found"
             if fd.predictions is not None
-            else "missing: " + run.absent.get(f"fit/{fd.axis}/predictions.csv", "not found")
+            else "missing: " + run.absent.get(_pred_label(run, fd), "not found")
         )
         rows.append(("fit", f"fit/{fd.axis}/fit.json", "found"))
-        rows.append(("fit", f"fit/{fd.axis}/predictions.csv", pred))
+        rows.append(("fit", _pred_label(run, fd), pred))
     for label, why in sorted(run.absent.items()):
         if label.startswith("fit/") and not any(
             label == f"fit/{fd.axis}/predictions.csv" for fd in run.fits
@@ -118,14 +138,29 @@ def overview_section(run: RunData) -> Section:
             rows.append(("fit", label, "missing: " + why))
     for dd in run.diagnoses:
         rows.append(("diagnose", f"diagnose/{dd.axis}/diagnosis.json", "found"))
-    if not run.diagnoses:
+    if not run.diagnoses and not run.fit_only:
         rows.append(("diagnose", "diagnose/AXIS/diagnosis.json", "not run (optional)"))
-    blocks: list = [
-        Table(("stage", "output", "status"), tuple(rows), "Stage outputs read from the run folder.")
-    ]
+    if run.fit_only:  # a fit output folder: its two files, no run layout
+        rows = [
+            (stage, label.split("/")[-1], status) for stage, label, status in rows if stage == "fit"
+        ]
+    blocks: list = []
+    recs = recommendation_table(run.fits)
+    if recs is not None:
+        blocks.append(recs)
     headline = _headline(run.fits)
     if headline is not None:
         blocks.append(headline)
+    blocks.append(
+        Table(
+            ("stage", "output", "status"),
+            tuple(rows),
+            "Files read from the fit output folder (no run folder: tracking, clock and "
+            "diagnosis are not part of this report)."
+            if run.fit_only
+            else "Stage outputs read from the run folder.",
+        )
+    )
     warned = run_warnings(run)
     if warned:
         blocks.append(
@@ -139,6 +174,35 @@ def overview_section(run: RunData) -> Section:
             Table(("stage", "where", "warning"), tuple(warned), "Warnings of every stage.")
         )
     return Section("overview", "Overview", tuple(blocks))
+
+
+def recommendation_table(fits: tuple[FitData, ...]) -> Table | None:
+    """The model recommended per dataset, why, and the range its data cover."""
+    rows = []
+    for fd in fits:
+        preds = _predictions_by_dataset(fd)
+        for d in tables.fit_datasets(fd.fit):
+            name = str(d.get("name", fd.axis))
+            r = recommend(d, preds.get(name))
+            rows.append((name, r.label, tables.fmt(r.rmse_deg, 3), r.why, r.support))
+    if not rows:
+        return None
+    return Table(
+        (
+            "dataset",
+            "recommended model",
+            "held-out RMSE (deg)",
+            "why",
+            "data cover (outside: extrapolation)",
+        ),
+        tuple(rows),
+        "Recommended model per dataset: among converged models the lowest held-out RMSE; "
+        "EGPI_C (continuous) over EGPI when within "
+        f"{100 * CONTINUOUS_MARGIN:.0f} % of it. The last column is the range of the "
+        "dataset's own measured samples: no data were seen outside it, so the model is "
+        "not supported there.",
+        align=("l", "l", "r", "l", "l"),
+    )
 
 
 def run_warnings(run: RunData) -> list[tuple[str, str, str]]:
@@ -267,7 +331,7 @@ def fit_figures_section(run: RunData, cfg: ReportConfig) -> Section:
     for fd in run.fits:
         blocks: list = []
         if fd.predictions is None:
-            blocks.append(_missing(run, f"fit/{fd.axis}/predictions.csv"))
+            blocks.append(_missing(run, _pred_label(run, fd)))
         else:
             for d in tables.fit_datasets(fd.fit):
                 name = str(d.get("name", fd.axis))
@@ -294,6 +358,15 @@ def fit_figures_section(run: RunData, cfg: ReportConfig) -> Section:
 def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
     c = tables.rows_from_predictions(rows)
     models = [lab for col, lab, _ in figures.MODEL_CURVES if col in rows]
+    banded = [lab for col, lab, _ in figures.MODEL_CURVES if figures.band_column(col) in rows]
+    band = (
+        f" Shaded about {', '.join(banded)} (middle): the ±{figures.BAND_SIGMA:g} sd prediction "
+        "band from the parameter covariance (FitResult.eval_uncertainty)."
+        if banded
+        else " No prediction band: predictions.csv has no <model>_sd_deg column (the band "
+        "needs the parameter covariance, which fit.json does not store; "
+        "FitResult.eval_uncertainty gives it in Python)."
+    )
     sign = (
         " Sign convention of a '-' dataset: input max(-enc, 0), angle -theta (= |angle| on "
         "its own samples)."
@@ -312,7 +385,7 @@ def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
         "time, right: model minus measured vs time. Own samples: "
         f"{c['fitted']} fitted, {c['holdout']} held out (yellow: held-out cycles), "
         f"{c['angle_missing']} not measured.{other} Lines are broken wherever samples are missing "
-        "(other direction, unmeasured frames, time gaps): no line bridges a gap." + sign
+        "(other direction, unmeasured frames, time gaps): no line bridges a gap." + sign + band
     )
 
 
@@ -341,13 +414,14 @@ def parameters_section(run: RunData, info: Mapping[str, tuple[str, str]] | None 
 
 
 def tracking_section(run: RunData, cfg: ReportConfig) -> Section:
-    """Detection rate, reprojection error and flagged frames over time."""
+    """Verdicts first, then the per-frame status timeline and a short quality table."""
     blocks: list = []
     if run.angles is None:
         blocks.append(_missing(run, "track/angles.csv"))
-    else:
-        summary = tables.tracking_summary(run.angles)
-        blocks.append(tables.tracking_table(summary))
+    if run.track is None:
+        blocks.append(_missing(run, "track/track.json"))
+    blocks += verdicts.tracking_verdicts(run.angles, run.track)
+    if run.angles is not None:
         png = figures.tracking_figure_png(
             run.angles, cfg.detection_window_s, dpi=cfg.figure_dpi, max_points=cfg.max_plot_points
         )
@@ -355,28 +429,52 @@ def tracking_section(run: RunData, cfg: ReportConfig) -> Section:
             Figure(
                 "tracking_quality",
                 png,
-                "Tracking quality over camera time: fused yaw/pitch, detection rate in a moving "
-                "window, reprojection error of measured frames, and the time of every flagged "
-                "(not measured) frame by status.",
+                "Tracking over camera time: the status of every frame (measured, or why "
+                "not), the fused yaw and pitch, the reprojection error of measured frames "
+                "and the roll (twist) they imply.",
             )
         )
-    if run.track is None:
-        blocks.append(_missing(run, "track/track.json"))
-    else:
-        blocks.append(
-            tables.key_value_table(run.track, "Summary recorded by the tracker (track/track.json).")
-        )
+        summary = tables.tracking_summary(run.angles)
+        noise = {
+            axis: verdicts.angle_noise_deg(
+                run.angles["time_s"].to_numpy(dtype=float),
+                run.angles[f"{axis}_deg"].to_numpy(dtype=float),
+            )
+            for axis in ("yaw", "pitch")
+            if f"{axis}_deg" in run.angles
+        }
+        blocks.append(tables.tracking_table(summary, run.track, noise))
     return Section("tracking", "Tracking quality", tuple(blocks))
 
 
 def sync_section(run: RunData, cfg: ReportConfig) -> Section:
-    """Clock offset/drift with uncertainties, and the synced loops."""
+    """Verdicts first (method and why, stated error, edges, axes, coverage), the clock
+    figure, a short table, then the synced loops."""
     blocks: list = []
+    view = clock_view(run.sync) if run.sync is not None else None
     if run.sync is None:
         blocks.append(_missing(run, "sync/sync.json"))
+    elif view is None:
+        blocks.append(Note("sync/sync.json states no clock offset (offset_s).", "warn"))
     else:
-        blocks.append(tables.sync_table(run.sync))
-        blocks.append(tables.key_value_table(run.sync, "Everything recorded in sync/sync.json."))
+        blocks += verdicts.clock_verdicts(view, run.sync, _angle_rate(run))
+        blocks.append(
+            Figure(
+                "clock",
+                figures.clock_figure_png(view, dpi=cfg.figure_dpi),
+                "Clock line: the offset t_ctrl − t_cam over camera time with its stated ±1 and "
+                "±2 sd band (top), and every piece of evidence relative to it (bottom): the "
+                "matched flash edges with ±1 sd, and the clocks the event and the "
+                "hysteresis model gave alone when auto combined them"
+                + (
+                    "; right: the model method's residual sum of squares over the offset "
+                    "(its minimum is the model's offset)."
+                    if view.profile is not None
+                    else "."
+                ),
+            )
+        )
+        blocks.append(tables.clock_table(view, run.sync))
     if run.synced is None:
         blocks.append(_missing(run, "sync/synced.csv"))
     else:
@@ -392,6 +490,40 @@ def sync_section(run: RunData, cfg: ReportConfig) -> Section:
             )
         )
     return Section("sync", "Clock synchronisation", tuple(blocks))
+
+
+def _angle_rate(run: RunData) -> float:
+    """Largest (over yaw and pitch) 95th-percentile angular speed (deg/s) of synced.csv,
+    else of angles.csv; NaN without either."""
+    frame = run.synced if run.synced is not None else run.angles
+    if frame is None:
+        return float("nan")
+    rates = [
+        angle_rate_p95(frame["time_s"].to_numpy(dtype=float), frame[c].to_numpy(dtype=float))
+        for c in ("yaw_deg", "pitch_deg")
+        if c in frame
+    ]
+    rates = [r for r in rates if np.isfinite(r)]
+    return max(rates) if rates else float("nan")
+
+
+def appendix_section(run: RunData) -> Section:
+    """The raw stage records (track.json, sync.json) collapsed, for a reader who wants
+    every number; the Markdown twin points to the files instead."""
+    blocks: list = []
+    for label, doc in (("track/track.json", run.track), ("sync/sync.json", run.sync)):
+        if doc is None:
+            continue
+        blocks.append(
+            Code(
+                json.dumps(doc, indent=2, default=str),
+                f"{label} (raw, {len(json.dumps(doc))} characters)",
+                md_note=f"Raw {label}: see the file in the run folder (shown in report.html).",
+            )
+        )
+    if not blocks:
+        blocks.append(Paragraph("No track.json or sync.json in the run folder."))
+    return Section("appendix", "Appendix: raw stage records", tuple(blocks))
 
 
 def diagnosis_section(diagnoses: tuple[DiagnosisData, ...]) -> Section:

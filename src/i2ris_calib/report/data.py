@@ -105,6 +105,9 @@ class RunData:
         ``compensate/`` when ``run`` was given a target.
     absent : dict
         Input label (e.g. ``"track/angles.csv"``) -> reason it is not shown.
+    fit_only : bool
+        Read from a ``fit`` output folder (fit.json + predictions.csv), not a run
+        folder: the report holds the model sections alone.
     """
 
     name: str
@@ -116,3 +119,4 @@ class RunData:
     diagnoses: tuple[DiagnosisData, ...] = ()
     compensation: CompensationData | None = None
     absent: dict[str, str] = field(default_factory=dict)
+    fit_only: bool = False

@@ -30,6 +30,16 @@ class Note:
 
 
 @dataclass(frozen=True)
+class Verdict:
+    """A one-line judgement of a stage: ``status`` ``"ok"``, ``"warn"`` or ``"info"``.
+
+    Rendered as a marked line (HTML: a coloured label; Markdown: a bold label)."""
+
+    text: str
+    status: str = "info"
+
+
+@dataclass(frozen=True)
 class Table:
     """A text table: ``header`` of k strings, ``rows`` of k strings each.
 
@@ -37,6 +47,8 @@ class Table:
     ``(label, n_columns)`` pairs whose widths add up to k (HTML only; in Markdown
     the group label is prefixed to the header cells). ``align`` optionally gives
     ``"l"`` or ``"r"`` per column; by default numeric-looking columns align right.
+    ``footnotes`` are lines printed under the table (e.g. ``"[1] v_f: ..."``, for
+    cells that carry a ``[1]`` marker instead of a long text).
     """
 
     header: tuple[str, ...]
@@ -44,6 +56,7 @@ class Table:
     caption: str = ""
     group_header: tuple[tuple[str, int], ...] = ()
     align: tuple[str, ...] = ()
+    footnotes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -57,10 +70,14 @@ class Figure:
 
 @dataclass(frozen=True)
 class Code:
-    """Preformatted text (JSON, TOML) shown verbatim."""
+    """Preformatted text (JSON, TOML) shown verbatim; collapsed under ``summary`` in HTML.
+
+    ``md_note``, when given, replaces the text in the Markdown twin (e.g. a pointer to
+    the raw file, so the Markdown stays short)."""
 
     text: str
     summary: str = ""
+    md_note: str = ""
 
 
 @dataclass(frozen=True)
@@ -76,7 +93,7 @@ class MarkdownFragment:
     images: dict[str, tuple[str, bytes]] = field(default_factory=dict)
 
 
-Block = Paragraph | Note | Table | Figure | Code | MarkdownFragment
+Block = Paragraph | Note | Verdict | Table | Figure | Code | MarkdownFragment
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ timestamp is written into the PNG, so the same data give the same bytes.
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -23,6 +23,8 @@ DIAGNOSED_COLOR = "#009E73"  # bluish green
 HOLDOUT_COLOR = "#F0E442"
 OTHER_COLOR = "0.6"
 GAP_FACTOR = 1.5
+BAND_SIGMA = 2.0
+"""Prediction bands are drawn at +-2 standard errors (about 95 %)."""
 """A time step longer than this times the median step is a gap (no line across it)."""
 STATUS_COLORS = {"not_found": "#E69F00", "ambiguous": "#CC79A7", "rejected": "#D55E00"}
 
@@ -174,6 +176,9 @@ class Fig6Data:
     counts : dict
         ``fit``, ``holdout`` (own samples with a measured angle), ``not_measured``
         (own samples without one), ``other`` (samples of the other direction).
+    bands : dict
+        Model column -> its 1-sigma prediction band (deg), shape (m,), for every model
+        whose ``<model>_sd_deg`` column (:func:`band_column`) predictions.csv carries.
     """
 
     time_s: np.ndarray
@@ -186,6 +191,7 @@ class Fig6Data:
     holdout_spans: list[tuple[float, float]]
     other_spans: list[tuple[float, float]]
     counts: dict[str, int]
+    bands: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def fig6_data(
@@ -221,7 +227,10 @@ def fig6_data(
     models = _model_columns(p[own])
     step = thinning_step(int(own.sum()), max_points)
     cols = [p[c].to_numpy(dtype=float) for c, _, _ in models]
-    time_s, vv, *ys = broken_series(np.flatnonzero(own)[::step], cont, t, v, *cols)
+    banded = [c for c, _, _ in models if band_column(c) in p]
+    sds = [p[band_column(c)].to_numpy(dtype=float) for c in banded]
+    time_s, vv, *ys = broken_series(np.flatnonzero(own)[::step], cont, t, v, *cols, *sds)
+    ys, band_ys = ys[: len(cols)], ys[len(cols) :]
     mt, mv, mth, *ms = broken_series(np.flatnonzero(measured)[::step], cont_m, t, v, theta, *cols)
     return Fig6Data(
         time_s=time_s,
@@ -239,7 +248,14 @@ def fig6_data(
             "not_measured": int((own & ~measured).sum()),
             "other": int((~own).sum()),
         },
+        bands=dict(zip(banded, band_ys, strict=True)),
     )
+
+
+def band_column(model_column: str) -> str:
+    """predictions.csv column of a model's 1-sigma prediction band: ``egpi_deg`` ->
+    ``egpi_sd_deg`` (deg; :meth:`i2ris_calib.fitting.fit.FitResult.eval_uncertainty`)."""
+    return model_column.removesuffix("_deg") + "_sd_deg"
 
 
 def fig6_labels(axis: str, direction: str) -> tuple[str, str]:
@@ -292,6 +308,10 @@ def fit_figure_png(
         label, color = labels[col]
         ax_v.plot(data.v, y, "-", lw=1, color=color, label=label)
         ax_t.plot(data.time_s, y, "-", lw=1, color=color, label=label)
+        if col in data.bands:
+            sd = BAND_SIGMA * data.bands[col]
+            ax_t.fill_between(data.time_s, y - sd, y + sd, color=color, alpha=0.25, lw=0,
+                              label=f"{label} ±{BAND_SIGMA:g} sd")  # fmt: skip
         ax_e.plot(
             data.meas_time_s,
             data.errors[col],
@@ -343,33 +363,72 @@ def detection_rate(time_s: np.ndarray, measured: np.ndarray, window_s: float) ->
     return (csum[hi] - csum[lo]) / np.maximum(hi - lo, 1)
 
 
+STATUS_ORDER = ("measured", "not_found", "ambiguous", "rejected")
+MEASURED_STATUS_COLOR = "#009E73"
+
+
+def status_runs(time_s: np.ndarray, status: np.ndarray, kind: str) -> list[tuple[float, float]]:
+    """(start, width) in s of each run of consecutive frames with ``status == kind``;
+    a run covers its frames' times plus one median frame interval (so a single frame
+    is visible)."""
+    t = np.asarray(time_s, dtype=float)
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    spans = holdout_spans(t, np.asarray(status) == kind)
+    return [(a - dt / 2, b - a + dt) for a, b in spans]
+
+
 def tracking_figure_png(
     angles: pd.DataFrame, window_s: float = 1.0, dpi: int = 100, max_points: int = 20000
 ) -> bytes:
-    """Tracking quality over time: angles, detection rate, reprojection error, flagged frames.
+    """Tracking over time: per-frame status timeline, angles, reprojection error, roll.
 
     Parameters
     ----------
     angles : DataFrame
         track/angles.csv: ``time_s`` (camera clock, s), ``yaw_deg``, ``pitch_deg``,
-        ``status``, ``reproj_err_px`` (px).
+        ``status``, optionally ``reproj_err_px`` (px) and ``roll_deg`` (deg).
     window_s : float
-        Moving-window width for the detection rate (s).
+        Moving-window width for the measured share drawn over the timeline (s).
 
     Returns
     -------
     bytes
-        PNG image, 10 x 8 in, four stacked panels sharing the time axis.
+        PNG image, 10 x 6 in (7 in with roll), stacked panels sharing the time axis: one
+        timeline row per status present (measured, not_found, ambiguous, rejected,
+        others) with the measured share in a ``window_s`` window; yaw and pitch;
+        reprojection error of measured frames; roll (twist) when present.
     """
     a = angles.sort_values("time_s", kind="stable")
     t_all = a["time_s"].to_numpy(dtype=float)
     status = a["status"].astype(str).to_numpy()
     measured = status == "measured"
-    rate = detection_rate(t_all, measured, window_s)
     step = thinning_step(len(a), max_points)
     sl = slice(None, None, step)
-    fig = _new_figure(10, 8)
-    ax_a, ax_d, ax_r, ax_f = fig.subplots(4, 1, sharex=True)
+    has_roll = "roll_deg" in a and np.isfinite(a["roll_deg"].to_numpy(dtype=float)).any()
+    ratios = [1.0, 2.0, 1.0] + ([1.0] if has_roll else [])
+    fig = _new_figure(10, 7 if has_roll else 6)
+    axes = fig.subplots(len(ratios), 1, sharex=True, gridspec_kw={"height_ratios": ratios})
+    ax_s, ax_a, ax_r = axes[:3]
+    kinds = [k for k in STATUS_ORDER if (status == k).any()]
+    kinds += sorted(set(status) - set(STATUS_ORDER))
+    for row, kind in enumerate(kinds):
+        n = int((status == kind).sum())
+        color = MEASURED_STATUS_COLOR if kind == "measured" else STATUS_COLORS.get(kind, "0.3")
+        ax_s.broken_barh(status_runs(t_all, status, kind), (row - 0.4, 0.8), color=color)
+        ax_s.text(0.995, row, f"{n} ", transform=ax_s.get_yaxis_transform(), va="center",
+                  ha="right", fontsize=7, color="0.1")  # fmt: skip
+    ax_s.set_yticks(range(len(kinds)), kinds)
+    ax_s.set_ylim(len(kinds) - 0.4, -0.6)
+    rate = detection_rate(t_all, measured, window_s)
+    ax_share = ax_s.twinx()
+    ax_share.plot(t_all[sl], 100 * rate[sl], lw=0.7, color="0.15")
+    ax_share.set_ylim(-5, 105)
+    ax_share.set_ylabel("measured (%)", fontsize=7)
+    ax_share.tick_params(labelsize=7)
+    ax_s.set_title(
+        f"status of every frame (frame counts at right; line: measured share in a "
+        f"{window_s:g} s window)"
+    )
     for col, color in (("yaw_deg", EGPI_COLOR), ("pitch_deg", GPI_COLOR)):
         if col in a:
             ax_a.plot(
@@ -380,10 +439,6 @@ def tracking_figure_png(
                 label=col.replace("_deg", ""),
             )
     ax_a.set(ylabel="angle (deg)", title="tracked angles (gaps = unmeasured frames)")
-    ax_d.plot(t_all[sl], 100 * rate[sl], lw=0.8, color="0.2")
-    ax_d.set(
-        ylabel="detected (%)", ylim=(-5, 105), title=f"detection rate, {window_s:g} s moving window"
-    )
     err = (
         a["reproj_err_px"].to_numpy(dtype=float)
         if "reproj_err_px" in a
@@ -396,33 +451,19 @@ def tracking_figure_png(
         ax_r.axhline(float(np.median(err[ok])), color=EGPI_COLOR, lw=0.8, label="median")
         ax_r.legend(fontsize=8, loc="upper right")
     ax_r.set(ylabel="reprojection\nerror (px)", title="reprojection error of measured frames")
-    _flagged_raster(ax_f, t_all, status)
-    ax_f.set(xlabel="time (s, camera clock)", title="flagged frames by status")
-    for ax in (ax_a, ax_d, ax_r, ax_f):
+    if has_roll:
+        ax_o = axes[3]
+        roll = a["roll_deg"].to_numpy(dtype=float)
+        ax_o.plot(t_all[sl], np.where(measured, roll, np.nan)[sl], lw=0.7, color="0.3")
+        ax_o.axhline(0.0, color="0.2", lw=0.5)
+        ax_o.set(ylabel="roll (deg)", title="roll (twist about the tool axis, diagnostic)")
+    axes[-1].set_xlabel("time (s, camera clock)")
+    for ax in axes[1:]:
         ax.grid(True, lw=0.4, alpha=0.5)
+    ax_s.grid(True, axis="x", lw=0.4, alpha=0.5)
     if ax_a.get_legend_handles_labels()[0]:
         ax_a.legend(fontsize=8, loc="upper right")
     return figure_png(fig, dpi)
-
-
-def _flagged_raster(ax, t: np.ndarray, status: np.ndarray) -> None:
-    """One row of tick marks per non-measured status."""
-    kinds = [s for s in ("not_found", "ambiguous", "rejected") if (status == s).any()]
-    kinds += sorted({s for s in status if s != "measured"} - set(kinds))
-    if not kinds:
-        ax.text(0.5, 0.5, "no flagged frames", ha="center", va="center", transform=ax.transAxes)
-        ax.set_yticks([])
-        return
-    for row, kind in enumerate(kinds):
-        ax.eventplot(
-            t[status == kind],
-            lineoffsets=row,
-            linelengths=0.8,
-            linewidths=0.8,
-            colors=STATUS_COLORS.get(kind, "0.3"),
-        )
-    ax.set_yticks(range(len(kinds)), kinds)
-    ax.set_ylim(-0.6, len(kinds) - 0.4)
 
 
 def synced_figure_png(synced: pd.DataFrame, dpi: int = 100, max_points: int = 20000) -> bytes:
@@ -506,4 +547,97 @@ def compensation_figure_png(
         ax_c.plot(t, commands[f"enc_{axis}"].to_numpy()[::step], "-", lw=0.9, color="0.1")
         ax_c.set_ylabel(f"command enc_{axis} (counts)")
         ax_c.set_xlabel("time (s)")
+    return figure_png(fig, dpi)
+
+
+CAMERA_MARKERS = {"top": ("o", EGPI_COLOR), "side": ("s", GPI_COLOR)}
+OTHER_CLOCK_STYLES = {"event alone": ("--", "#E69F00"), "model alone": (":", DIAGNOSED_COLOR)}
+
+
+def clock_figure_png(view, dpi: int = 100) -> bytes:
+    """The clock and its evidence: offset line with its stated band, residuals of the
+    flash edges and of the clocks each method gave alone, the model's offset profile.
+
+    Parameters
+    ----------
+    view : ClockView
+        :func:`i2ris_calib.report.clock.clock_view` of sync.json.
+
+    Returns
+    -------
+    bytes
+        PNG image, 11 x 5.6 in. Left top: offset ``t_ctrl - t_cam`` minus its value at
+        ``t_ref`` (ms) vs camera time, with +-1 and +-2 sd bands. Left bottom: the same
+        relative to the stated clock (residual, ms): flash edges with +-1 sd error bars,
+        the event's and the model's clocks alone. Right (model methods): residual sum of
+        squares of the offset profile vs offset at ``t_ref`` (ms from the stated clock).
+    """
+    c = view.clock
+    t0, t1 = view.t_range_s
+    pad = 0.02 * (t1 - t0) if t1 > t0 else 1.0
+    t = np.linspace(t0 - pad, t1 + pad, 200)
+    ms = 1e3
+    fig = _new_figure(11, 5.6)
+    if view.profile is not None:
+        grid = fig.add_gridspec(2, 2, width_ratios=(3, 1))
+        ax_l, ax_r = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[1, 0])
+        ax_p = fig.add_subplot(grid[:, 1])
+    else:
+        ax_l, ax_r = fig.subplots(2, 1, sharex=True)
+        ax_p = None
+    sd = c.sd(t) * ms
+    line = (c.offset(t) - c.offset_ref_s) * ms
+    for ax, centre in ((ax_l, line), (ax_r, np.zeros_like(t))):
+        if np.isfinite(sd).any():
+            ax.fill_between(t, centre - 2 * sd, centre + 2 * sd, color=EGPI_COLOR, alpha=0.12,
+                            lw=0, label="stated ±2 sd")  # fmt: skip
+            ax.fill_between(t, centre - sd, centre + sd, color=EGPI_COLOR, alpha=0.25, lw=0,
+                            label="stated ±1 sd")  # fmt: skip
+        ax.plot(t, centre, "-", color=EGPI_COLOR, lw=1.2, label=f"clock ({view.method})")
+    for other in view.others:
+        style, color = OTHER_CLOCK_STYLES.get(other.label, ("-.", "0.3"))
+        o = other.offset(t) * ms
+        ax_l.plot(t, o - c.offset_ref_s * ms, style, color=color, lw=1.1, label=other.label)
+        ax_r.plot(t, o - c.offset(t) * ms, style, color=color, lw=1.1, label=other.label)
+    for cam in sorted({e.camera for e in view.edges}):
+        marker, color = CAMERA_MARKERS.get(cam, ("^", "0.3"))
+        es = [e for e in view.edges if e.camera == cam]
+        te = np.array([e.t_cam_s for e in es])
+        r = np.array([e.residual_s for e in es]) * ms
+        s = np.array([e.sd_s for e in es]) * ms
+        base = (c.offset(te) - c.offset_ref_s) * ms
+        kw = dict(fmt=marker, ms=4, color=color, ecolor=color, elinewidth=0.8, capsize=2)
+        ax_l.errorbar(te, base + r, yerr=s, label=f"flash edges ({cam})", **kw)
+        ax_r.errorbar(te, r, yerr=s, label=f"flash edges ({cam})", **kw)
+    ax_l.set(
+        ylabel="offset − offset at t_ref (ms)",
+        title=f"clock line: t_ctrl − t_cam relative to {c.offset_ref_s:.6f} s at "
+        f"t_cam = {c.t_ref_s:.3g} s (slope = drift)",
+    )
+    ax_r.set(
+        xlabel="camera time (s)",
+        ylabel="residual from the clock (ms)",
+        title="residuals: flash edges and the clocks each method gave alone",
+    )
+    ax_r.axhline(0.0, color="0.2", lw=0.5)
+    for ax in (ax_l, ax_r):
+        ax.grid(True, lw=0.4, alpha=0.5)
+        ax.set_xlim(t0 - pad, t1 + pad)
+    ax_l.legend(fontsize=7, loc="best", ncol=2)
+    if ax_p is not None:
+        x, y = view.profile
+        order = np.argsort(x)
+        dx = (x[order] - c.offset_ref_s) * ms
+        ax_p.plot(dx, y[order], "o-", ms=3, lw=0.9, color=DIAGNOSED_COLOR)
+        if np.isfinite(c.offset_ref_sd_s):
+            s_ref = c.offset_ref_sd_s * ms
+            ax_p.axvspan(-s_ref, s_ref, color=EGPI_COLOR, alpha=0.25, lw=0, label="stated ±1 sd")
+        ax_p.axvline(0.0, color=EGPI_COLOR, lw=1.0)
+        ax_p.set(
+            xlabel="offset at t_ref − stated (ms)",
+            ylabel="model residual sum of squares (deg²)",
+            title="model method: offset profile",
+        )
+        ax_p.grid(True, lw=0.4, alpha=0.5)
+        ax_p.legend(fontsize=7, loc="upper center")
     return figure_png(fig, dpi)

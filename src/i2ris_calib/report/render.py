@@ -29,9 +29,11 @@ from i2ris_calib.report.document import (
     Paragraph,
     Section,
     Table,
+    Verdict,
 )
 
 NOTE_LABELS = {"missing": "Not available", "warn": "Warning", "info": "Note"}
+VERDICT_LABELS = {"ok": "OK", "warn": "CHECK", "info": "INFO"}
 
 
 def data_uri(png: bytes) -> str:
@@ -101,6 +103,9 @@ def _html_block(b: Block) -> str:
     if isinstance(b, Note):
         label = NOTE_LABELS.get(b.kind, "Note")
         return f'<p class="note {e(b.kind)}"><strong>{label}:</strong> {e(b.text)}</p>'
+    if isinstance(b, Verdict):
+        label = VERDICT_LABELS.get(b.status, "INFO")
+        return f'<p class="verdict {e(b.status)}"><span class="mark">{label}</span> {e(b.text)}</p>'
     if isinstance(b, Table):
         return _html_table(b)
     if isinstance(b, Figure):
@@ -138,9 +143,14 @@ def _html_table(t: Table) -> str:
         for row in t.rows
     )
     caption = f"<caption>{e(t.caption)}</caption>" if t.caption else ""
+    notes = (
+        '<p class="footnotes">' + "<br>".join(e(n) for n in t.footnotes) + "</p>"
+        if t.footnotes
+        else ""
+    )
     return (
         f'<div class="table-wrap"><table>{caption}<thead>{"".join(head)}</thead>'
-        f"<tbody>\n{body}\n</tbody></table></div>"
+        f"<tbody>\n{body}\n</tbody></table>{notes}</div>"
     )
 
 
@@ -238,6 +248,8 @@ def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
         return [_md_text(b.text)]
     if isinstance(b, Note):
         return [f"> **{NOTE_LABELS.get(b.kind, 'Note')}:** {_md_text(b.text)}"]
+    if isinstance(b, Verdict):
+        return [f"- **{VERDICT_LABELS.get(b.status, 'INFO')}** {_md_text(b.text)}"]
     if isinstance(b, Table):
         return _md_table(b)
     if isinstance(b, Figure):
@@ -245,6 +257,8 @@ def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
         alt = _md_inline(_alt_text(b)).replace("[", "(").replace("]", ")")
         return [f"![{alt}]({path})", "", f"_{_md_inline(b.caption)}_" if b.caption else ""]
     if isinstance(b, Code):
+        if b.md_note:
+            return [_md_text(b.md_note)]
         fence = "```"
         while fence in b.text:
             fence += "`"
@@ -283,6 +297,8 @@ def _md_table(t: Table) -> list[str]:
     out += ["| " + " | ".join(cell(c) for c in row) + " |" for row in t.rows]
     if t.caption:
         out += ["", f"_{_md_inline(t.caption)}_"]
+    if t.footnotes:
+        out += [""] + [_md_text(n) + "  " for n in t.footnotes[:-1]] + [_md_text(t.footnotes[-1])]
     return out
 
 

@@ -13,14 +13,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.hysteresis.registry import ALL_KINDS, PAPER_KINDS, kind_info, table_order
 from i2ris_calib.report.document import Table
 
 DASH = "—"
 NOT_CONVERGED = "*"
-MODELS = (("egpi", "EGPI"), ("gpi", "GPI"))  # the paper's two, in its row order
-# fitted models a fit.json may hold, in table order: a model saved by `diagnose`, the
-# continuous EGPI, then the paper's two
-FIT_MODELS = (("diagnosed", "EGPI + diagnosed effects"), ("egpi_c", "EGPI_C"), *MODELS)
+# the paper's two, in its row order, and every model a fit.json may hold, in table
+# order (a model saved by `diagnose` first, the paper's two last): from the registry
+MODELS = tuple((k, kind_info(k).report_name) for k in PAPER_KINDS)
+FIT_MODELS = tuple((k, kind_info(k).report_name) for k in table_order(ALL_KINDS))
 METRIC_COLUMNS = (
     ("rmse_deg", "RMSE (deg)", 3),
     ("nrmse_pct", "NRMSE (%)", 2),
@@ -49,6 +50,105 @@ def fmt(value: Any, digits: int | None = None) -> str:
     if isinstance(value, Mapping):
         return ", ".join(f"{k}={fmt(v, digits)}" for k, v in value.items()) if value else DASH
     return str(value)
+
+
+def _finite(x: Any) -> float | None:
+    """``x`` as a finite float, else None (None, NaN, inf, text)."""
+    try:
+        f = float(x)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def _positional(x: float, decimals: int) -> str:
+    """``x`` rounded to ``decimals`` places (negative: to tens, hundreds ...), no exponent."""
+    if decimals >= 0:
+        text = f"{x:.{decimals}f}"
+    else:
+        text = f"{round(x, decimals):.0f}"
+    return "0" + text[2:] if text.startswith("-0") and float(text) == 0 else text
+
+
+def fmt_sig(value: Any, digits: int = 4, pad: bool = False) -> str:
+    """``value`` to ``digits`` significant digits, positional between 1e-4 and 1e6
+    (``4225``, ``0.0364``), else ``1.23e-07``; an em dash when missing. ``pad`` keeps
+    trailing zeros (``0.010``) for a number whose digits state its precision."""
+    v = _finite(value)
+    if v is None:
+        return DASH
+    if v == 0 or 1e-4 <= abs(v) < 1e6:
+        if pad:  # keep trailing zeros: 0.010 says "two significant digits"
+            text = np.format_float_positional(
+                v, precision=digits, unique=False, fractional=False, trim="k"
+            )
+            return text.rstrip(".")
+        return np.format_float_positional(v, precision=digits, fractional=False, trim="-")
+    return f"{v:.{digits - 1}e}"
+
+
+def fmt_pm(
+    value: Any,
+    stderr: Any,
+    *,
+    fixed: bool = False,
+    no_stderr: str = "not identified",
+    digits: int = 2,
+) -> str:
+    """``value ± stderr`` with the digits the uncertainty supports.
+
+    The standard error is rounded to ``digits`` significant digits and the value to
+    the same decimal place (``0.00590 ± 0.00008``, ``4225 ± 31``); a value that
+    rounds to zero there keeps one significant digit (``0.00003 ± 0.16``). Very small
+    or very large numbers share one power of ten: ``(3.00 ± 0.10)e-9``.
+
+    Parameters
+    ----------
+    value, stderr : float or None
+        Estimate and its standard error (same unit).
+    fixed : bool
+        The parameter was held fixed: ``"0.0364 (fixed)"``, no stderr.
+    no_stderr : str
+        Words for a missing (None/NaN) standard error, e.g. ``"not identified"`` or
+        ``"profiled"``: ``"4225 (profiled)"``.
+    digits : int
+        Significant digits of the standard error.
+
+    Returns
+    -------
+    str
+        An em dash for a missing value. ``" (not identified)"`` is appended when the
+        standard error exceeds ``|value|`` (the data do not pin the sign).
+    """
+    v = _finite(value)
+    if v is None:
+        return DASH
+    if fixed:
+        return f"{fmt_sig(v)} (fixed)"
+    s = _finite(stderr)
+    if s is None or s < 0:
+        return f"{fmt_sig(v)} ({no_stderr})" if no_stderr else fmt_sig(v)
+    if s == 0:
+        return f"{fmt_sig(v)} ± 0"
+    exp = math.floor(math.log10(s))
+    decimals = digits - 1 - exp
+    s_r = round(s, decimals)
+    if s_r >= 10.0 ** (exp + 1):  # 0.0996 -> 0.10: one place fewer
+        decimals -= 1
+        s_r = round(s, decimals)
+    tail = " (not identified)" if s > abs(v) else ""
+    top = max(abs(v), s_r)
+    if decimals > 6 or top >= 1e6:
+        # one shared power of ten, mantissa to the same relative place
+        e10 = math.floor(math.log10(top))
+        md = max(decimals + e10, 0)
+        mv, ms = v / 10.0**e10, s_r / 10.0**e10
+        body = f"({_positional(mv, md)} ± {_positional(ms, md)})e{e10}"
+        return body + tail
+    v_text = _positional(v, decimals)
+    if v != 0 and float(v_text) == 0:
+        v_text = np.format_float_positional(v, precision=1, fractional=False, trim="-")
+    return f"{v_text} ± {_positional(s_r, decimals)}{tail}"
 
 
 def fit_datasets(fit: Mapping[str, Any]) -> list[dict[str, Any]]:
@@ -297,20 +397,64 @@ def gpi_egpi_ratio(dataset: Mapping[str, Any], split_key: str = "holdout_metrics
     return g / e if e > 0 and math.isfinite(g) and math.isfinite(e) else None
 
 
+MEANING_MAX_CHARS = 40
+"""Longer parameter meanings are cut at their first ``:``/``;`` (or a word) and the
+whole text goes to a footnote under the table."""
+
+
+def short_meaning(text: str, limit: int = MEANING_MAX_CHARS) -> tuple[str, str]:
+    """(cell text, footnote text) of a parameter meaning; footnote ``""`` when it fits.
+
+    The cell keeps the part before the first ``": "`` or ``"; "`` when that fits in
+    ``limit`` characters, else the words that fit followed by an ellipsis.
+    """
+    text = " ".join(str(text).split())
+    if len(text) <= limit:
+        return text, ""
+    cuts = [i for i in (text.find(": "), text.find("; ")) if 0 < i <= limit]
+    if cuts:
+        return text[: min(cuts)], text
+    head = text[: limit - 1].rsplit(" ", 1)[0]
+    return head + "…", text
+
+
+def param_cell(rec: Mapping[str, Any], name: str) -> str:
+    """One parameter of one fitted model: :func:`fmt_pm` of its value and stderr.
+
+    A parameter not in the record's ``free`` list (or, without that list, with stderr
+    exactly 0) is "fixed"; the profiled flag point ``v_f`` has no stderr ("profiled");
+    any other missing stderr means the Jacobian did not identify it.
+    """
+    params = rec.get("params") or {}
+    if name not in params:
+        return DASH
+    se = (rec.get("stderr") or {}).get(name)
+    free = rec.get("free")
+    fixed = name not in free if isinstance(free, list) else _finite(se) == 0.0
+    how = "profiled" if name in PROFILED_PARAMS else "not identified"
+    return fmt_pm(params[name], se, fixed=fixed, no_stderr=how)
+
+
+PROFILED_PARAMS = ("v_f",)
+"""Parameters fitted by a profile search (no standard error), as in ``fitting.fit``."""
+
+
 def params_table(
     dataset: Mapping[str, Any], info: Mapping[str, tuple[str, str]] | None = None
 ) -> Table:
-    """Fitted parameters with standard errors, one column group per model.
+    """Fitted parameters as ``value ± stderr``, one column per model.
 
     Parameters
     ----------
     dataset : mapping
         One fit.json dataset record.
     info : mapping, optional
-        Parameter name -> (unit, one-line meaning), shown when given.
+        Parameter name -> (unit, meaning), shown when given; a meaning longer than
+        :data:`MEANING_MAX_CHARS` is shortened and given in full in a footnote.
 
-    The relative standard error (stderr / |value|, %) flags poorly determined
-    parameters.
+    Each cell is :func:`param_cell`: digits set by the standard error, "not
+    identified" when the standard error exceeds the value or is missing, "fixed" for
+    a parameter held fixed, "profiled" for the flag point.
     """
     info = info or {}
     models = [
@@ -321,35 +465,43 @@ def params_table(
         for n in dataset["models"][k].get("params", {}) or {}:
             if n not in names:
                 names.append(n)
-    header = ["parameter", "unit"]
-    for _, lab in models:
-        header += [f"{lab} value", f"{lab} stderr", f"{lab} rel. stderr (%)"]
-    header.append("meaning")
-    rows = []
+    rows, notes = [], []
     for n in names:
         unit, doc = info.get(n, ("", ""))
-        row = [n, unit]
-        for k, _ in models:
-            rec = dataset["models"][k]
-            val = (rec.get("params") or {}).get(n)
-            se = (rec.get("stderr") or {}).get(n)
-            row += [fmt(val), fmt(se), fmt(_relative_pct(val, se), 1)]
-        rows.append((*row, doc))
+        cell, note = short_meaning(doc)
+        if note:
+            notes.append(f"{n}: {note}")
+            cell = f"{cell} [{len(notes)}]"
+        rows.append((n, unit, *(param_cell(dataset["models"][k], n) for k, _ in models), cell))
     return Table(
-        header=tuple(header),
+        header=("parameter", "unit", *(f"{lab} (value ± stderr)" for _, lab in models), "meaning"),
         rows=tuple(rows),
-        align=("l", "l", *("r" * (3 * len(models))), "l"),
-        caption=f"{_dataset_label(dataset)}: fitted parameters (stderr from the LM Jacobian; "
-        "— = not a parameter of that model, held fixed, or not estimable).",
+        align=("l", "l", *("r" * len(models)), "l"),
+        caption=f"{_dataset_label(dataset)}: fitted parameters, ± one standard error from "
+        "the Jacobian at the optimum, rounded to 2 significant digits with the value to the "
+        "same decimal place. not identified = the standard error exceeds the value or the "
+        "data do not determine it; fixed = held at its value; profiled = fitted by a grid "
+        "search (no standard error); — = not a parameter of that model.",
+        footnotes=tuple(f"[{i + 1}] {t}" for i, t in enumerate(notes)),
     )
 
 
-def _relative_pct(value: Any, stderr: Any) -> float | None:
-    try:
-        v, s = float(value), float(stderr)
-    except (TypeError, ValueError):
-        return None
-    return 100.0 * s / abs(v) if v != 0 else None
+def unidentified(dataset: Mapping[str, Any], key: str) -> list[str]:
+    """Free parameters of model ``key`` whose stderr is missing or exceeds |value|
+    (the profiled flag point excluded: it has no stderr by construction)."""
+    rec = dataset.get("models", {}).get(key)
+    if not isinstance(rec, Mapping):
+        return []
+    out = []
+    free = rec.get("free")
+    for n, v in (rec.get("params") or {}).items():
+        se = _finite((rec.get("stderr") or {}).get(n))
+        if n in PROFILED_PARAMS or (isinstance(free, list) and n not in free) or se == 0.0:
+            continue
+        val = _finite(v)
+        if se is None or val is None or se > abs(val):
+            out.append(n)
+    return out
 
 
 FIT_INFO_KEYS = (
@@ -415,29 +567,75 @@ def tracking_summary(angles: pd.DataFrame) -> dict[str, Any]:
         "reproj_p95_px": stat(lambda e: np.percentile(e, 95)),
         "reproj_max_px": stat(np.max),
         "duration_s": float(np.nanmax(t) - np.nanmin(t)) if n else float("nan"),
+        **_roll_stat(angles, status == "measured"),
     }
 
 
-def tracking_table(summary: Mapping[str, Any]) -> Table:
-    """Key/value table of :func:`tracking_summary`."""
+def _roll_stat(angles: pd.DataFrame, measured: pd.Series) -> dict[str, float]:
+    """``roll_p95_abs_deg``: 95th percentile of |roll_deg| over measured frames, when present."""
+    if "roll_deg" not in angles:
+        return {}
+    roll = pd.to_numeric(angles.loc[measured, "roll_deg"], errors="coerce").to_numpy(dtype=float)
+    roll = roll[np.isfinite(roll)]
+    return {"roll_p95_abs_deg": float(np.percentile(np.abs(roll), 95))} if roll.size else {}
+
+
+def tracking_table(
+    summary: Mapping[str, Any],
+    track: Mapping[str, Any] | None = None,
+    noise_deg: Mapping[str, float] | None = None,
+) -> Table:
+    """Tracking quality in at most 12 rows: frames, status counts, reprojection error,
+    angle noise per axis, roll per frame and the reference roll.
+
+    Parameters
+    ----------
+    summary : mapping
+        :func:`tracking_summary` of angles.csv.
+    track : mapping, optional
+        Parsed track.json (reference roll).
+    noise_deg : mapping, optional
+        Angle column -> frame-to-frame noise (deg), e.g. ``{"yaw": 0.004}``.
+    """
     n = summary["n_frames"]
     rows = [
         ("frames", fmt(n)),
         ("duration (s, camera clock)", fmt(summary["duration_s"], 2)),
         ("detection rate (%)", fmt(100 * summary["detection_rate"], 1)),
     ]
-    for s, c in summary["counts"].items():
-        rows.append((f"frames {s}", f"{c} ({fmt(100 * c / n if n else None, 1)} %)"))
-    rows += [
-        ("reprojection error median (px)", fmt(summary["reproj_median_px"], 3)),
-        ("reprojection error 95th percentile (px)", fmt(summary["reproj_p95_px"], 3)),
-        ("reprojection error max (px)", fmt(summary["reproj_max_px"], 3)),
-    ]
+    for st, c in summary["counts"].items():
+        if st != "measured":
+            rows.append((f"frames {st}", f"{c} ({fmt(100 * c / n if n else None, 1)} %)"))
+    rows.append(
+        (
+            "reprojection error median / 95 % / max (px)",
+            " / ".join(
+                fmt_sig(summary[k], 2)
+                for k in ("reproj_median_px", "reproj_p95_px", "reproj_max_px")
+            ),
+        )
+    )
+    for axis, sd in (noise_deg or {}).items():
+        rows.append((f"{axis} noise, frame to frame (deg, 1 sd)", fmt_sig(sd, 2, pad=True)))
+    if "roll_p95_abs_deg" in summary:
+        rows.append(
+            ("roll per frame, 95 % of |roll| below (deg)", fmt_sig(summary["roll_p95_abs_deg"], 2))
+        )
+    ref = (track or {}).get("reference")
+    if isinstance(ref, Mapping) and ref.get("roll_correction_deg") is not None:
+        rows.append(
+            (
+                f"reference roll correction (deg, {ref.get('roll_method', '?')})",
+                fmt_pm(ref.get("roll_correction_deg"), ref.get("roll_sd_deg")),
+            )
+        )
     return Table(
         header=("quantity", "value"),
         rows=tuple(rows),
-        caption="Tracking quality computed from track/angles.csv (reprojection error over "
-        "measured frames only).",
+        caption="Tracking quality from track/angles.csv (reprojection error over measured "
+        "frames) and track/track.json. Angle noise: robust sd of second differences over "
+        "three consecutive measured frames / sqrt(6). Roll is the twist about the tool "
+        "axis (poorly conditioned; a diagnostic, not used downstream).",
     )
 
 
@@ -519,6 +717,88 @@ def sync_table(sync: Mapping[str, Any]) -> Table:
         rows=tuple(rows),
         caption="t_ctrl = offset_s + (1 + drift_ppm * 1e-6) * t_cam (controller clock from "
         "camera clock).",
+    )
+
+
+def clock_table(view: Any, sync: Mapping[str, Any]) -> Table:
+    """The clock in at most 14 rows: method, offset and drift with standard errors, the
+    stated error in the middle and at worst, each method's clock alone, flash edges,
+    rows synced, glitches, the (biased) cross-correlation for comparison.
+
+    Parameters
+    ----------
+    view : ClockView
+        :func:`i2ris_calib.report.clock.clock_view` of ``sync``.
+    sync : mapping
+        Parsed sync.json.
+    """
+    c = view.clock
+    worst, t_worst = view.worst_sd()
+    ms = lambda x: fmt_sig(1e3 * x, 2)  # noqa: E731
+
+    def drift_text(line) -> str:
+        if math.isfinite(line.drift_sd_ppm):
+            return fmt_pm(line.drift_ppm, line.drift_sd_ppm) + " ppm"
+        return f"{fmt_sig(line.drift_ppm, 3)} ppm (held, not fitted)"
+
+    rows = [
+        ("method used (asked)", f"{view.method} ({view.requested})"),
+        (
+            f"offset at t_cam = {fmt_sig(c.t_ref_s, 4)} s",
+            fmt_pm(c.offset_ref_s, c.offset_ref_sd_s) + " s",
+        ),
+        ("drift", drift_text(c)),
+        (
+            "stated clock error, 1 sd: middle / worst",
+            f"{ms(c.offset_ref_sd_s)} ms / {ms(worst)} ms (at t_cam = {fmt_sig(t_worst, 3)} s)",
+        ),
+    ]
+    for line in view.others:
+        rows.append(
+            (
+                f"{line.label}: offset at t_cam = {fmt_sig(line.t_ref_s, 4)} s; drift",
+                f"{fmt_pm(line.offset_ref_s, line.offset_ref_sd_s)} s; {drift_text(line)}",
+            )
+        )
+    if math.isfinite(view.z):
+        rows.append(("event − model (combined sd)", fmt_sig(view.z, 2)))
+    if view.edges or view.n_camera_edges is not None:
+        rows.append(
+            (
+                "flash edges matched (camera / log edges)",
+                f"{len(view.edges)} ({fmt(view.n_camera_edges)} / {fmt(view.n_log_edges)})",
+            )
+        )
+    rows.append(
+        (
+            "frames synced / outside the encoder log",
+            f"{fmt(sync.get('n_rows'))} / {fmt(sync.get('n_dropped_outside_log'))}",
+        )
+    )
+    glitches = sync.get("encoder_glitches")
+    if isinstance(glitches, Mapping):
+        rows.append(("encoder glitches replaced", fmt(glitches.get("n_samples"))))
+    xc = sync.get("xcorr_comparison")
+    if isinstance(xc, Mapping) and _finite(xc.get("offset_s")) is not None:
+        off = float(xc["offset_s"]) + (_finite(xc.get("drift_ppm")) or 0.0) * 1e-6 * c.t_ref_s
+        rows.append(
+            (
+                "plain cross-correlation (biased, comparison only)",
+                f"{fmt_sig(1e3 * (off - c.offset_ref_s), 3)} ms from the clock at t_ref",
+            )
+        )
+    for key, label in (("camera_time_range_s", "camera"), ("log_time_range_s", "encoder log")):
+        rng = sync.get(key)
+        if isinstance(rng, list) and len(rng) == 2:
+            rows.append((f"{label} time range (s)", f"{fmt_sig(rng[0], 4)} – {fmt_sig(rng[1], 4)}"))
+    return Table(
+        header=("quantity", "value"),
+        rows=tuple(rows),
+        align=("l", "l"),
+        caption="t_ctrl = offset + (1 + drift 1e-6) t_cam (controller clock from camera "
+        "clock); ± one standard error. The stated error of the clock at any time follows "
+        "from the offset's and the drift's (it grows away from t_ref). The raw sync.json "
+        "is in the appendix.",
     )
 
 

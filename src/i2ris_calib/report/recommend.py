@@ -1,0 +1,146 @@
+"""Which fitted model the report recommends per dataset, why, and where the data end.
+
+The rule (stated in the report): among the models that converged, the lowest held-out
+RMSE wins; the continuous EGPI_C is preferred over the paper's EGPI when its held-out
+RMSE is within :data:`CONTINUOUS_MARGIN` of it (EGPI's output steps at the flag point,
+which a feedforward inversion cannot follow). Parameters the data do not identify are
+named. The supported range is that of the dataset's own measured samples: outside
+it the model extrapolates.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from i2ris_calib.report.tables import (
+    FIT_MODELS,
+    PROFILED_PARAMS,
+    fmt_sig,
+    not_converged,
+    unidentified,
+)
+
+CONTINUOUS_MARGIN = 0.10
+"""EGPI_C is recommended over EGPI when its held-out RMSE is at most this much higher (relative)."""
+
+LABELS = dict(FIT_MODELS)
+
+
+@dataclass(frozen=True)
+class Recommendation:
+    """The recommended model of one dataset.
+
+    Attributes
+    ----------
+    dataset : str
+        Dataset name (``yaw+`` ...).
+    model : str or None
+        fit.json model key (``egpi`` ...); None when no model converged with a held-out error.
+    rmse_deg : float
+        Its held-out RMSE (deg); NaN when none.
+    why : str
+        One or two sentences: the comparison, output jumps, identifiability.
+    support : str
+        The input (and angle) range the dataset's measured samples cover.
+    """
+
+    dataset: str
+    model: str | None
+    rmse_deg: float
+    why: str
+    support: str
+
+    @property
+    def label(self) -> str:
+        """Display name of the model (``EGPI_C``), or an em dash."""
+        return LABELS.get(self.model, "—") if self.model else "—"
+
+
+def _holdout(d: Mapping[str, Any], key: str) -> float:
+    rec = d.get("models", {}).get(key) or {}
+    try:
+        v = float((rec.get("holdout_metrics") or {}).get("rmse_deg"))
+    except (TypeError, ValueError):
+        return float("nan")
+    return v if math.isfinite(v) else float("nan")
+
+
+def supported_range(d: Mapping[str, Any], pred: pd.DataFrame | None) -> str:
+    """Input and angle range of the dataset's own measured samples (predictions.csv),
+    else fit.json's ``input_range_counts``; ``"unknown"`` without either."""
+    if pred is not None and not pred.empty:
+        own = pred[(pred["split"].astype(str) != "other")]
+        theta = own["theta_deg"].to_numpy(dtype=float)
+        ok = np.isfinite(theta)
+        if ok.any():
+            v = own["v"].to_numpy(dtype=float)[ok]
+            return (
+                f"input {fmt_sig(v.min(), 4)}–{fmt_sig(v.max(), 4)} counts, angle "
+                f"{fmt_sig(theta[ok].min(), 3)}–{fmt_sig(theta[ok].max(), 3)} deg"
+            )
+    rng = d.get("input_range_counts")
+    if isinstance(rng, list) and len(rng) == 2:
+        return f"input {fmt_sig(rng[0], 4)}–{fmt_sig(rng[1], 4)} counts"
+    return "unknown"
+
+
+def recommend(d: Mapping[str, Any], pred: pd.DataFrame | None = None) -> Recommendation:
+    """The :class:`Recommendation` for one fit.json dataset record (rule: module doc)."""
+    name = str(d.get("name", "dataset"))
+    support = supported_range(d, pred)
+    cands = {
+        k: _holdout(d, k)
+        for k, _ in FIT_MODELS
+        if k in d.get("models", {}) and not not_converged(d, k)
+    }
+    cands = {k: v for k, v in cands.items() if math.isfinite(v)}
+    if not cands:
+        return Recommendation(
+            name, None, float("nan"), "no converged model with a held-out error", support
+        )
+    best = min(cands, key=cands.__getitem__)
+    ranked = sorted(cands.items(), key=lambda kv: kv[1])
+    why = [f"lowest held-out RMSE ({fmt_sig(cands[best], 2, pad=True)} deg"]
+    if len(ranked) > 1:
+        k2, v2 = ranked[1]
+        why[0] += f"; next {LABELS[k2]} {fmt_sig(v2, 2, pad=True)} deg)"
+    else:
+        why[0] += ")"
+    if best == "egpi" and "egpi_c" in cands:
+        c, e = cands["egpi_c"], cands["egpi"]
+        if c <= e * (1 + CONTINUOUS_MARGIN):
+            best = "egpi_c"
+            why = [
+                f"held-out RMSE {fmt_sig(c, 2, pad=True)} deg, within "
+                f"{100 * CONTINUOUS_MARGIN:.0f} % of EGPI's {fmt_sig(e, 2, pad=True)} deg, and "
+                "no output step at the flag point (EGPI jumps there)"
+            ]
+        else:
+            why.append("EGPI's output steps at the flag point (mind it when inverting)")
+    elif best == "egpi":
+        why.append("its output steps at the flag point (mind it when inverting)")
+    bad = unidentified(d, best)
+    free = d["models"][best].get("free") or d["models"][best].get("params") or []
+    n_free = len([n for n in free if n not in PROFILED_PARAMS])
+    if bad:
+        why.append(
+            f"{len(bad)} parameter(s) not identified by these data ({', '.join(bad)}): "
+            "trust the predictions, not those values"
+        )
+    else:
+        profiled = [n for n in free if n in PROFILED_PARAMS]
+        why.append(
+            f"all {n_free} fitted parameters identified"
+            + (f" ({', '.join(profiled)} profiled)" if profiled else "")
+        )
+    if "gpi" in cands and best != "gpi":
+        ratio = cands["gpi"] / cands[best] if cands[best] > 0 else float("nan")
+        if math.isfinite(ratio) and ratio > 1:
+            why.append(f"GPI is {fmt_sig(ratio, 2, pad=True)}x worse")
+    return Recommendation(name, best, cands[best], "; ".join(why) + ".", support)

@@ -143,3 +143,91 @@ def test_effects_and_diagnosis_are_public(data):
     y, yd = base(data.signals), delayed(data.signals)
     assert delayed.names[: len(base.names)] == base.names
     np.testing.assert_allclose(yd[100:], y[90:-10], atol=1e-9)
+
+
+# ---------------------------------------------------------------- the API is visible
+
+_STUB = ROOT / "src" / "i2ris_calib" / "__init__.pyi"
+
+
+def _stub_names() -> tuple[dict[str, str], set[str], list[str], dict[str, list[str]]]:
+    """The stub's ``{name: module}`` imports, ``__version__``-like annotated names,
+    ``__all__`` and ``{function: parameter names}`` of the functions it defines."""
+    import ast
+
+    tree = ast.parse(_STUB.read_text())
+    imported, annotated, defs, all_ = {}, set(), {}, []
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.module.startswith("i2ris_calib"):
+            for a in node.names:
+                assert a.asname == a.name, f"{a.name}: re-export as `{a.name} as {a.name}`"
+                imported[a.name] = node.module
+        elif isinstance(node, ast.AnnAssign):
+            annotated.add(node.target.id)
+        elif isinstance(node, ast.FunctionDef):
+            defs[node.name] = [a.arg for a in (*node.args.args, *node.args.kwonlyargs)]
+        elif isinstance(node, ast.Assign) and node.targets[0].id == "__all__":
+            all_ = ast.literal_eval(node.value)
+    return imported, annotated, all_, defs
+
+
+def test_stub_and_all_agree():
+    """__init__.pyi declares exactly ``__all__``, each name from the module that
+    ``__getattr__`` loads it from."""
+    imported, annotated, stub_all, defs = _stub_names()
+    assert stub_all == list(i2ris_calib.__all__)
+    assert {*imported, *annotated, *defs} == set(i2ris_calib.__all__)
+    assert imported == i2ris_calib._API
+    assert set(defs) == set(i2ris_calib._IO)
+
+
+def test_dir_lists_the_public_names():
+    import subprocess
+    import sys
+
+    # in a fresh interpreter: before any name was loaded
+    out = subprocess.run(
+        [sys.executable, "-c", "import i2ris_calib; print(' '.join(dir(i2ris_calib)))"],
+        capture_output=True, text=True, check=True,
+    ).stdout.split()  # fmt: skip
+    assert set(i2ris_calib.__all__) <= set(out)
+    assert set(i2ris_calib.__all__) <= set(dir(i2ris_calib))
+
+
+def test_public_signatures_are_the_real_ones():
+    """No public callable reads ``(*args, **kwargs)``: a wrapper shows what it wraps,
+    and the two functions defined in the package face take the stub's parameters."""
+    import inspect
+
+    _, _, _, defs = _stub_names()
+    for name in i2ris_calib.__all__:
+        obj = getattr(i2ris_calib, name)
+        if not inspect.isfunction(obj):
+            continue
+        kinds = {p.kind for p in inspect.signature(obj).parameters.values()}
+        assert kinds - {inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD}, name
+        if name in defs:
+            assert list(inspect.signature(obj).parameters) == defs[name], name
+    sig = inspect.signature(i2ris_calib.fit_model)
+    assert list(sig.parameters)[:3] == ["model", "signals", "theta_deg"]
+    assert "fit_model" in i2ris_calib.fit_model.__name__ and "Eq24" in i2ris_calib.fit_model.__doc__
+
+
+def test_a_loaded_name_is_one_object():
+    assert i2ris_calib.load_synced is i2ris_calib.load_synced
+    assert i2ris_calib.fit is importlib.import_module("i2ris_calib.fitting.pipeline").fit
+
+
+def test_import_stays_cheap():
+    """``import i2ris_calib`` (and so the CLI's ``--help``) loads none of the heavy
+    modules: they come with the first public name that needs them."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, i2ris_calib; "
+        "print(' '.join(m for m in ('numba', 'scipy', 'cv2', 'matplotlib', 'pandas') "
+        "if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == []

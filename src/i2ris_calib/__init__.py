@@ -8,7 +8,10 @@ Stages (each a subpackage of pure functions on arrays and frozen dataclasses):
 writes files; ``cli`` is the thin command-line layer.
 
 The Python API (docs/api.md) is importable from here; names load on first use, so
-``import i2ris_calib`` stays cheap::
+``import i2ris_calib`` stays cheap (the CLI's ``--help`` does not load numba, scipy,
+OpenCV or matplotlib). ``dir(i2ris_calib)`` lists them, and ``__init__.pyi`` declares
+them with their real types for IDEs and type checkers (scikit-image's lazy-loader
+pattern; ``tests/test_api.py`` keeps the stub, ``_API`` and ``__all__`` in step)::
 
     from i2ris_calib import i2ris_egpi_model, fit, load_synced
     data = load_synced("synced.csv", "yaw")[0]      # the yaw+ dataset, whole history
@@ -65,7 +68,18 @@ __all__ = ["__version__", *_API, *_IO]
 _FRAME_HINT = "a DataFrame in memory: make_dataset(axis, direction, df['time_s'], ...)"
 
 
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
+
 def __getattr__(name: str):
+    """The public ``name``, imported from its module on first use and kept here."""
+    value = _load(name)
+    globals()[name] = value  # later look-ups do not come back here
+    return value
+
+
+def _load(name: str):
     if name in _API:
         return getattr(import_module(_API[name]), name)
     if name in _IO:
@@ -76,7 +90,7 @@ def __getattr__(name: str):
             checked_fit_config = import_module("i2ris_calib.fitting.pipeline").checked_fit_config
             checked_directions = import_module("i2ris_calib.data.dataset").checked_directions
 
-            def load_synced(path, axis, config=None, directions=None):
+            def load_synced(path, axis, config=None, directions=None):  # typed in __init__.pyi
                 """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
                 func = "load_synced"
                 v.check_path(func, "path", path, "a synced CSV", _FRAME_HINT)
@@ -88,7 +102,7 @@ def __getattr__(name: str):
 
             return load_synced
 
-        def load_config(path=None):
+        def load_config(path=None):  # typed in __init__.pyi
             """The pipeline TOML at ``path`` (defaults when None) as a PipelineConfig."""
             if path is not None:
                 v.check_path("load_config", "path", path, "a TOML config file (docs/config.md)")

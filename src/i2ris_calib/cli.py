@@ -14,6 +14,7 @@ from pathlib import Path
 import typer
 
 from i2ris_calib import __version__
+from i2ris_calib.interrupts import sigint_guard
 
 app = typer.Typer(
     name="i2ris-calib",
@@ -119,7 +120,9 @@ def sync(
 def fit(
     data: list[Path] = typer.Argument(..., help="Synced CSV file(s) (docs/formats.md)."),
     axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
-    model: str = typer.Option("all", "--model", help="gpi, egpi, egpi_c (continuous EGPI) or all."),
+    model: str = typer.Option(
+        "all", "--model", help="gpi, egpi, egpi_c, agpi (two-tendon GPI, signed input) or all."
+    ),
     out: Path = typer.Option(Path("fit_out"), "--out", "-o", help="Output folder."),
     config: Path | None = ConfigOpt,
     model_file: Path | None = typer.Option(
@@ -128,16 +131,25 @@ def fit(
     signed: bool = typer.Option(
         False, "--signed", help="One model on the whole signed input (loops that cross zero)."
     ),
+    split: bool = typer.Option(
+        False, "--split", help="The paper's split into motion directions, whatever the input."
+    ),
+    columns: str | None = typer.Option(
+        None, "--columns", help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".'
+    ),
 ) -> None:
-    """Fit GPI and EGPI hysteresis models (Levenberg-Marquardt) per motion direction."""
+    """Fit hysteresis models (Levenberg-Marquardt): the paper's GPI/EGPI per motion
+    direction, or a two-tendon GPI over the signed input when the input crosses zero."""
     cfg = _config(config)
-    if signed:
+    if signed or split:
         from dataclasses import replace
 
-        cfg = replace(cfg, fit=replace(cfg.fit, signed=True))
+        cfg = replace(cfg, fit=replace(cfg.fit, signed=signed, split=split))
     from i2ris_calib.io.fit import fit_files
+    from i2ris_calib.io.synced import reading_columns
 
-    fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
+    with reading_columns(cfg, columns) as cfg:
+        fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
 
 
 @app.command()
@@ -176,6 +188,8 @@ def compensate(
             f"max {rec['max_abs_err_deg']:.4f} deg, {rec['n_unreachable']} of "
             f"{rec['n_samples']} samples unreachable"
         )
+        for warning in rec.get("warnings", ()):
+            typer.echo(f"warning: {warning}", err=True)
     typer.echo(f"wrote {out} and {out.with_name('compensate.json')}")
 
 
@@ -194,20 +208,31 @@ def diagnose(
     start: str = typer.Option(
         "auto",
         "--start",
-        help="Starting model: auto (from gpi and from egpi, one reconciled answer), gpi or egpi.",
+        help="Starting model: auto (agpi on a signed input; else gpi and egpi, one reconciled "
+        "answer), gpi, egpi or agpi.",
     ),
     out: Path = typer.Option(Path("diagnose_out"), "--out", "-o", help="Output folder."),
     direction: str = typer.Option(
-        "auto", "--direction", help="Motion direction: + , - or auto (the one with more samples)."
+        "auto", "--direction",
+        help="+, -, ± or auto (the input fit chooses: signed through zero, else the direction "
+        "with more samples).",
     ),
     config: Path | None = ConfigOpt,
+    columns: str | None = typer.Option(
+        None, "--columns", help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".'
+    ),
 ) -> None:
     """Find where model and measurement disagree, name the missing effect, add it, refit."""
     cfg = _config(config)
     from i2ris_calib.io.diagnose import diagnose_file
+    from i2ris_calib.io.synced import reading_columns
 
-    rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
+    with reading_columns(cfg, columns) as cfg:
+        rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
     typer.echo(f"{rec['dataset']}: {rec['summary']}")
+    for note in rec.get("notes", []):
+        if note.startswith("coupling"):  # coupling named, or not separable (issue 20)
+            typer.echo(note)
     if rec.get("reconciliation") and len(rec.get("paths", {})) > 1:
         typer.echo(f"starting models: {rec['reconciliation']}")
     typer.echo(f"wrote {out}")
@@ -272,13 +297,23 @@ def main(argv: list[str] | None = None) -> int:
     Typer handles usage errors, ``--help`` and exit codes itself (it exits through
     SystemExit); everything else that escapes a command is caught here.
     """
-    from i2ris_calib.errors import CalibError
-
     args = sys.argv[1:] if argv is None else list(argv)
     debug = "--debug" in args
     if not debug:  # FFmpeg's and OpenCV's own log lines only with --debug (read at cv2 import)
         os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
         os.environ.setdefault("OPENCV_LOG_LEVEL", "SILENT")
+    # Ctrl-C in compiled code (numba) or in a __del__ is raised at the next safe point
+    # (i2ris_calib/interrupts.py); once the result is decided, the console command
+    # ignores it so that a Ctrl-C while the interpreter shuts down cannot turn it into
+    # "killed by SIGINT" without a message
+    with sigint_guard(ignore_after=argv is None):
+        return _run(args, debug)
+
+
+def _run(args: list[str], debug: bool) -> int:
+    """:func:`main` without the SIGINT guard."""
+    from i2ris_calib.errors import CalibError
+
     try:
         app(args=args, prog_name="i2ris-calib")
     except SystemExit as exc:

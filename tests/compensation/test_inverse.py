@@ -202,3 +202,22 @@ def test_paper_egpi_inverse_does_not_alternate_between_families():
     n_jumps = int(np.sum(np.abs(np.diff(res.commands)) > 200))
     assert n_jumps <= n_reversals + 1
     assert np.sqrt(np.mean(res.error_deg[res.reachable] ** 2)) < 0.01
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_chunked_inversion_is_the_one_pass_inversion(kind):
+    # invert runs its compiled loop in chunks (a Ctrl-C is acted on between them): the
+    # state carried across chunk ends makes any chunk size give exactly the same result
+    model = make_model(kind, paper_like_params("yaw+"))
+    t = np.arange(1500) * 0.01
+    target = 16 + 11 * np.sin(0.9 * t) + 3 * np.sin(7.1 * t)
+    code, c, r, p, kappa, vf, db = kernel_params(model)
+    for rate, quantum, v0, has_init in ((np.inf, 1.0, 0.0, False), (2500.0, 0.0, 300.0, True)):
+        args = (code, c, r, p, kappa, vf, db, target, t, 0.0, V_MAX, rate, quantum, v0, has_init,
+                0.01)  # fmt: skip
+        whole = K.invert(*args, chunk=t.size)
+        for chunk in (1, 7, 256):
+            for a, b in zip(whole, K.invert(*args, chunk=chunk), strict=True):
+                assert a.dtype == b.dtype and np.array_equal(a, b)
+        np.testing.assert_allclose(whole[2], forward(model, whole[0], t, v0 if has_init else None),
+                                   atol=1e-10, rtol=0)  # fmt: skip

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from i2ris_calib.data.cycles import cycle_index
 from i2ris_calib.data.dataset import make_dataset
 from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
 from i2ris_calib.diagnosis.report import diagnosis_markdown, not_excluded_sentence, step_verdict
 from i2ris_calib.diagnosis.results import SEPARATING_FROM_BASE, Alternative, separating_experiment
 from i2ris_calib.diagnosis.stats import autocovariance, sse_reduction_z
-from i2ris_calib.fitting.cycles import cycle_index
 from i2ris_calib.hysteresis.model import Signals
 
 
@@ -51,7 +51,7 @@ def test_z_test_detects_a_real_improvement():
 
 
 def test_units_are_the_held_out_cycles_of_the_one_segmentation():
-    """Units come from fitting.cycles (the cycles the held-out mask was drawn from):
+    """Units come from data.cycles (the cycles the held-out mask was drawn from):
     2 held-out cycles of 6 are 2 units, halved until there are at least 6."""
     t = np.arange(0, 60, 0.05)
     v = np.round(3000 * (1 - np.cos(2 * np.pi * t / 10)))

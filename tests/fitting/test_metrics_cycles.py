@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
+from i2ris_calib.data.cycles import cycle_index, holdout_mask
 from i2ris_calib.fitting.metrics import information_criteria, metrics
 from i2ris_calib.hysteresis.presets import loading_trajectory
 

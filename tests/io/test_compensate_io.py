@@ -233,3 +233,263 @@ def test_fit_json_written_by_fit(tmp_path):
     ok = df["reachable"] == 1
     assert np.sqrt(np.mean((achieved[ok] - target[ok]) ** 2)) < 0.3
     assert ok.mean() > 0.9
+
+
+# ---------------------------------------------------------------- fit.json checked on load
+
+
+def _broken(doc, how):
+    ds = doc["datasets"][0]
+    egpi = ds["models"]["egpi"]
+    if how == "null":
+        egpi["params"]["a1"] = None
+    elif how == "text":
+        egpi["params"]["a1"] = "abc"
+    elif how == "nan":
+        egpi["params"]["a1"] = float("nan")  # json writes NaN
+    elif how == "missing":
+        del egpi["params"]["v_f"]
+    elif how == "reversed":
+        ds["input_range_counts"] = [6000.0, 0.0]
+    elif how == "range_nan":
+        ds["input_range_counts"] = [0.0, float("nan")]
+    elif how == "deadband":
+        egpi["deadband_counts"] = None
+    elif how == "operators":
+        egpi["n_operators"] = 0
+    return doc
+
+
+@pytest.mark.parametrize(
+    ("how", "key", "problem"),
+    [
+        ("null", "datasets[0].models.egpi.params.a1", "is null, not a finite number"),
+        ("text", "datasets[0].models.egpi.params.a1", "= 'abc' is not a number"),
+        ("nan", "datasets[0].models.egpi.params.a1", "= NaN is not a finite number"),
+        ("missing", "datasets[0].models.egpi.params", "has no v_f"),
+        ("reversed", "datasets[0].input_range_counts", "= [6000.0, 0.0] is not ordered: min"),
+        ("range_nan", "datasets[0].input_range_counts[1]", "= NaN is not a finite number"),
+        ("deadband", "datasets[0].models.egpi.deadband_counts", "is null, not a finite number"),
+        ("operators", "datasets[0].models.egpi.n_operators", "= 0 is not a whole number >= 1"),
+    ],
+)
+def test_broken_fit_json_is_one_line_naming_file_dataset_and_key(files, capsys, how, key, problem):
+    tmp, _ = files
+    bad = tmp / "bad_fit.json"
+    bad.write_text(json.dumps(_broken(json.loads((tmp / "fit.json").read_text()), how)))
+    rc = main(["compensate", str(bad), "--dataset", "yaw+", "--model", "egpi", "--target",
+               str(tmp / "target.csv"), "--out", str(tmp / "o" / "c.csv")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert err.startswith(f"error: {bad} [yaw+]: {key} {problem}")
+    assert err.endswith("re-run 'fit' or restore the file")
+    assert "target.csv" not in err  # the target is fine: not blamed
+    assert not (tmp / "o").exists()
+
+
+def test_fit_json_not_an_object_or_missing_keys(files, capsys):
+    tmp, _ = files
+    bad = tmp / "bad_fit.json"
+    doc = json.loads((tmp / "fit.json").read_text())
+    for text, expect in [
+        ("[1, 2]", "expected a JSON object at top level, got list"),
+        ("{nope", "not a JSON file"),
+        (json.dumps({**doc, "axis": None}), "axis = null is not one of yaw, pitch"),
+        (json.dumps({**doc, "datasets": [{"name": "yaw+"}]}), "datasets[0] has no 'models'"),
+    ]:
+        bad.write_text(text)
+        rc = main(["compensate", str(bad), "--dataset", "yaw+", "--target",
+                   str(tmp / "target.csv"), "--out", str(tmp / "o" / "c.csv")])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and err.startswith(f"error: {bad}") and expect in err, err
+    del doc["datasets"][0]["input_range_counts"]
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(
+        CalibError, match=r"\[yaw\+\]: datasets\[0\]\.input_range_counts is missing"
+    ):
+        compensate_files([bad], ["yaw+"], tmp / "target.csv", tmp / "o" / "c.csv")
+
+
+def test_broken_final_model_json_names_file_and_key(tmp_path, capsys):
+    from i2ris_calib.diagnosis.effects import add_effect
+    from i2ris_calib.diagnosis.serialize import model_to_dict
+
+    P = _fit_json(tmp_path / "fit.json", kinds=("egpi",))
+    model = add_effect(model_from_params("egpi", P, 30, 2.0), "time_delay", {"tau_s": 0.1})
+    saved = model_to_dict(model)
+    doc = json.loads((tmp_path / "fit.json").read_text())
+    rec = dict(doc["datasets"][0]["models"]["egpi"])
+    rec["params"] = {p.name: p.value for p in model.parameters}
+    doc["datasets"][0]["models"]["diagnosed"] = rec
+    (tmp_path / "fit.json").write_text(json.dumps(doc))
+    t = np.arange(0, 5, 0.01)
+    pd.DataFrame({"time_s": t, "yaw_deg": 15 + 5 * np.sin(t)}).to_csv(
+        tmp_path / "t.csv", index=False
+    )
+    for where, value, key in [
+        ("base", None, "base.params.a1 is null, not a finite number"),
+        ("base", "abc", "base.params.a1 = 'abc' is not a number"),
+        ("effect", float("nan"), "effects[0].params.tau_s = NaN is not a finite number"),
+    ]:
+        doc = json.loads(json.dumps(saved))
+        if where == "base":
+            doc["base"]["params"]["a1"] = value
+        else:
+            doc["effects"][0]["params"]["tau_s"] = value
+        (tmp_path / "final_model.json").write_text(json.dumps(doc))
+        rc = main(["compensate", str(tmp_path / "fit.json"), "--dataset", "yaw+", "--model",
+                   "diagnosed", "--model-file", str(tmp_path / "final_model.json"), "--target",
+                   str(tmp_path / "t.csv"), "--out", str(tmp_path / "o" / "c.csv")])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and len(err.splitlines()) == 1
+        assert err.startswith(f"error: {tmp_path / 'final_model.json'}: {key}"), err
+
+
+# ------------------------------------------------- a target in radians or of the wrong sign
+
+
+@pytest.mark.parametrize(
+    ("dataset", "target", "says"),
+    [
+        ("yaw+", np.radians(14 + 8 * np.sin(np.arange(0, 10, 0.02))),
+         "if the target is in radians, convert it to degrees (6 to 22 deg)"),
+        ("yaw+", -(14 + 8 * np.sin(np.arange(0, 10, 0.02))),
+         "the target has the other sign: give --dataset yaw- (the other motion direction) or "
+         "negate the target"),
+        ("yaw-", 14 + 8 * np.sin(np.arange(0, 10, 0.02)),
+         "the target has the other sign: give --dataset yaw+"),
+        ("yaw+", -np.radians(14 + 8 * np.sin(np.arange(0, 10, 0.02))),
+         "the target looks like radians (-22 to -6 deg) of the other sign"),
+        ("yaw+", 100 + 8 * np.sin(np.arange(0, 10, 0.02)),
+         "give a target within the model's angles"),
+    ],
+)  # fmt: skip
+def test_mostly_unreachable_target_says_ranges_and_likely_mistake(
+    tmp_path, capsys, dataset, target, says
+):
+    P = _fit_json(tmp_path / "fit.json")
+    t = np.arange(0, 10, 0.02)
+    pd.DataFrame({"time_s": t, "yaw_deg": target}).to_csv(tmp_path / "t.csv", index=False)
+    rc = main(["compensate", str(tmp_path / "fit.json"), "--dataset", dataset, "--model", "egpi",
+               "--target", str(tmp_path / "t.csv"), "--out", str(tmp_path / "c.csv")])  # fmt: skip
+    captured = capsys.readouterr()
+    assert rc == 0  # a warning: the commands are still written
+    rec = json.loads((tmp_path / "compensate.json").read_text())["axes"]["yaw"]
+    assert rec["n_unreachable"] > 0.5 * rec["n_samples"]
+    # the model's angles over its input range, in the dataset's sign (truth: its forward output)
+    sign = -1.0 if dataset.endswith("-") else 1.0
+    up = np.linspace(0, 6000, 1001)
+    y = sign * forward(model_from_params("egpi", P, 30, 2.0), np.concatenate([up, up[::-1]]))
+    np.testing.assert_allclose(rec["reachable_deg"], [y.min(), y.max()], rtol=1e-9)
+    (warning,) = rec["warnings"]
+    assert says in warning
+    lo, hi = rec["reachable_deg"]
+    assert f"the target spans {target.min():.3g} to {target.max():.3g} deg" in warning
+    assert f"the model {lo:.3g} to {hi:.3g} deg" in warning
+    assert f"warning: {warning}" in " ".join(captured.err.split())
+
+
+def test_reachable_target_has_no_range_warning(files, capsys):
+    tmp, _ = files
+    rc = main(["compensate", str(tmp / "fit.json"), "--dataset", "yaw-", "--model", "egpi",
+               "--target", str(tmp / "target.csv"), "--out", str(tmp / "c.csv")])  # fmt: skip
+    assert rc == 0
+    assert "warning" not in capsys.readouterr().err
+    assert json.loads((tmp / "compensate.json").read_text())["axes"]["yaw"]["warnings"] == []
+
+
+# ------------------------------------------------------------------ Ctrl-C (SIGINT)
+
+INTERRUPT_CHILD = """
+import os, signal, sys, threading
+from i2ris_calib.cli import main
+from i2ris_calib.compensation import kernel as K
+
+original = K.invert
+
+
+def invert(*args, **kwargs):  # Ctrl-C arrives while the compiled inversion runs
+    short = list(args)
+    short[7], short[8] = args[7][:10], args[8][:10]  # target, t
+    original(*short, **kwargs)  # compiled (or loaded from numba's cache) before the Ctrl-C
+    threading.Timer(float(os.environ["SIGINT_AFTER_S"]), os.kill,
+                    (os.getpid(), signal.SIGINT)).start()
+    return original(*args, **kwargs)
+
+
+K.invert = invert
+sys.argv = ["i2ris-calib", *sys.argv[1:]]
+sys.exit(main())
+"""
+
+
+def _large_target(path, n):
+    t = np.arange(n) * 0.001
+    pd.DataFrame({"time_s": t, "yaw_deg": 20 + 15 * np.sin(2 * np.pi * 0.5 * t)}).to_csv(
+        path, index=False, float_format="%.6f"
+    )
+
+
+def test_ctrl_c_inside_the_compiled_inversion_is_one_line_and_130(tmp_path):
+    # 0.2 s into an inversion of 3e5 samples (~1 s here): the compiled loop is running.
+    # Before the inversion was chunked, the SIGINT was handled while numba converted the
+    # returned arrays: SystemError ("returned a result with an exception set") or SIGSEGV
+    import os
+    import subprocess
+    import sys
+
+    _fit_json(tmp_path / "fit.json")
+    _large_target(tmp_path / "target.csv", 300_000)
+    out = tmp_path / "o" / "c.csv"
+    proc = subprocess.run(
+        [sys.executable, "-c", INTERRUPT_CHILD, "compensate", str(tmp_path / "fit.json"),
+         "--dataset", "yaw+", "--model", "egpi", "--target", str(tmp_path / "target.csv"),
+         "--out", str(out)],
+        capture_output=True, text=True, timeout=300,
+        env={**os.environ, "SIGINT_AFTER_S": "0.2", "NUMBA_NUM_THREADS": "1"},
+    )  # fmt: skip
+    assert proc.returncode == 130, (proc.returncode, proc.stderr[-2000:])
+    assert proc.stderr == "interrupted (no partial outputs were kept)\n"
+    assert not out.exists() and not out.with_name("compensate.json").exists()
+
+
+@pytest.mark.slow  # ~1 min: a 1e6-sample target, interrupted at 1-6 s, two launchers
+@pytest.mark.parametrize("launcher", ["console script", "python -m"])
+def test_ctrl_c_at_any_time_during_compensate_is_130(tmp_path, launcher):
+    # the issue's case: Ctrl-C 2-4 s into compensate of a 1e6-row target gave SIGSEGV
+    # (5 of 5 tries), at 6 s rc -2 without a message
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    _fit_json(tmp_path / "fit.json")
+    _large_target(tmp_path / "target.csv", 1_000_000)
+    if launcher == "console script":
+        cmd = [str(Path(sys.executable).with_name("i2ris-calib"))]
+    else:
+        cmd = [sys.executable, "-m", "i2ris_calib.cli"]
+    for delay in (1.0, 2.0, 3.0, 4.0, 6.0):
+        out = tmp_path / f"o{delay:g}" / "c.csv"
+        proc = subprocess.Popen(
+            [*cmd, "compensate", str(tmp_path / "fit.json"), "--dataset", "yaw+", "--target",
+             str(tmp_path / "target.csv"), "--out", str(out)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env={**os.environ, "NUMBA_NUM_THREADS": "1"},
+        )  # fmt: skip
+        time.sleep(delay)
+        finished = proc.poll() is not None
+        if not finished:
+            proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=300)
+        if finished:  # a fast machine: done before the Ctrl-C
+            assert proc.returncode == 0 and out.is_file(), err
+            continue
+        assert proc.returncode in (0, 130), (delay, proc.returncode, err[-2000:])
+        if proc.returncode == 130:
+            assert err == "interrupted (no partial outputs were kept)\n", (delay, err)
+            assert not out.exists() and not out.with_name("compensate.json").exists()
+        else:  # the Ctrl-C came after the outputs were complete (while Python shut down)
+            assert out.is_file() and out.with_name("compensate.json").is_file()

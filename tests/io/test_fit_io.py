@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pandas as pd
@@ -273,3 +274,41 @@ def test_same_fit_whatever_the_input_unit(tmp_path, unit_per_count):
     ha, hb = (d["models"]["egpi"]["holdout_metrics"]["rmse_deg"] for d in (ra, rb))
     # the same optimum up to the optimiser's tolerance (ftol 1e-7 on the cost)
     assert hb == pytest.approx(ha, rel=0.02) and hb < 1.2 * NOISE
+
+
+def test_source_labels_are_the_shortest_distinguishing_paths():
+    from i2ris_calib.io.fit import source_labels
+
+    runs = ["/r/s1/sync/synced.csv", "/r/s2/sync/synced.csv", "/r/s1/sync/synced.csv"]
+    assert source_labels(runs) == {
+        "/r/s1/sync/synced.csv": "s1/sync/synced.csv",
+        "/r/s2/sync/synced.csv": "s2/sync/synced.csv",
+    }
+    assert source_labels(["/r/a.csv", "/r/b.csv"]) == {"/r/a.csv": "a.csv", "/r/b.csv": "b.csv"}
+    assert source_labels(["/r/x.csv"]) == {"/r/x.csv": "x.csv"}
+
+
+def test_same_file_name_in_two_folders_gets_one_table_per_file(tmp_path, capsys, monkeypatch):
+    # was: one table with four "yaw+"/"yaw+ (synced)" column groups, squeezed into 80
+    # columns until some columns were empty, and no way to tell which file was which
+    monkeypatch.setenv("COLUMNS", "80")
+    df = synced_frame(n=600)
+    for folder in ("A", "B"):
+        (tmp_path / folder).mkdir()
+        df.to_csv(tmp_path / folder / "synced.csv", index=False)
+    rc = main(["fit", str(tmp_path / "A" / "synced.csv"), str(tmp_path / "B" / "synced.csv"),
+               "--axis", "yaw", "--model", "gpi", "--out", str(tmp_path / "o")])  # fmt: skip
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    tables = out.out.split("GPI and EGPI")[1:]
+    assert len(tables) == 2
+    for folder, table in zip(("A", "B"), tables, strict=True):
+        assert f"{folder}/synced.csv" in table
+        # every column whole: yaw+ and yaw-, RMSE / NRMSE / MAE each, two rows of numbers
+        heads = [line.split("┃")[2:-1] for line in table.splitlines() if line.startswith("┃")]
+        assert [[c.strip() for c in h] for h in heads] == [
+            ["yaw+"] * 3 + ["yaw-"] * 3, ["RMSE", "NRMSE", "MAE"] * 2
+        ]  # fmt: skip
+        assert len(re.findall(r"\b\d+\.\d\d\b", table)) == 12
+    err = " ".join(out.err.split())
+    assert "yaw+ [A/synced.csv]: " in err and "yaw- (synced) [B/synced.csv]: " in err

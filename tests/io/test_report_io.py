@@ -292,3 +292,26 @@ def test_fit_output_folder_gives_the_model_sections_alone(tmp_path):
     write_report(fit_dir, tmp_path / "rep2", CFG)
     text = (tmp_path / "rep2" / "report.md").read_text()
     assert "predictions.csv: not found" in text
+
+
+@pytest.mark.parametrize(
+    ("value", "problem"),
+    [
+        (None, "is null, not a finite number"),
+        (float("nan"), "= NaN is not a finite number"),
+        ("abc", "= 'abc' is not a number"),
+    ],
+)
+def test_fit_json_parameter_must_be_a_finite_number(run_dir, capsys, value, problem):
+    # the one fit.json check (io/fit_schema.py) that compensate uses too: a null or NaN
+    # parameter was shown as "-" before
+    path = run_dir / "fit" / "yaw" / "fit.json"
+    doc = json.loads(path.read_text())
+    doc["datasets"][1]["models"]["egpi"]["params"]["a3"] = value
+    path.write_text(json.dumps(doc))
+    name = doc["datasets"][1]["name"]
+    expect = f"{path} [{name}]: datasets[1].models.egpi.params.a3 {problem}; re-run 'fit'"
+    with pytest.raises(CalibError, match=re.escape(expect)):
+        load_run(run_dir)
+    assert _one_line_error(["report", str(run_dir)], capsys).startswith(f"error: {expect}")
+    assert not (run_dir / "report").exists()

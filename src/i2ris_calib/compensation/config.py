@@ -6,8 +6,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from i2ris_calib._validate import validated_config
+from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 
-_KINDS = ("", "gpi", "egpi", "egpi_c", "diagnosed")
+#: The kinds compensation inverts (the registry's ``inverse``) and ``"diagnosed"``
+_KINDS = ("", *INVERSE_KINDS, "diagnosed")
 _DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
 
 

@@ -18,13 +18,9 @@ from i2ris_calib.compensation._args import check_args
 from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Signals
-from i2ris_calib.hysteresis.models import (
-    ContinuousEGPIModel,
-    GPIModel,
-    I2RISEGPIModel,
-    density,
-    thresholds,
-)
+from i2ris_calib.hysteresis.models import density, thresholds
+from i2ris_calib.hysteresis.registry import KINDS, kind_of
+from i2ris_calib.interrupts import deferred
 
 STATUS_NAMES = {
     K.STATUS_OK: "reached",
@@ -146,18 +142,21 @@ def _base_and_delay(model) -> tuple[object, float]:
 
 def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, float, float]:
     """(kind code, c (6,), r (m,), p (m,), kappa, v_f, dead band) of a base model."""
-    v = model.value_dict()
-    r = thresholds(v["r1"], v["rn"], int(model.n))
-    p = density(r, v["lam"], v["sigma"])
-    if isinstance(model, I2RISEGPIModel):
-        code = K.KIND_EGPI_C if isinstance(model, ContinuousEGPIModel) else K.KIND_EGPI
+    family = getattr(kind_of(model), "inverse", None)  # the registry's inverse
+    if family is not None:
+        v = model.value_dict()
+        r = thresholds(v["r1"], v["rn"], int(model.n))
+        p = density(r, v["lam"], v["sigma"])
+    if family in ("egpi", "egpi_c"):
+        code = K.KIND_EGPI_C if family == "egpi_c" else K.KIND_EGPI
         c = np.array([v[k] for k in ("a1", "a2", "a3", "a4", "a5", "a6")])
         return code, c, r, p, v["kappa"], v["v_f"], float(model.deadband_counts)
-    if isinstance(model, GPIModel):
+    if family == "gpi":
         c = np.array([v["a1"], v["a2"], v["a3"], v["a4"], v["a3"], v["a4"]])
         return K.KIND_GPI, c, r, p, 1.0, np.inf, 0.0
+    *names, last = (k.kind for k in KINDS if k.inverse)
     raise CalibError(
-        f"compensate inverts gpi, egpi and egpi_c models (optionally with a time delay), "
+        f"compensate inverts {', '.join(names)} and {last} models (optionally with a time delay), "
         f"not '{getattr(model, 'name', type(model).__name__)}'"
     )
 
@@ -268,7 +267,8 @@ def compensate(
         # command k serves the target at t_k + delay: report status on the target's samples
         j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
         status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
-    predicted = forward(model, u, t, None if v_initial is None else v0)
+    with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
+        predicted = forward(model, u, t, None if v_initial is None else v0)
     kind = base.name + ("+time_delay" if delay > 0 else "")
     return CompensationResult(
         commands=u,

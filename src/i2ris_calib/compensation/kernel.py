@@ -27,6 +27,10 @@ the model allows and flagged.
 Conventions: ``c`` = envelope coefficients (a1..a6; GPI uses a5 = a3, a6 = a4),
 ``r``, ``p`` thresholds and weights (shape (m,)), ``kind`` one of the ``KIND_*``
 codes, ``w`` operator states (2, m) (family 1 only used by the paper's EGPI).
+
+:func:`invert` runs the compiled loop :data:`CHUNK` samples at a time, the state carried
+across calls that return nothing: a Ctrl-C is raised between two of them, in Python,
+never while numba converts returned arrays (that crashed: i2ris_calib/interrupts.py).
 """
 
 from __future__ import annotations
@@ -230,11 +234,25 @@ def _choose(xs, errs, keep, nc, v_prev, tk, y_prev, init, tol_deg):  # pragma: n
     return xs[bi], errs[bi]
 
 
-@njit(cache=True)
+#: Samples per compiled call of :func:`invert` (about 0.1 s of work): a Ctrl-C is
+#: acted on between two calls (i2ris_calib/interrupts.py).
+CHUNK = 1 << 15
+
+# invert's state between chunks, in one float array (``STATE_SIZE`` values)
+_DSTATE, _ANCHOR, _V_PREV, _Y_PREV, _INIT = range(5)
+STATE_SIZE = 5
+
+
 def invert(
-    kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init, tol_deg
-):  # pragma: no cover - compiled
+    kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init, tol_deg,
+    chunk=CHUNK,
+):  # fmt: skip
     """Invert the model on ``target`` sample by sample.
+
+    The samples are inverted ``chunk`` at a time by compiled calls that carry the
+    operator and ``v'`` states from one to the next (the result does not depend on
+    ``chunk``) and return nothing: a Ctrl-C during one is raised in Python right after
+    it, never inside numba's conversion of returned arrays (i2ris_calib/interrupts.py).
 
     Parameters
     ----------
@@ -264,6 +282,8 @@ def invert(
     tol_deg : float
         An output within ``tol_deg`` of the target counts as meeting it (choice among
         inputs, status); at least 1e-10 relative.
+    chunk : int
+        Samples per compiled call.
 
     Returns
     -------
@@ -277,19 +297,41 @@ def invert(
     status : ndarray of int8, shape (n,)
         ``STATUS_*`` of the real-valued best (0 = target reached).
     """
+    target = np.ascontiguousarray(target, dtype=float)
+    t = np.ascontiguousarray(t, dtype=float)
+    c, r, p = (np.ascontiguousarray(a, dtype=float) for a in (c, r, p))
     n = target.size
-    m = p.size
-    w = np.zeros((2, m))
-    w_new = np.zeros((2, m))
-    scratch = np.empty(m)
+    w = np.zeros((2, p.size))
+    state = np.zeros(STATE_SIZE)
     u_out = np.empty(n)
     u_real = np.empty(n)
     y_out = np.empty(n)
     status = np.zeros(n, dtype=np.int8)
-    n_fam = 2 if kind == KIND_EGPI else 1
-    dstate, anchor, v_prev, y_prev = 1, 0.0, 0.0, 0.0
-    init = True
+    kind, kappa, vf, db = int(kind), float(kappa), float(vf), float(db)
+    lo, hi, max_rate, quantum, tol_deg = (float(x) for x in (lo, hi, max_rate, quantum, tol_deg))
+    _invert_start(kind, c, r, p, kappa, vf, db, float(v_init), bool(has_init), w, state)
+    step = max(1, int(chunk))
+    for k0 in range(0, n, step):
+        _invert_chunk(
+            kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
+            k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status,
+        )  # fmt: skip
+    return u_out, u_real, y_out, status
+
+
+@njit(cache=True)
+def _invert_start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # pragma: no cover
+    """The state before the first sample: operator states ``w`` (2, m) and ``state``
+    (``v'`` direction and anchor, previous input and output, whether the first command
+    sets the initial state), as :func:`invert` describes."""
+    m = p.size
+    state[_DSTATE] = 1.0
+    state[_ANCHOR] = 0.0
+    state[_V_PREV] = 0.0
+    state[_Y_PREV] = 0.0
+    state[_INIT] = 1.0
     if has_init:
+        n_fam = 2 if kind == KIND_EGPI else 1
         for f in range(n_fam):
             _family(kind, f, w[f], w[f], c, r, p, kappa, vf, 0.0, v_init, SIDE_INIT)
         dstate, anchor = _direction(1, 0.0, v_init, db, True)
@@ -297,15 +339,38 @@ def invert(
         y_prev = 0.0
         for i in range(m):
             y_prev += p[i] * w[fam, i]
-        v_prev = v_init
-        init = False
+        state[_DSTATE] = dstate
+        state[_ANCHOR] = anchor
+        state[_V_PREV] = v_init
+        state[_Y_PREV] = y_prev
+        state[_INIT] = 0.0
+
+
+@njit(cache=True)
+def _invert_chunk(
+    kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
+    k0, k1, w, state, u_out, u_real, y_out, status,
+):  # pragma: no cover - compiled  # fmt: skip
+    """Invert samples ``k0 .. k1 - 1`` from the state in ``w`` and ``state`` (updated in
+    place), writing ``u_out``, ``u_real``, ``y_out`` and ``status`` there; returns
+    nothing (see :func:`invert`)."""
+    n = target.size
+    m = p.size
+    w_new = np.zeros((2, m))
+    scratch = np.empty(m)
+    n_fam = 2 if kind == KIND_EGPI else 1
+    dstate = int(state[_DSTATE])
+    anchor = state[_ANCHOR]
+    v_prev = state[_V_PREV]
+    y_prev = state[_Y_PREV]
+    init = state[_INIT] != 0.0
     dt0 = t[1] - t[0] if n > 1 else 1.0
     bps = np.empty(3)
     edges = np.empty(6)
     cand_x = np.empty(16)
     cand_e = np.empty(16)
     cand_keep = np.empty(16, dtype=np.bool_)
-    for k in range(n):
+    for k in range(k0, k1):
         tk = target[k]
         if init:
             a_lim, b_lim = lo, hi
@@ -460,4 +525,8 @@ def invert(
         init = False
         u_out[k] = u
         y_out[k] = acc
-    return u_out, u_real, y_out, status
+    state[_DSTATE] = dstate
+    state[_ANCHOR] = anchor
+    state[_V_PREV] = v_prev
+    state[_Y_PREV] = y_prev
+    state[_INIT] = 1.0 if init else 0.0

@@ -130,6 +130,10 @@ def refit_globally(c: Candidate, d: SearchData, cfg: DiagnosisConfig) -> Candida
             method="trf",
             max_nfev=cfg.global_max_nfev,
             screen_nfev=cfg.global_max_nfev // 4,
+            # the candidate's own start x already holds the base fit with the effect
+            # profiled from neutral; a further nested refit of the base would cost a
+            # base fit per candidate and, on a tie, hide an effect the base absorbs
+            nested=False,
         )
         x_new = model_values(res.model)
     except CalibError:

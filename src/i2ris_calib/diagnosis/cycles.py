@@ -1,7 +1,7 @@
 """Held-out units of the paired evidence and loading branches, from the one segmentation.
 
 The diagnosis has no segmentation of its own. Loading cycles are the fitting
-stage's (:func:`i2ris_calib.fitting.cycles.cycle_index`, the same call that chose
+stage's (:func:`i2ris_calib.data.cycles.cycle_index`, the same call that chose
 the dataset's held-out cycles in :func:`i2ris_calib.data.dataset.make_dataset`),
 and the loading/unloading branch of a sample is the model's own ``v'``
 (:func:`i2ris_calib.hysteresis.kernel.motion_direction` with the dataset's dead band).
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from i2ris_calib.fitting.cycles import cycle_index
+from i2ris_calib.data.cycles import cycle_index
 from i2ris_calib.hysteresis.kernel import motion_direction
 
 
@@ -19,7 +19,7 @@ def dataset_cycles(v: np.ndarray) -> np.ndarray:
     """Loading-cycle number of every sample of a dataset's input ``v``, int (n,).
 
     Exactly the cycles its held-out mask was drawn from
-    (:func:`~i2ris_calib.fitting.cycles.cycle_index` with its default dead band).
+    (:func:`~i2ris_calib.data.cycles.cycle_index` with its default dead band).
     """
     return cycle_index(np.asarray(v, dtype=float), None)
 

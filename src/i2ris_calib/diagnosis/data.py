@@ -48,7 +48,7 @@ def check_dataset(data: Dataset, config: DiagnosisConfig | None = None) -> None:
     The minimum (checked in this order):
 
     1. at least one held-out loading cycle. With the held-out rule
-       (:func:`i2ris_calib.fitting.cycles.holdout_mask`) that means at least 2
+       (:func:`i2ris_calib.data.cycles.holdout_mask`) that means at least 2
        loading cycles, and one of them other than the first lying inside the input
        range of the others (a held-out cycle tests interpolation); the first cycle
        is never held out. Two such cycles are enough.

@@ -626,6 +626,26 @@ class EffectModel(NamedParameters):
             effect_values=tuple(float(x) for x in values[m:]),
         )
 
+    def nested(self) -> tuple[Model, np.ndarray]:
+        """The model this one extends and the values that switch the extension off.
+
+        The fitter (:func:`~i2ris_calib.fitting.fit.fit_model`) fits the wrapped model
+        first and also starts from ``(its fitted values, tail)``, so an extended fit
+        is never worse than the fit without the effect.
+
+        Returns
+        -------
+        inner : Model
+            The wrapped model.
+        tail : ndarray, shape (p_effect,)
+            The effect's neutral values (its fixed parameters keep their values);
+            at ``concatenate([x_inner, tail])`` this model equals ``inner`` at
+            ``x_inner`` whenever no parameter is fixed away from neutral.
+        """
+        fixed = np.array(self.fixed or (False,) * len(self.effect.params), dtype=bool)
+        tail = np.where(fixed, np.asarray(self.effect_values, float), self.effect.neutral())
+        return self.inner, tail
+
 
 def model_values(model: Model) -> np.ndarray:
     """Current parameter vector of ``model``, shape (p,)."""

@@ -22,9 +22,9 @@ from i2ris_calib.diagnosis.effects import base_of, build_model, effects_of
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
 from i2ris_calib.hysteresis.registry import (
+    BUILT_KINDS,
     DEFAULT_DEADBAND_COUNTS,
     DEFAULT_N_OPERATORS,
-    MODEL_KINDS,
     model_for_kind,
 )
 
@@ -35,10 +35,10 @@ def base_kind(model: Model) -> str:
     """The registry kind (``"gpi"``, ``"egpi"``, ``"egpi_c"``) of the base model: the
     kinds this format can rebuild (:func:`~i2ris_calib.hysteresis.registry.model_for_kind`)."""
     name = base_of(model).name
-    if name in MODEL_KINDS:
+    if name in BUILT_KINDS:
         return name
     raise CalibError(
-        f"cannot save base model '{name}': only the model kinds {', '.join(MODEL_KINDS)} are "
+        f"cannot save base model '{name}': only the model kinds {', '.join(BUILT_KINDS)} are "
         "supported"
     )
 

@@ -123,3 +123,74 @@ def compare(
         delta_bic=float(dbic),
         significant=sig,
     )
+
+
+#: Effects whose only signature is the input speed: on a recording where the speed is
+#: a function of the input level they fit as well as a static (rate-independent) shape.
+RATE_EFFECTS = ("rate_dependent_thresholds", "rate_dependent_weights")
+
+#: The recording that separates a rate effect from a static shape.
+SPEED_EXPERIMENT = (
+    "record the same amplitude at two or more speeds (e.g. the same sine at 0.2 and 2 Hz, "
+    "or ramps at three speeds to one level): a rate effect changes the loop with the "
+    "speed, a static shape does not"
+)
+
+#: Pooled within-level spread of the speed (relative to its mean) below which the
+#: speed counts as a function of the level (one speed per level on each branch).
+SPEED_SPREAD_LIMIT = 0.15
+
+
+def speed_level_spread(signals, mask: np.ndarray, n_bins: int = 20) -> float:
+    """How much the input speed varies at one input level, relative to its mean.
+
+    On each branch (rising, falling input; moving samples in ``mask``), the input
+    range is cut into ``n_bins`` levels; the pooled standard deviation of
+    ``|dv/dt|`` within a level is divided by the branch's mean speed, and the larger
+    of the two branches is returned. Near 0: the speed is a function of the level
+    (one-frequency sine, constant-speed triangle), so rate effects cannot be told
+    from a static shape. NaN without sample times or without motion.
+
+    Parameters
+    ----------
+    signals : Signals
+        ``v`` and ``t_s``, shape (n,).
+    mask : ndarray of bool, shape (n,)
+        Samples that count.
+    n_bins : int
+        Input levels per branch.
+    """
+    from i2ris_calib.diagnosis.effects import RATE_WINDOW_S, _speed
+
+    if signals.t_s is None:
+        return float("nan")
+    v = np.asarray(signals.v, float)
+    speed = _speed(signals, RATE_WINDOW_S)
+    slope = np.gradient(v, np.asarray(signals.t_s, float))
+    top = float(np.quantile(speed[mask], 0.95)) if mask.any() else 0.0
+    if top <= 0:
+        return float("nan")
+    moving = mask & (speed > 0.05 * top)
+    spreads = []
+    for branch in (slope > 0, slope < 0):
+        sel = moving & branch
+        if sel.sum() < 3 * n_bins:
+            continue
+        vb, sb = v[sel], speed[sel]
+        edges = np.linspace(vb.min(), vb.max(), n_bins + 1)
+        idx = np.clip(np.digitize(vb, edges) - 1, 0, n_bins - 1)
+        ss, dof = 0.0, 0
+        for b in range(n_bins):
+            s = sb[idx == b]
+            if s.size >= 2:
+                ss += float(np.sum((s - s.mean()) ** 2))
+                dof += s.size - 1
+        if dof:
+            spreads.append(np.sqrt(ss / dof) / float(sb.mean()))
+    return float(max(spreads)) if spreads else float("nan")
+
+
+def speed_follows_level(signals, mask: np.ndarray) -> bool:
+    """True when the input's speed is a function of its level on both branches
+    (:func:`speed_level_spread` below ``SPEED_SPREAD_LIMIT``)."""
+    return bool(speed_level_spread(signals, mask) < SPEED_SPREAD_LIMIT)

@@ -45,7 +45,8 @@ from dataclasses import replace
 import numpy as np
 
 from i2ris_calib._validate import check_callable, check_choices, check_instance, check_model
-from i2ris_calib.data.dataset import Dataset, checked_dataset
+from i2ris_calib.data.coupling import motors_together
+from i2ris_calib.data.dataset import Dataset, checked_dataset, other_axis
 from i2ris_calib.diagnosis.blas import single_threaded_blas
 from i2ris_calib.diagnosis.candidates import fit_candidate, refit_globally
 from i2ris_calib.diagnosis.config import DiagnosisConfig
@@ -63,11 +64,20 @@ from i2ris_calib.diagnosis.results import (
     Step,
     separating_experiment,
 )
-from i2ris_calib.diagnosis.stats import autocovariance, compare, n_free_of, score_of
+from i2ris_calib.diagnosis.stats import (
+    RATE_EFFECTS,
+    SPEED_EXPERIMENT,
+    autocovariance,
+    compare,
+    n_free_of,
+    score_of,
+    speed_follows_level,
+)
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import checked_fit_config, fit_dataset
 from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts
 
 __all__ = [
     "AutoDiagnosis",
@@ -259,12 +269,62 @@ def _not_excluded(
     return tuple(sorted(out, key=lambda a: a.holdout_rmse_deg))
 
 
+def _rate_or_static(confounded: list[Candidate], current: Model) -> str:
+    """The note of a recording whose input speed is a function of its level."""
+    rate = sorted({c.effect for c in confounded})
+    return (
+        "not separable on this recording: a static (rate-independent) loop shape and "
+        f"{' or '.join(rate)} fit it alike, because the input's speed is a function of "
+        f"its level (one speed at each level on each branch, e.g. a one-frequency sine); "
+        f"neither is named (the model stays {current.name}). To separate them, " + SPEED_EXPERIMENT
+    )
+
+
+def _with_rate_alternatives(not_excluded, confounded, current, d, cfg):
+    """``not_excluded`` with the confounded rate candidates (once each), listed with
+    the separating recording (:data:`SPEED_EXPERIMENT`)."""
+    out = list(not_excluded)
+    seen: set[str] = set()
+    cur_m = score_of(current, model_values(current), d, n_free_of(current))
+    for c in sorted(confounded, key=lambda c: c.metrics.holdout_rmse_deg):
+        if c.effect in seen:
+            continue
+        seen.add(c.effect)
+        out = [a for a in out if a.effect != c.effect]
+        comp = compare((c.model, c.metrics), (current, cur_m), d, cfg)
+        out.append(_alternative(c, comp, excluded=False, experiment=SPEED_EXPERIMENT))
+    return tuple(out)
+
+
+#: Catalogue effects that model coupling to the other motor
+COUPLING_EFFECTS = ("axis_coupling",)
+
+
+def _coupling_note(data: Dataset) -> str:
+    """The diagnosis's sentence on coupling to the other motor, or "" (the other motor
+    does not move with this one, or its input is unknown):
+    "coupling cannot be separated ..." when the two motors move in lockstep
+    (:attr:`~i2ris_calib.data.coupling.MotorsTogether.cannot_separate`; the coupling
+    effects are then not tried), else "coupling to the <other> motor: ..." (added when
+    a coupling effect is named)."""
+    other = other_axis(data.axis) if data.axis in ("yaw", "pitch") else "other"
+    together = motors_together(data.enc, data.signals.v_other, other)
+    if together is None or not together.moves_together:
+        return ""
+    if together.cannot_separate:
+        return f"coupling cannot be separated on this recording: {together.reason}"
+    return (
+        f"coupling to the {other} motor: {together.reason}; the default fit models it "
+        "(two-tendon GPI + hysteretic coupling, on the signed input)"
+    )
+
+
 def fit_start_model(kind: str, data: Dataset, fit_config=None) -> Model:
     """Starting model ``"gpi"`` or ``"egpi"`` fitted by the fitting stage
     (:func:`i2ris_calib.fitting.pipeline.fit_dataset`, multi-start) on the dataset's
     loss mask: exactly what ``fit`` fits on the same dataset."""
-    if kind not in ("gpi", "egpi"):
-        raise CalibError(f"starting model must be gpi or egpi, got '{kind}'")
+    if kind not in DIAGNOSIS_STARTS:
+        raise CalibError(f"starting model must be {' or '.join(DIAGNOSIS_STARTS)}, got '{kind}'")
     with single_threaded_blas():
         return fit_dataset(kind, data, fit_config or FitConfig()).model
 
@@ -326,6 +386,9 @@ def _diagnosis_config(func: str, config: object) -> DiagnosisConfig:
 def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
     d, hold_full, step = search_data(data, cfg)
     names = list(cfg.candidates or CATALOGUE)
+    coupling_note = _coupling_note(data)
+    if coupling_note and coupling_note.startswith("coupling cannot"):
+        names = [n for n in names if n not in COUPLING_EFFECTS]  # not identifiable here
     pol = refit(start, d.signals, d.theta, d.fit, model_values(start), max_nfev=cfg.start_max_nfev)
     current = start.with_values(pol.values)
     cur_m = score_of(current, pol.values, d, n_free_of(current))
@@ -334,6 +397,8 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
     steps: list[Step] = []
     last: tuple[Candidate, ...] = ()
     notes: list[str] = []
+    one_speed = speed_follows_level(d.signals, d.fit | d.hold)
+    confounded: list[Candidate] = []
     for _ in range(cfg.max_steps):
         analysis, sentences = _analysis(current, d)
         cands = _round(current, cur_m, names, d, cfg, progress)
@@ -342,6 +407,11 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         cands = tuple(refitted.get(c.effect, c) for c in cands)
         last = cands
         passing = [c for c in finals if c.comparison.significant]
+        if one_speed:
+            # the speed is a function of the level: a rate effect fits as a static shape
+            # would; neither is named, both are listed with the separating recording
+            confounded += [c for c in passing if c.effect in RATE_EFFECTS]
+            passing = [c for c in passing if c.effect not in RATE_EFFECTS]
         if not passing:
             break
         best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
@@ -371,7 +441,14 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         current, cur_m = best.model, best.metrics
         last = ()
     analysis, sentences = _analysis(current, d)
+    if coupling_note:
+        named = any(st.effect in COUPLING_EFFECTS for st in steps)
+        if named or coupling_note.startswith("coupling cannot"):
+            notes.append(coupling_note)
     not_excluded = _not_excluded(current, last, d, cfg)
+    if confounded:
+        notes.append(_rate_or_static(confounded, current))
+        not_excluded = _with_rate_alternatives(not_excluded, confounded, current, d, cfg)
     return Diagnosis(
         start_model=start_polished,
         final_model=current,
@@ -392,7 +469,7 @@ def diagnose_from_starts(
     data: Dataset,
     config: DiagnosisConfig | None = None,
     fit_config=None,
-    starts: tuple[str, ...] = ("gpi", "egpi"),
+    starts: tuple[str, ...] | None = None,
     progress=None,
 ) -> AutoDiagnosis:
     """``--start auto``: diagnose from each starting model, reconcile one answer.
@@ -408,8 +485,10 @@ def diagnose_from_starts(
     config : DiagnosisConfig, optional
     fit_config : FitConfig, optional
         Settings of the starting fits.
-    starts : tuple of str
-        Starting models (``"gpi"``, ``"egpi"``).
+    starts : tuple of str, optional
+        Starting models (``"gpi"``, ``"egpi"``, ``"agpi"``); default
+        :func:`~i2ris_calib.hysteresis.registry.diagnosis_starts` of the dataset (the
+        two-tendon GPI on a signed dataset, GPI and EGPI on a direction's).
     progress : callable, optional
         ``progress(text)`` before each fit.
     """
@@ -417,9 +496,14 @@ def diagnose_from_starts(
     checked_dataset(func, "data", data)
     cfg = _diagnosis_config(func, config)
     fit_config = checked_fit_config(func, fit_config, "fit_config")
-    starts = check_choices(func, "starts", starts, ("gpi", "egpi"), "('gpi', 'egpi')")
+    if starts is None:
+        starts = diagnosis_starts(data.direction == "±")
+    starts = check_choices(func, "starts", starts, DIAGNOSIS_STARTS, repr(DIAGNOSIS_STARTS))
     if not starts:
-        raise CalibError(f"{func}: starts is empty; give ('gpi',), ('egpi',) or both")
+        raise CalibError(
+            f"{func}: starts is empty; give "
+            f"{', '.join(repr((k,)) for k in DIAGNOSIS_STARTS)} or both"
+        )
     check_callable(func, "progress", progress)
     paths = {}
     for kind in starts:

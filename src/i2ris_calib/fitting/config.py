@@ -51,6 +51,11 @@ class FitConfig:
     signed : bool
         Fit one model per axis on the whole signed input (dataset ``"<axis>±"``)
         instead of one per motion direction: for actuators whose loops cross zero.
+        Neither ``signed`` nor ``split``: ``fit`` chooses from the recording
+        (docs/fit.md, "Which model").
+    split : bool
+        Fit the paper's per-direction split even when the recording calls for the
+        signed model (``fit --split``).
     loss : str
         ``"linear"`` (Eq24, plain least squares), or the robust ``"soft_l1"`` /
         ``"huber"`` (need ``method = "trf"``) against tracking outliers.
@@ -72,6 +77,7 @@ class FitConfig:
     zero_band_counts: float = -1.0
     min_block_samples: int = 50
     signed: bool = False
+    split: bool = False
     loss: str = "linear"
     f_scale_deg: float = 0.5
 
@@ -98,6 +104,8 @@ class FitConfig:
             raise ValueError(f"loss '{self.loss}' needs method = \"trf\"")
         if self.f_scale_deg <= 0:
             raise ValueError("f_scale_deg must be > 0")
+        if self.signed and self.split:
+            raise ValueError("signed and split exclude each other (neither: chosen from the data)")
         if self.min_block_samples < 1:
             raise ValueError("min_block_samples must be >= 1")
         known_gpi = {"a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn"}

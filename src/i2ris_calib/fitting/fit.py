@@ -20,6 +20,7 @@ The fitted result is a new object; the input model is never changed.
 
 from __future__ import annotations
 
+import functools
 import html
 from dataclasses import dataclass, field, replace
 
@@ -38,7 +39,7 @@ from i2ris_calib._validate import (
 )
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
-from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.model import Model, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
 
 PROFILE_PARAMS = ("v_f",)
@@ -65,6 +66,164 @@ class FitNote:
     code: str
     text: str
     params: tuple[str, ...] = ()
+
+
+#: A recording whose first input lies within this fraction of the input range of zero,
+#: of its lowest or of its highest value starts at rest: the models' own start (every
+#: operator relaxed, ``w[-1] = 0`` clamped into the band at ``v[0]``) is the state
+#: reached by coming there monotonically, and no initial state is estimated.
+REST_TOLERANCE = 0.01
+#: Levels scanned for the initial state before the first fit (then refined by profile).
+INITIAL_STATE_GRID = 41
+#: Longest synthetic pre-history (samples).
+MAX_PREHISTORY = 5000
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """The state at the first sample of a recording that does not start at rest.
+
+    The models start with every operator relaxed at ``v[0]`` (the state of an input
+    that came up from zero), which is wrong for a recording that starts mid-loop:
+    an operator pulled the other way, a first angle off by up to the loop's width.
+    The fitter then runs every model after a synthetic pre-history, the input
+    ramping from a level ``v_from`` (operators relaxed there) to ``v[0]`` at the
+    recording's own typical speed, and fits ``v_from`` with the other parameters
+    (a profile search over the input range). ``v_from`` above ``v[0]``: the
+    recording starts on a falling branch that turned at ``v_from``; at or below it
+    (or zero): on the loading branch. One level cannot stand for a nested history
+    of several reversals; such a start keeps a smaller error until the input has
+    swept the loop. The rule works for every model: it only changes the input the
+    model runs on.
+
+    Attributes
+    ----------
+    v_from : float
+        Fitted level (input unit) the input came from.
+    n_samples : int
+        Samples of the synthetic pre-history.
+    v0 : float
+        First input value.
+    text : str
+        One sentence for the terminal and fit.json.
+    """
+
+    v_from: float
+    n_samples: int
+    v0: float
+    text: str
+
+    def as_dict(self) -> dict:
+        """JSON-ready form."""
+        return {
+            "v_from": self.v_from,
+            "n_samples": self.n_samples,
+            "v0": self.v0,
+            "text": self.text,
+        }
+
+
+def starts_at_rest(v: np.ndarray) -> bool:
+    """True when the first input is within ``REST_TOLERANCE`` of the input range of
+    zero, of the lowest or of the highest input: the models' relaxed start applies."""
+    v = np.asarray(v, dtype=float)
+    span = float(np.ptp(v)) if v.size else 0.0
+    if span <= 0:
+        return True
+    tol = REST_TOLERANCE * span
+    v0 = float(v[0])
+    return abs(v0) <= tol or v0 - float(v.min()) <= tol or float(v.max()) - v0 <= tol
+
+
+class _FromLevel:
+    """``model`` run after a synthetic pre-history: the input ramps from the level
+    ``v_from`` (the last parameter; operators relaxed there) to ``v[0]``; the
+    pre-history's outputs are dropped. Model protocol, plus the inner model's exact
+    Jacobian and flag-point families when it has them."""
+
+    PARAM = "initial_state.v_from"
+
+    def __init__(self, model: Model, v: np.ndarray):
+        self.inner = model
+        self.name = model.name
+        v = np.asarray(v, dtype=float)
+        lo, hi = min(float(v.min()), 0.0), max(float(v.max()), 0.0)
+        self.parameters = (
+            *model.parameters,
+            Parameter(self.PARAM, float(v[0]), lo, hi, unit="input",
+                      doc="level the input came from before the recording"),
+        )  # fmt: skip
+        steps = np.abs(np.diff(v))
+        moving = steps[steps > 0]
+        self.step = float(np.median(moving)) if moving.size else float(np.ptp(v)) / 100
+        self.jac_inner = _analytic_jacobian(model, "jacobian")
+        self.families_inner = _analytic_jacobian(model, "flag_point_families")
+        self._cache: dict = {}
+
+    def prehistory(self, signals: Signals, u: float) -> tuple[Signals, int]:
+        """(signals with the pre-history from ``u`` prepended, its length)."""
+        key = (id(signals.v), float(u))
+        if key in self._cache:
+            return self._cache[key]
+        v = np.asarray(signals.v, dtype=float)
+        n_pre = int(np.clip(np.ceil(abs(v[0] - u) / self.step), 2, MAX_PREHISTORY))
+        vv = np.concatenate([np.linspace(u, v[0], n_pre + 1)[:-1], v])
+        vv.flags.writeable = False  # the models keep what they derive from a frozen input
+
+        def pad(a):
+            a = np.asarray(a)
+            return np.concatenate([np.full(n_pre, a[0], dtype=a.dtype), a])
+
+        t = None
+        if signals.t_s is not None:
+            t0 = np.asarray(signals.t_s, dtype=float)
+            dt = float(np.median(np.diff(t0))) if t0.size > 1 else 1.0
+            t = np.concatenate([t0[0] - dt * np.arange(n_pre, 0, -1), t0])
+        extra = {
+            k: pad(a) if isinstance(a, np.ndarray) and a.shape == v.shape else a
+            for k, a in signals.extra.items()
+        }
+        out = (
+            Signals(
+                v=vv,
+                t_s=t,
+                v_other=None if signals.v_other is None else pad(signals.v_other),
+                theta_other_deg=None
+                if signals.theta_other_deg is None
+                else pad(signals.theta_other_deg),
+                extra=extra,
+            ),
+            n_pre,
+        )
+        if len(self._cache) > 4:
+            self._cache.pop(next(iter(self._cache)))
+        self._cache[key] = out
+        return out
+
+    def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        sig, n_pre = self.prehistory(signals, float(values[-1]))
+        return np.asarray(self.inner.evaluate(sig, np.asarray(values[:-1], float)))[n_pre:]
+
+    def jacobian(self, signals, values, rows=None):
+        sig, n_pre = self.prehistory(signals, float(values[-1]))
+        rows = np.arange(np.asarray(signals.v).size) if rows is None else np.asarray(rows)
+        jac = self.jac_inner(sig, np.asarray(values[:-1], float), rows=rows + n_pre)
+        return np.hstack([jac, np.zeros((jac.shape[0], 1))])  # v_from is profiled
+
+    def flag_point_families(self, signals, values):
+        sig, n_pre = self.prehistory(signals, float(values[-1]))
+        return tuple(a[n_pre:] for a in self.families_inner(sig, np.asarray(values[:-1], float)))
+
+    def with_values(self, values: np.ndarray) -> Model:
+        return self.inner.with_values(np.asarray(values, dtype=float)[:-1])
+
+
+def _method_of(model, method: str):
+    """:func:`_analytic_jacobian`, seeing through :class:`_FromLevel`."""
+    if isinstance(model, _FromLevel):
+        inner = model.jac_inner if method == "jacobian" else model.families_inner
+        return None if inner is None else getattr(model, method)
+    return _analytic_jacobian(model, method)
 
 
 @dataclass(frozen=True)
@@ -110,6 +269,19 @@ class FitResult:
         Samples in the loss.
     free : tuple of str
         Names of the fitted parameters.
+    starts_tried : int
+        Start vectors screened (with the nested start of an extended model).
+    extra : dict
+        ``outside_bounds``: free parameters outside their bounds.
+    notes : tuple of FitNote
+        What the fitter did that a user should know.
+    stderr_reasons : dict
+        Why the standard error of a free parameter is NaN, by name (only those):
+        profiled, at a bound, not identified by these data (with the parameters it
+        cannot be told apart from), no effect on the fitted samples, too few samples.
+    initial_state : InitialState or None
+        The operator state estimated at the first sample of a recording that does
+        not start at rest (None: it starts at rest, the model's own relaxed start).
     """
 
     model: Model
@@ -129,11 +301,87 @@ class FitResult:
     starts_tried: int = 1
     extra: dict = field(default_factory=dict)
     notes: tuple[FitNote, ...] = ()
+    stderr_reasons: dict[str, str] = field(default_factory=dict)
+    initial_state: InitialState | None = None
 
     def predict(self, signals: Signals | np.ndarray) -> np.ndarray:
         """Fitted model output (deg) for ``signals``."""
         s = as_signals(signals)
         return self.model.evaluate(s, np.array([p.value for p in self.model.parameters]))
+
+    def eval_uncertainty(
+        self, signals: Signals | np.ndarray | None = None, sigma: float = 1.0
+    ) -> np.ndarray:
+        """Prediction band of the fitted model from the parameter covariance (deg), per sample.
+
+        As lmfit's ``ModelResult.eval_uncertainty``: ``sigma_y = sqrt(diag(J C J^T))``
+        with ``J`` the Jacobian of the model output with respect to the parameters the
+        covariance covers (free, not profiled; fixed ones and a profiled ``v_f`` have
+        zero rows and add nothing) and ``C`` :attr:`covariance`. ``J`` is the model's
+        exact ``jacobian`` when it has one (GPI, EGPI, EGPI_C), else central
+        differences with steps of 1 % of each standard error. The band is the
+        uncertainty of the model curve from the parameters alone (not the scatter of
+        new measurements about it), valid where the output is smooth in them.
+
+        Parameters
+        ----------
+        signals : Signals or ndarray, shape (n,), optional
+            Input to evaluate at (counts), the whole history in time order (the model
+            has state). Default: the fit's own input when recorded in ``extra["signals"]``.
+        sigma : float
+            Width in standard errors (``2`` -> the 2-sigma band); a value in (0, 1) is a
+            two-sided probability (``0.95`` -> 1.96 sigma), as in lmfit.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``sigma`` x the standard error of :meth:`predict` at every sample (deg);
+            zeros when no parameter has a covariance (all fixed).
+
+        Raises
+        ------
+        CalibError
+            ``signals`` not given and not recorded; ``sigma`` not a positive number.
+        """
+        if signals is None:
+            signals = self.extra.get("signals")
+            if signals is None:
+                raise CalibError(
+                    "eval_uncertainty: this FitResult does not keep its input; pass the "
+                    "signals, e.g. res.eval_uncertainty(dataset.signals)"
+                )
+        if isinstance(sigma, bool) or not isinstance(sigma, (int, float, np.floating)):
+            raise CalibError(f"eval_uncertainty: sigma is {describe(sigma)}; give a number > 0")
+        if not (np.isfinite(sigma) and sigma > 0):
+            raise CalibError(
+                f"eval_uncertainty: sigma = {sigma} must be > 0 (1 = one standard error)"
+            )
+        if sigma < 1:
+            from scipy.special import ndtri
+
+            sigma = float(ndtri(0.5 + 0.5 * sigma))
+        s = as_signals(signals)
+        x = np.array([p.value for p in self.model.parameters], dtype=float)
+        cov = np.asarray(self.covariance, dtype=float)
+        diag = np.diag(cov) if cov.shape == (x.size, x.size) else np.zeros(x.size)
+        idx = np.flatnonzero(np.isfinite(diag) & (diag > 0))
+        n = np.asarray(s.v).size
+        if idx.size == 0:
+            return np.zeros(n)
+        jac_fn = _analytic_jacobian(self.model, "jacobian")
+        if jac_fn is not None:
+            jac = np.asarray(jac_fn(s, x), dtype=float)[:, idx]
+        else:
+            jac = np.empty((n, idx.size))
+            for col, i in enumerate(idx):
+                h = 0.01 * float(np.sqrt(diag[i])) or 1e-6 * (1.0 + abs(x[i]))
+                up, down = x.copy(), x.copy()
+                up[i] += h
+                down[i] -= h
+                jac[:, col] = (self.model.evaluate(s, up) - self.model.evaluate(s, down)) / (2 * h)
+        c = cov[np.ix_(idx, idx)]
+        var = np.einsum("ij,jk,ik->i", jac, c, jac)
+        return sigma * np.sqrt(np.maximum(var, 0.0))
 
     @property
     def chisqr(self) -> float:
@@ -239,8 +487,8 @@ class _Counter:
         self.model, self.signals, self.theta, self.used = model, signals, theta, used
         self.loss, self.f_scale = loss, float(f_scale)
         self.n = 0
-        self.jac_fn = _analytic_jacobian(model, "jacobian")
-        self.families_fn = _analytic_jacobian(model, "flag_point_families")
+        self.jac_fn = _method_of(model, "jacobian")
+        self.families_fn = _method_of(model, "flag_point_families")
         names = [p.name for p in model.parameters]
         self.vf_index = names.index("v_f") if "v_f" in names else -1
         self.used_idx = np.flatnonzero(used)
@@ -386,6 +634,22 @@ def _profile(counter, full, idx, grid, cost=None):
     return best
 
 
+def _refine_level(counter, full, idx, lower, upper, wide=True):
+    """Profile search over the initial-state level ``v_from`` (index ``idx``), the
+    others held: ``wide``, ``INITIAL_STATE_GRID`` levels over its whole range; else 21
+    levels within +-2.5 % of the range around the current one. Never worse."""
+    lo, hi = lower[idx], upper[idx]
+    if wide:
+        grid = np.linspace(lo, hi, INITIAL_STATE_GRID)
+    else:
+        h = 0.025 * (hi - lo)
+        grid = np.clip(np.linspace(full[idx] - h, full[idx] + h, 21), lo, hi)
+    best, _ = _profile(counter, full, idx, grid)
+    full = full.copy()
+    full[idx] = best
+    return full
+
+
 def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
     """Profile search over each profiled parameter (v_f), the others held.
 
@@ -510,6 +774,8 @@ def _fit_model(
     ftol: float = 1e-7,
     loss: str = "linear",
     f_scale_deg: float = 0.5,
+    nested: bool = True,
+    initial_state: str = "auto",
 ) -> FitResult:
     """Fit ``model`` to measured angles by least squares (Eq24).
 
@@ -545,6 +811,17 @@ def _fit_model(
         ``"linear"`` is Eq24 (plain least squares). The robust losses down-weight
         residuals beyond ``f_scale_deg`` (e.g. tracking outliers); they need
         ``method="trf"``. Metrics are always Eq25-27 on every sample.
+    nested : bool
+        For a model that extends another (``model.nested()`` gives the wrapped model
+        and the values that switch the extension off, e.g. an effect added by
+        :func:`~i2ris_calib.diagnosis.effects.add_effect`): fit the wrapped model
+        first (same data and options, the wrapped part of every start) and add its
+        fitted values with the extension off as a start. The result is never worse
+        than that fit (the fitter never ends worse than a start inside the bounds).
+    initial_state : {"auto", "rest"}
+        ``"auto"``: a recording that does not start at rest (:func:`starts_at_rest`)
+        gets its initial state fitted (:class:`InitialState`, reported in
+        ``initial_state``); ``"rest"``: every model starts relaxed at ``v[0]``.
 
     Returns
     -------
@@ -560,42 +837,71 @@ def _fit_model(
     """
     _check_args(model, signals, theta_deg, fit_mask, holdout_mask, starts, method, max_nfev,
                 screen_nfev, ftol, loss, f_scale_deg)  # fmt: skip
+    check_choice("fit_model", "initial_state", initial_state, ("auto", "rest"))
     s = as_signals(signals)
     v = np.asarray(s.v, dtype=float)
     theta = np.asarray(theta_deg, dtype=float)
+    opts = dict(
+        fit_mask=fit_mask, holdout_mask=holdout_mask, method=method, max_nfev=max_nfev,
+        screen_nfev=screen_nfev, ftol=ftol, initial_state=initial_state,
+    )  # fmt: skip
     params = model.parameters
-    names = tuple(p.name for p in params)
-    lower = np.array([p.lower for p in params])
-    upper = np.array([p.upper for p in params])
-    is_free = np.array([not p.fixed for p in params])
-    pidx = [i for i, nm in enumerate(names) if nm in PROFILE_PARAMS and is_free[i]]
-    lsq_free = np.flatnonzero(is_free & ~np.isin(np.arange(len(names)), pidx))
     hold = np.zeros(theta.shape, bool) if holdout_mask is None else np.asarray(holdout_mask, bool)
     used = np.isfinite(theta) & ~hold
     if fit_mask is not None:
         used &= np.asarray(fit_mask, bool)
-    _validate(s, theta, int(is_free.sum()), used)
+    _validate(s, theta, sum(not p.fixed for p in params), used)
     if loss not in ("linear", "soft_l1", "huber"):
         raise CalibError(f"fit: unknown loss '{loss}'; use linear, soft_l1 or huber")
     if loss != "linear" and method != "trf":
         raise CalibError(
             f"fit: loss '{loss}' needs method 'trf' (MINPACK LM is plain least squares)"
         )
+    starts = [np.array([p.value for p in params], dtype=float)] if not starts else list(starts)
+    starts = [np.asarray(x0, dtype=float) for x0 in starts]
+    # a nested model: its base fitted first, with the extension off, is one more start
+    inner_fit = _nested_fit(model, s, theta, starts, opts | dict(loss=loss, f_scale_deg=f_scale_deg)) if nested else None  # fmt: skip
+    if inner_fit is not None:
+        starts.append(inner_fit[0])
+    # a recording that does not start at rest: its initial state is fitted (v_from)
+    level = initial_state == "auto" and not starts_at_rest(v)
+    fitted_model: Model = _FromLevel(model, v) if level else model
+    params = fitted_model.parameters
+    names = tuple(p.name for p in params)
+    lower = np.array([p.lower for p in params])
+    upper = np.array([p.upper for p in params])
+    is_free = np.array([not p.fixed for p in params])
+    uidx = len(names) - 1 if level else None
+    pidx = [i for i, nm in enumerate(names) if nm in PROFILE_PARAMS and is_free[i]]
+    lsq_free = np.flatnonzero(is_free & ~np.isin(np.arange(len(names)), [*pidx, len(names) - 1] if level else pidx))  # fmt: skip
     # the model runs on a read-only copy of the input: it cannot change during the fit,
     # so the models keep what they derive from it (runs of held samples)
     v_frozen = np.array(s.v, dtype=float)
     v_frozen.flags.writeable = False
-    counter = _Counter(model, replace(s, v=v_frozen), theta, used, loss, f_scale_deg)
-    starts = [np.array([p.value for p in params], dtype=float)] if not starts else starts
+    counter = _Counter(fitted_model, replace(s, v=v_frozen), theta, used, loss, f_scale_deg)
+    if level:
+        # every start at the level that fits it best (scanned once, on the first start);
+        # the nested start keeps its base fit's level
+        u0 = _refine_level(counter, np.append(starts[0], float(v[0])), uidx, lower, upper)[-1]
+        u_nested = (
+            inner_fit[1].initial_state.v_from
+            if inner_fit is not None and inner_fit[1].initial_state is not None
+            else u0
+        )
+        starts = [np.append(x0, u0) for x0 in starts]
+        if inner_fit is not None:
+            starts[-1][-1] = u_nested
 
     def run(x0, nfev_limit, steps, how=method):
         full, res = np.asarray(x0, dtype=float).copy(), None
-        for step in steps if pidx else ("lm",):
+        for step in steps if pidx or level else ("lm",):
             if step == "lm" and lsq_free.size:
                 full, res = _lsq(counter, full, lsq_free, lower, upper, how, nfev_limit, ftol)
             elif step in ("wide", "fine"):
                 full = _refine_profiled(counter, full, pidx, v, lower, upper, wide=step == "wide")
-            elif step == "reopt" and lsq_free.size:
+                if level:
+                    full = _refine_level(counter, full, uidx, lower, upper, wide=step == "wide")
+            elif step == "reopt" and lsq_free.size and pidx:
                 full = _reoptimised_profile(
                     counter, full, pidx, lsq_free, v, lower, upper, how, screen_nfev, ftol
                 )
@@ -606,9 +912,7 @@ def _fit_model(
     first = ("fine", "lm", "wide", "lm")
     polish = ("lm", "reopt", "fine", "lm")
     # in-bounds points already reached (starts, screened ends): the result must not be worse
-    known = [
-        (counter.cost(np.asarray(x0, dtype=float)), np.asarray(x0, dtype=float)) for x0 in starts
-    ]
+    known = [(counter.cost(x0), x0) for x0 in starts]
     if loss != "linear":
         # robust fits start from the converged plain least-squares fit (LM, the
         # fitter's own path; outliers also bias the data-driven starts), then refine
@@ -616,11 +920,14 @@ def _fit_model(
         # result may not be worse than, so a start that scores better in the robust
         # cost is refined too and the lower end wins (never a bare restart from it).
         plain = _fit_model(
-            model, s, theta, fit_mask=fit_mask, holdout_mask=holdout_mask, starts=starts,
-            method="lm", max_nfev=max_nfev, screen_nfev=screen_nfev, ftol=ftol,
+            model, s, theta, **(opts | dict(method="lm")), nested=False,
+            starts=[x[: len(model.parameters)] for x in starts],
         )  # fmt: skip
         counter.n += plain.nfev
         x_plain = np.array([p.value for p in plain.model.parameters], dtype=float)
+        if level:
+            st = plain.initial_state
+            x_plain = np.append(x_plain, st.v_from if st is not None else starts[0][-1])
         known.append((counter.cost(x_plain), x_plain))
         # the flag point is profiled with the robust cost too, over the wide grid:
         # outliers pull the least-squares profile's v_f
@@ -665,7 +972,8 @@ def _fit_model(
             )
         )
     result = _result(
-        model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n, len(starts), lsq_free
+        fitted_model, s, theta, used, hold, full, res, names, is_free, pidx, counter.n,
+        len(starts), lsq_free, uidx,
     )  # fmt: skip
     if floor is not None and not cost <= floor[0] * (1 + 1e-9):
         result = replace(result, converged=False)
@@ -675,16 +983,62 @@ def _fit_model(
                 f"NOT a minimum: cost {cost:.4g} above that of a start ({floor[0]:.4g})",
             )
         )
-    if not notes:
-        return result
     at_bound = (
         [names[i] for i in lsq_free if _on_bound(full[i], lower[i], upper[i])] if left else []
     )
     if at_bound:
         notes.append(FitNote("at_bound", f"at the bound: {', '.join(at_bound)}", tuple(at_bound)))
     stderr = result.stderr | dict.fromkeys(at_bound, float("nan"))
+    reasons = result.stderr_reasons | {
+        nm: f"at its bound ({full[names.index(nm)]:.6g}): the covariance does not apply there"
+        for nm in at_bound
+    }
     message = result.message + "".join(f" [{n.text}]" for n in notes)
-    return replace(result, message=message, stderr=stderr, notes=tuple(notes))
+    result = replace(
+        result, message=message, stderr=stderr, notes=tuple(notes), stderr_reasons=reasons
+    )
+    return _without_level(result, model, v, full) if level else result
+
+
+def _nested_fit(model, s, theta, starts, opts) -> tuple[np.ndarray, FitResult] | None:
+    """(start vector, fit of the wrapped model) for a model with ``nested()``: the
+    wrapped model fitted with the same options from the wrapped part of every start,
+    followed by the values that switch the extension off; None for other models."""
+    nested = getattr(model, "nested", None)
+    if not callable(nested):
+        return None
+    inner, tail = nested()
+    m = len(inner.parameters)
+    try:
+        res = _fit_model(inner, s, theta, starts=[x[:m] for x in starts], **opts)
+    except CalibError:
+        return None
+    x = np.concatenate([[p.value for p in res.model.parameters], np.asarray(tail, float)])
+    return x, res
+
+
+def _without_level(result: FitResult, model: Model, v: np.ndarray, full: np.ndarray) -> FitResult:
+    """``result`` of a :class:`_FromLevel` fit in terms of ``model``: the level
+    ``v_from`` leaves the parameters for :attr:`FitResult.initial_state`."""
+    u = float(full[-1])
+    p = len(model.parameters)
+    names = tuple(pp.name for pp in model.parameters)
+    branch = f"a falling branch that turned at {u:.6g}" if u > v[0] else "the loading branch"
+    st = _FromLevel(model, v)
+    n_pre = st.prehistory(Signals(v=np.asarray(v, float)), u)[1]
+    text = (
+        f"the recording starts mid-range (input {v[0]:.6g}, not at rest): initial state "
+        f"fitted as {branch} (pre-history from {u:.6g}, {n_pre} samples)"
+    )
+    return replace(
+        result,
+        params={k: result.params[k] for k in names},
+        stderr={k: result.stderr[k] for k in names},
+        stderr_reasons={k: r for k, r in result.stderr_reasons.items() if k in names},
+        covariance=result.covariance[:p, :p],
+        free=tuple(k for k in result.free if k in names),
+        initial_state=InitialState(u, int(n_pre), float(v[0]), text),
+    )
 
 
 def _on_bound(x: float, lo: float, hi: float) -> bool:
@@ -698,8 +1052,9 @@ def _outside(full, free, lower, upper) -> list[int]:
 
 
 def _result(
-    model, s, theta, used, hold, full, res, names, is_free, pidx, nfev, n_starts, lsq_idx
-) -> FitResult:
+    model, s, theta, used, hold, full, res, names, is_free, pidx, nfev, n_starts, lsq_idx,
+    uidx=None,
+) -> FitResult:  # fmt: skip
     fitted = model.with_values(full)
     y = model.evaluate(s, full)
     resid = y - theta
@@ -709,7 +1064,12 @@ def _result(
     p = len(names)
     cov = np.zeros((p, p))
     stderr = dict.fromkeys(names, 0.0)
+    reasons: dict[str, str] = {}
     lsq_idx = [int(i) for i in lsq_idx]
+    if lsq_idx and n <= k:
+        for i in lsq_idx:
+            stderr[names[i]] = float("nan")
+            reasons[names[i]] = f"{n} fitted samples for {k} free parameters: no residual variance"
     if res is not None and lsq_idx and n > k:
         J = np.asarray(res.jac, dtype=float)
         s2 = rss / (n - k)
@@ -728,8 +1088,15 @@ def _result(
             stderr[names[ia]] = (
                 float("nan") if unidentified[a] else float(np.sqrt(max(c[a, a], 0.0)))
             )
+        reasons |= _unidentified_reasons(norm, evecs[:, ~ok], [names[i] for i in lsq_idx])
     for i in pidx:
         stderr[names[i]] = float("nan")
+        reasons[names[i]] = (
+            "profiled: the output steps in it (piecewise constant), so it has no "
+            "derivative and no covariance; it is placed at the centre of the best interval"
+        )
+    if uidx is not None:
+        stderr[names[uidx]] = float("nan")
     converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)
     message = "profile search only" if res is None else str(res.message)
     outside = [
@@ -757,7 +1124,63 @@ def _result(
         free=tuple(names[i] for i in np.flatnonzero(is_free)),
         starts_tried=n_starts,
         extra={"outside_bounds": outside},
+        stderr_reasons=reasons,
     )
 
 
-fit_model.__doc__ = _fit_model.__doc__
+def _unidentified_reasons(norm: np.ndarray, null: np.ndarray, names: list[str]) -> dict[str, str]:
+    """Why each parameter in the Jacobian's null space has no standard error.
+
+    Parameters
+    ----------
+    norm : ndarray, shape (q,)
+        Norm of each Jacobian column (0: the output does not depend on it).
+    null : ndarray, shape (q, m)
+        Null-space directions of the column-scaled J^T J.
+    names : list of str
+        Parameter names of the columns.
+    """
+    out = {}
+    for a, nm in enumerate(names):
+        if norm[a] == 0:
+            out[nm] = "no effect on the fitted samples: the output does not change with it"
+            continue
+        dirs = [j for j in range(null.shape[1]) if abs(null[a, j]) > 0.1]
+        if not dirs:
+            continue
+        with_ = sorted(
+            {names[b] for j in dirs for b in range(len(names)) if b != a and abs(null[b, j]) > 0.1}
+        )
+        out[nm] = (
+            "not identified: these data cannot tell it apart from "
+            + (", ".join(with_) if with_ else "a constant")
+            + " (singular covariance: changing them together leaves the output the same)"
+        )
+    return out
+
+
+# fit_model shows _fit_model's docstring and signature (inspect.signature follows __wrapped__)
+functools.update_wrapper(fit_model, _fit_model, assigned=("__doc__", "__annotations__"))
+
+
+def innermost(model: Model) -> Model:
+    """The model at the bottom of a stack of extensions (``model.nested()``, e.g.
+    effects added by :func:`~i2ris_calib.diagnosis.effects.add_effect`); ``model``
+    itself when it extends nothing. Its parameters come first in ``model``'s vector."""
+    while callable(getattr(model, "nested", None)):
+        model = model.nested()[0]
+    return model
+
+
+def fit_notices(res: FitResult) -> tuple[str, ...]:
+    """Sentences a user should read about ``res`` (the fitting stage adds them to its
+    warnings): the initial state fitted for a recording that does not start at rest,
+    and the free parameters without a standard error and why (a profiled flag point
+    has none by design and is not listed)."""
+    out = []
+    if res.initial_state is not None:
+        out.append(res.initial_state.text)
+    missing = {k: r for k, r in res.stderr_reasons.items() if not r.startswith("profiled")}
+    if missing:
+        out.append("no standard error for " + "; ".join(f"{k} ({r})" for k, r in missing.items()))
+    return tuple(out)

@@ -6,7 +6,7 @@ direction's input and a loss mask: every model runs over every sample in time or
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -18,23 +18,33 @@ from i2ris_calib._validate import (
     describe,
     same_length,
 )
+from i2ris_calib.data.coupling import MotorsTogether
+from i2ris_calib.data.cycles import cycle_index, holdout_mask
 from i2ris_calib.data.dataset import Dataset, checked_dataset
+from i2ris_calib.data.excursions import Excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.cycles import cycle_index, holdout_mask
-from i2ris_calib.fitting.fit import FitResult, fit_model
+from i2ris_calib.fitting.fit import FitResult, fit_model, fit_notices, innermost
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.registry import (
+    COUPLED_DEFAULT,
     DEFAULT_DEADBAND_COUNTS,
     DEFAULT_N_OPERATORS,
     MODEL_KINDS,
+    SIGNED_DEFAULT,
+    SIGNED_KINDS,
+    fit_order,
+    kind_info,
     model_for_kind,
+    start_recipe,
 )
-from i2ris_calib.hysteresis.start import default_deadband, keep_fixed, recipe_of, start_values
+from i2ris_calib.hysteresis.start import default_deadband, keep_fixed
 
 __all__ = [
     "MODEL_KINDS",
+    "ModelChoice",
+    "choose_model",
     "build_model",
     "deadband_for",
     "fit",
@@ -46,6 +56,112 @@ __all__ = [
     "model_from_params",
     "split_masks",
 ]
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """Which models ``fit`` fits, on which input, and why (docs/fit.md, "Which model").
+
+    Attributes
+    ----------
+    signed : bool
+        One model per axis over the whole signed input (dataset ``"±"``); else the
+        paper's split into motion directions.
+    kinds : tuple of str
+        Model kinds to fit (registry names), in fitting order.
+    why : str
+        The reason, in a few words (the recording's zero crossings and rests, or the
+        option that forced it; whether the other motor moves with this one).
+    coupling : MotorsTogether or None
+        How the other motor moves with this one (:mod:`i2ris_calib.data.coupling`);
+        None when the recording has no other motor's input.
+    """
+
+    signed: bool
+    kinds: tuple[str, ...]
+    why: str
+    coupling: MotorsTogether | None = None
+
+    @property
+    def main(self) -> str:
+        """The default model of this choice: the coupled two-tendon GPI when fitted,
+        else the two-tendon GPI on a signed input, else the last kind."""
+        for kind in (COUPLED_DEFAULT, SIGNED_DEFAULT):
+            if self.signed and kind in self.kinds:
+                return kind
+        return self.kinds[-1]
+
+    @property
+    def line(self) -> str:
+        """One line for the terminal and the report, e.g. ``model: two-tendon GPI over
+        the signed input (the input crosses zero 14 times; ...)``."""
+        if self.signed:
+            what = f"{kind_info(self.main).report_name} over the signed input"
+        else:
+            what = " / ".join(kind_info(k).report_name for k in self.kinds)
+            what += " per motion direction (the paper's split)"
+        return f"model: {what} ({self.why})"
+
+    def as_dict(self) -> dict:
+        """The fit.json ``model_choice`` record."""
+        return {"input": "signed" if self.signed else "split", "kinds": list(self.kinds),
+                "main": self.main, "why": self.why, "line": self.line,
+                "coupling": None if self.coupling is None else self.coupling.as_dict()}  # fmt: skip
+
+
+def choose_model(
+    recording: Excursions | None,
+    config: FitConfig = FitConfig(),
+    model: str = "all",
+    together: MotorsTogether | None = None,
+) -> ModelChoice:
+    """The models of a fit and their input: the paper's per-direction split, or one
+    model per axis over the whole signed input (the two-tendon GPI).
+
+    Signed when ``config.signed`` (``--signed``), when ``model`` needs the signed input,
+    or - unless ``config.split`` (``--split``) - when the recording calls for it
+    (:attr:`Excursions.signed`: both sides move, and the input crosses zero or an
+    excursion does not start at rest). ``model``: ``"all"`` (the default kinds of that
+    input: :data:`MODEL_KINDS` split, :data:`SIGNED_KINDS` signed) or one kind.
+
+    ``together``: how the other motor moves with this one
+    (:func:`i2ris_calib.data.coupling.motors_together`). On a signed input with
+    ``model = "all"``, when the other motor moves while this one does and the recording
+    can separate coupling (:attr:`MotorsTogether.coupled`), the two-tendon GPI with
+    coupling to the other motor (:data:`COUPLED_DEFAULT`) is fitted too and is the
+    default model; ``why`` says so, or why not.
+
+    Raises
+    ------
+    CalibError
+        ``model`` needs the signed input but ``config.split`` is set.
+    """
+    needs_signed = model != "all" and kind_info(model).signed
+    if needs_signed and config.split:
+        raise CalibError(f"--model {model} is fitted on the signed input; drop --split")
+    seen = "" if recording is None else recording.reason
+    if config.signed:
+        signed, why = True, "--signed"
+    elif needs_signed:
+        signed, why = True, f"--model {model}"
+    elif config.split:
+        signed, why = False, "--split" + (f"; the recording: {seen}" if seen else "")
+    else:
+        signed, why = bool(recording is not None and recording.signed), seen
+    if model == "all":
+        kinds = SIGNED_KINDS if signed else MODEL_KINDS
+    else:
+        kinds = (model,)
+    why = why or "default"
+    if together is not None and together.moves_together:
+        if signed and model == "all" and together.coupled:
+            kinds = (*kinds, COUPLED_DEFAULT)
+            why += f"; with coupling: {together.reason}"
+        elif together.cannot_separate:
+            why += f"; no coupling term: {together.reason}"
+        elif not signed:
+            why += f"; {together.reason} (coupling is modelled on the signed input: --signed)"
+    return ModelChoice(signed, tuple(fit_order(kinds)), why, together)
 
 
 def deadband_for(v: np.ndarray, config: FitConfig) -> float:
@@ -63,7 +179,7 @@ def build_model(
     dead band in input units, default :func:`deadband_for`)."""
     db = deadband_for(v, config) if deadband is None else float(deadband)
     m = model_for_kind(kind, n=config.n_operators, deadband_counts=db)
-    fixed = set(config.fixed_gpi if kind == "gpi" else config.fixed_egpi)
+    fixed = set(kind_info(kind).fixed(config))
     if not config.fit_flag_point and "v_f" in m.names:
         fixed.add("v_f")
     return m.with_fixed(fixed=tuple(fixed), free=tuple(n for n in m.names if n not in fixed))
@@ -82,7 +198,7 @@ def model_from_params(
 
 def split_masks(v: np.ndarray, config: FitConfig = FitConfig()) -> tuple[np.ndarray, np.ndarray]:
     """(cycle index (n,), held-out mask (n,)) for ``v``: the one held-out rule
-    (:func:`i2ris_calib.fitting.cycles.holdout_mask`, cycles with a 1 % dead band)."""
+    (:func:`i2ris_calib.data.cycles.holdout_mask`, cycles with a 1 % dead band)."""
     cyc = cycle_index(v)
     return cyc, holdout_mask(cyc, config.holdout_fraction, v)
 
@@ -132,21 +248,33 @@ def fit_kind(
     db = deadband_for(v, config) if deadband is None else float(deadband)
     scale = input_scale(v)
     if scale != 1.0:
+        v_other = None if s.v_other is None else np.asarray(s.v_other, float) / scale
         res = fit_kind(
-            kind, replace(s, v=v / scale), theta, config, holdout,
+            kind, replace(s, v=v / scale, v_other=v_other), theta, config, holdout,
             None if gpi_fit is None else _scaled_fit(gpi_fit, 1.0 / scale),
             deadband=db / scale, related=tuple(_scaled_fit(r, 1.0 / scale) for r in related),
         )  # fmt: skip
         return _scaled_fit(res, scale, build_model(kind, v, config, db))
     model = build_model(kind, v, config, db)
-    n_starts = config.n_starts if kind != "gpi" else config.n_starts_gpi
+    info = kind_info(kind)
+    n_starts = getattr(config, info.n_starts)
     rng = np.random.default_rng(config.seed)
     fit_sel = np.isfinite(theta) & ~holdout
     theta_fit = np.where(fit_sel, theta, np.nan)
-    starts = start_values(model, v, theta_fit, n_starts, rng, db) if fit_sel.sum() > 2 else None
-    if starts is not None and kind != "gpi":
+    if info.coupled:
+        if s.v_other is None:
+            raise CalibError(
+                f"model {kind} needs the other motor's input (enc_other / the other enc_ column)"
+            )
         if gpi_fit is None:
-            gpi_fit = fit_kind("gpi", s, theta, config, holdout, deadband=db)
+            gpi_fit = fit_kind(info.nested, s, theta, config, holdout, deadband=db)
+        model, starts = info.start(model, s, theta_fit, gpi_fit.params, n_starts, rng, db)
+        starts = [keep_fixed(model, x) for x in starts]
+        return _fit_configured(model, s, theta, holdout, starts, config)
+    starts = info.start(model, v, theta_fit, n_starts, rng, db) if fit_sel.sum() > 2 else None
+    if starts is not None and info.nested is not None:
+        if gpi_fit is None:
+            gpi_fit = fit_kind(info.nested, s, theta, config, holdout, deadband=db)
         starts.append(nested_gpi_start(model, gpi_fit.params, starts[0]))
         for other in related:
             if set(other.params) == set(model.names):
@@ -171,9 +299,6 @@ def _fit_configured(model, signals, theta, holdout, starts, config: FitConfig) -
     )
 
 
-SLOPES = ("a1", "a3", "a5")
-
-
 def input_scale(v: np.ndarray) -> float:
     """Factor the fit divides the input by: 1 for inputs up to 1e2-1e6 in magnitude
     (encoder counts), else the power of ten that brings max |v| to about 1e4.
@@ -189,11 +314,13 @@ def input_scale(v: np.ndarray) -> float:
 
 
 def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = None) -> FitResult:
-    """``res`` with its parameters expressed for the input ``v * scale`` (slopes divided
-    by ``scale``, the flag point multiplied by it); ``model``: the model to carry the
-    converted values (default: ``res.model``)."""
+    """``res`` with its parameters expressed for the input ``v * scale`` (slopes, in
+    deg per input unit, divided by ``scale``; inputs such as the flag point multiplied
+    by it); ``model``: the model to carry the converted values (default: ``res.model``)."""
     names = tuple(res.params)
-    d = np.array([1.0 / scale if k in SLOPES else scale if k == "v_f" else 1.0 for k in names])
+    unit = {p.name: p.unit for p in res.model.parameters}
+    factor = {"deg/count": 1.0 / scale, "count": scale}
+    d = np.array([factor.get(unit.get(k, ""), 1.0) for k in names])
     params = {k: float(x * f) for (k, x), f in zip(res.params.items(), d, strict=True)}
     stderr = {k: float(res.stderr[k] * f) for k, f in zip(names, d, strict=True)}
     cov = (
@@ -218,10 +345,11 @@ def fit_dataset(
     starts (GPI nested in EGPI, EGPI for the continuous EGPI)."""
     earlier = earlier or {}
     db = data.bands.deadband if config.deadband_counts < 0 else float(config.deadband_counts)
-    related = tuple(r for k, r in earlier.items() if k not in ("gpi", kind))
+    nested = kind_info(kind).nested
+    related = tuple(r for k, r in earlier.items() if k not in (nested, kind))
     return fit_kind(
-        kind, data.signals, data.theta_deg, config, data.holdout, earlier.get("gpi"),
-        deadband=db, related=related,
+        kind, data.signals, data.theta_deg, config, data.holdout,
+        None if nested is None else earlier.get(nested), deadband=db, related=related,
     )  # fmt: skip
 
 
@@ -248,10 +376,12 @@ def fit_all(
     holdout = split_masks(v, config)[1]
     out: dict[str, FitResult] = {}
     for k in kinds:
-        related = tuple(r for kk, r in out.items() if kk != "gpi")
+        nested = kind_info(k).nested
+        related = tuple(r for kk, r in out.items() if kk != nested)
         out[k] = fit_kind(
-            k, signals, theta_deg, config, holdout, gpi_fit=out.get("gpi"), related=related
-        )
+            k, signals, theta_deg, config, holdout,
+            gpi_fit=None if nested is None else out.get(nested), related=related,
+        )  # fmt: skip
     return out
 
 
@@ -261,8 +391,7 @@ def fit_dataset_all(
     """``{kind: FitResult}`` for every kind on one direction dataset (GPI first: the
     EGPI kinds start from it)."""
     out: dict[str, FitResult] = {}
-    order = sorted(kinds, key=lambda k: MODEL_KINDS.index(k) if k in MODEL_KINDS else 99)
-    for k in order:
+    for k in fit_order(kinds):
         out[k] = fit_dataset(k, data, config, out)
     return {k: out[k] for k in kinds}
 
@@ -297,6 +426,7 @@ def fit_warnings(res: FitResult, v: np.ndarray) -> tuple[str, ...]:
                 f"loading slope a1 = {a1:.3g} deg per input unit: the angle does not grow "
                 "with the input"
             )
+    out += fit_notices(res)  # a fitted initial state, standard errors missing and why
     if not res.converged:
         out.append("not converged: " + res.message)
     return tuple(out)
@@ -391,8 +521,11 @@ def fit(
     signals, theta, hold, db, v, config = _fit_inputs(model, data, config, holdout)
     starts = [model.values]
     theta_fit = np.where(np.isfinite(theta) & ~hold, theta, np.nan)
-    if recipe_of(model) is not None and np.isfinite(theta_fit).sum() > 2:
+    base = innermost(model)  # an extended model: the data-driven starts of its base
+    recipe = start_recipe(base)
+    if recipe is not None and np.isfinite(theta_fit).sum() > 2:
         rng = np.random.default_rng(config.seed)
-        starts += start_values(model, v, theta_fit, config.n_starts, rng, db)
+        tail = model.values[len(base.parameters) :]
+        starts += [np.append(x, tail) for x in recipe(base, v, theta_fit, config.n_starts, rng, db)]
         starts = [keep_fixed(model, x) for x in starts]
     return _fit_configured(model, signals, theta, hold, starts, config)

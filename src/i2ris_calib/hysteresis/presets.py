@@ -140,3 +140,75 @@ def loading_trajectory(
         t = np.arange(0.0, knots_t[-1], 1.0 / rate_hz)
     v = np.round(np.interp(t, knots_t, knots_v))
     return t + start_s, v
+
+
+def random_two_tendon_params(
+    rng: np.random.Generator,
+    v_max_counts: float = V_MAX_COUNTS,
+    offset_deg: float | None = None,
+    n: int = 30,
+) -> dict[str, float]:
+    """One plausible true parameter set of the two-tendon GPI (model kind ``"agpi"``).
+
+    Each tendon: the GPI part of :func:`random_i2ris_egpi_params` with its own bending
+    range (U(25, 45) deg at ``v_max_counts``: different gains on the two sides), put in
+    the gauge ``a2 = 0`` (both envelopes shifted by ``-a2``); ``theta0`` = ``offset_deg``
+    (default U(-10, 10) deg), the angle at zero input.
+    """
+    vals = {"theta0": float(rng.uniform(-10.0, 10.0)) if offset_deg is None else offset_deg}
+    for side in ("p", "n"):
+        g = gpi_values(random_i2ris_egpi_params(rng, v_max_counts, rng.uniform(25.0, 45.0), n))
+        g["a4"] -= g["a2"]
+        g["a2"] = 0.0
+        vals |= {f"{k}_{side}": x for k, x in g.items()}
+    return vals
+
+
+def through_zero_trajectory(
+    rng: np.random.Generator,
+    n_samples: int,
+    rate_hz: float = 30.0,
+    v_max_counts: float = V_MAX_COUNTS,
+    period_s: tuple[float, float] = (4.0, 12.0),
+    hold_fraction: float = 0.1,
+    burn_in_s: float = 20.0,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """A lab-like input driven through zero: loops of varying amplitude and period
+    (circles/sines through zero, 0.2-1 of ``v_max_counts``), some holds, whole counts.
+
+    The trajectory starts ``burn_in_s`` before the recording: a model run over the
+    whole array and cut at ``start`` gives a recording that starts mid-loop.
+
+    Returns
+    -------
+    t_s : ndarray, shape (m,)
+        Times (s), ``t_s[start] = 0``.
+    v : ndarray, shape (m,)
+        Signed input (counts).
+    start : int
+        Index of the recording's first sample (``n_samples`` samples from there).
+    """
+    dt = 1.0 / rate_hz
+    n_burn = int(round(burn_in_s * rate_hz))
+    m = n_burn + int(n_samples)
+    v = np.empty(m)
+    k, phase = 0, float(rng.uniform(0.0, 2.0 * np.pi))
+    while k < m:
+        if rng.uniform() < hold_fraction:  # hold where the input is
+            n_hold = int(rng.uniform(0.5, 2.0) * rate_hz)
+            v[k : k + n_hold] = v[k - 1] if k > 0 else 0.0
+            k += n_hold
+            continue
+        amp = rng.uniform(0.2, 1.0) * v_max_counts
+        period = rng.uniform(*period_s)
+        n_loop = max(int(period * rate_hz), 4)
+        ph = phase + 2.0 * np.pi * np.arange(1, n_loop + 1) / n_loop
+        seg = amp * np.sin(ph)
+        # continue from where the input is: blend over the first quarter loop
+        if k > 0:
+            w = np.clip(np.arange(1, n_loop + 1) / (0.25 * n_loop), 0.0, 1.0)
+            seg = (1 - w) * v[k - 1] + w * seg
+        v[k : k + n_loop] = seg[: m - k]
+        k += n_loop
+    t = (np.arange(m) - n_burn) * dt
+    return t, np.round(v), n_burn

@@ -1,16 +1,36 @@
 """The one registry of model kinds: the name a config, a command line or a saved file
-uses (``"gpi"``, ``"egpi"``, ``"egpi_c"``) -> the model.
+uses (``"gpi"``, ``"egpi"``, ``"egpi_c"``, ...) -> everything the stages need to know.
 
-Every place that turns a kind into a model (the fitting stage, saved fits, the
-compensation and diagnosis stages) goes through :func:`model_for_kind`, so the
-defaults (``n`` operators, the ``v'`` dead band) are the same everywhere.
+Each kind is one :class:`ModelKind` row of :data:`KINDS`: its factory and class, its
+label in the terminal and in the report, its start recipe (:mod:`.start`), the
+``[fit]`` settings it reads (held parameters, number of starts), the kind whose fit
+is nested in it (a start), its inverse in the compensation stage, and whether it
+needs the whole signed input of an axis. The fitting, diagnosis, compensation and
+report stages and the file readers read this table; adding a built-in kind is its
+module plus one row here (and its docs and tests).
+
+Every place that turns a kind into a model goes through :func:`model_for_kind`, so
+the defaults (``n`` operators, the ``v'`` dead band) are the same everywhere.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+from operator import attrgetter
+
 from i2ris_calib._validate import describe
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.coupled import (
+    CoupledTwoTendonModel,
+    coupled_fixed,
+    coupled_starts,
+    coupled_two_tendon_model,
+)
 from i2ris_calib.hysteresis.models import (
+    ContinuousEGPIModel,
+    GPIModel,
+    I2RISEGPIModel,
     ParametricModel,
     check_settings,
     checked_values,
@@ -18,14 +38,192 @@ from i2ris_calib.hysteresis.models import (
     gpi_model,
     i2ris_egpi_model,
 )
-
-#: Model kinds: GPI (Eq1-3), the paper's I2RIS EGPI (Eq16-23) and the continuous EGPI
-#: (docs/models.md). ``"all"`` on the command line means all three.
-MODEL_KINDS = ("gpi", "egpi", "egpi_c")
+from i2ris_calib.hysteresis.start import start_values
+from i2ris_calib.hysteresis.two_tendon import (
+    TwoTendonGPIModel,
+    two_tendon_fixed,
+    two_tendon_gpi_model,
+    two_tendon_starts,
+)
 
 #: Defaults of :func:`model_for_kind` (those of the model factories)
 DEFAULT_N_OPERATORS = 30
 DEFAULT_DEADBAND_COUNTS = 2.0
+
+
+@dataclass(frozen=True)
+class ModelKind:
+    """One model kind and what every stage needs to know about it.
+
+    Attributes
+    ----------
+    kind : str
+        The name in configs, on the command line, in fit.json and final_model.json.
+    label : str
+        Row label in the terminal's results table.
+    report_name : str
+        Row label in the report's tables.
+    factory : callable or None
+        ``factory(n=..., deadband_counts=...)`` -> an unfitted model with default
+        values (``deadband_counts`` only when ``uses_deadband``); None for
+        ``"diagnosed"`` (a model saved by ``diagnose``, rebuilt from its file).
+    model_class : type or None
+        The class the factory returns (a model's kind is found from its class).
+    start : callable or None
+        The data-driven start recipe ``start(model, v, theta_deg, n_starts, rng,
+        deadband)`` -> list of start vectors, shape (p,) each.
+    fixed : callable
+        ``fixed(fit_config)`` -> names of the parameters held at their start value.
+    n_starts : str
+        The ``[fit]`` setting giving its number of data-driven starts.
+    nested : str or None
+        Kind whose fit, mapped into this kind, is one more start (GPI in EGPI).
+    inverse : str or None
+        Model family the compensation kernel inverts (``"gpi"``, ``"egpi"``,
+        ``"egpi_c"``); None: no inverse.
+    signed : bool
+        Needs the whole signed input of an axis (dataset ``"±"``).
+    paper : bool
+        One of the paper's two models (compared with its Tables 1-2).
+    diagnosis_start : bool
+        A starting model of ``diagnose``.
+    on_signed : bool
+        Fitted by default on a signed dataset (``"±"``).
+    uses_deadband : bool
+        Its factory takes the ``v'`` dead band.
+    coupled : bool
+        Reads the other motor's input (``Signals.v_other``): fitted by default when the
+        other motor moves while this one does (:mod:`i2ris_calib.data.coupling`); its
+        ``start`` is ``start(model, signals, theta, nested_params, n_starts, rng,
+        deadband)`` -> (model, starts).
+    """
+
+    kind: str
+    label: str
+    report_name: str
+    factory: Callable[..., ParametricModel] | None
+    model_class: type | None
+    start: Callable | None = None
+    fixed: Callable[[object], tuple[str, ...]] = lambda config: ()
+    n_starts: str = "n_starts"
+    nested: str | None = None
+    inverse: str | None = None
+    signed: bool = False
+    paper: bool = False
+    diagnosis_start: bool = False
+    on_signed: bool = False
+    uses_deadband: bool = False
+    coupled: bool = False
+
+
+#: Every kind, in fitting order (a kind's nested kind comes before it). Tables list
+#: them in the reverse order (:func:`table_order`).
+KINDS: tuple[ModelKind, ...] = (
+    ModelKind(
+        "gpi", "GPI", "GPI", gpi_model, GPIModel,
+        start=start_values, fixed=attrgetter("fixed_gpi"), n_starts="n_starts_gpi",
+        inverse="gpi", paper=True, diagnosis_start=True, on_signed=True,
+    ),
+    ModelKind(
+        "egpi", "EGPI", "EGPI", i2ris_egpi_model, I2RISEGPIModel,
+        start=start_values, fixed=attrgetter("fixed_egpi"), nested="gpi",
+        inverse="egpi", paper=True, diagnosis_start=True, uses_deadband=True,
+    ),
+    ModelKind(
+        "egpi_c", "EGPI_C", "EGPI_C", continuous_egpi_model, ContinuousEGPIModel,
+        start=start_values, fixed=attrgetter("fixed_egpi"), nested="gpi",
+        inverse="egpi_c", uses_deadband=True,
+    ),
+    ModelKind(
+        "agpi", "two-tendon GPI", "two-tendon GPI", two_tendon_gpi_model, TwoTendonGPIModel,
+        start=two_tendon_starts, fixed=two_tendon_fixed, n_starts="n_starts_gpi", signed=True,
+        on_signed=True, diagnosis_start=True,
+    ),
+    ModelKind(
+        "agpi_coupled", "two-tendon GPI + coupling",
+        "two-tendon GPI + hysteretic coupling to the other motor", coupled_two_tendon_model,
+        CoupledTwoTendonModel, start=coupled_starts, fixed=coupled_fixed,
+        n_starts="n_starts_gpi", nested="agpi", signed=True, coupled=True,
+    ),
+    ModelKind("diagnosed", "DIAGNOSED", "EGPI + diagnosed effects", None, None),
+)  # fmt: skip
+
+_BY_NAME = {k.kind: k for k in KINDS}
+
+#: Kinds a factory builds (every kind but ``"diagnosed"``), in fitting order.
+BUILT_KINDS = tuple(k.kind for k in KINDS if k.factory is not None)
+
+#: Model kinds of a motion-direction dataset: GPI (Eq1-3), the paper's I2RIS EGPI
+#: (Eq16-23) and the continuous EGPI (docs/models.md). ``"all"`` on the command line
+#: means these on a per-direction fit.
+MODEL_KINDS = tuple(k.kind for k in KINDS if k.factory is not None and not k.signed)
+
+#: Kinds a fit.json / compensation may name: the built kinds and ``"diagnosed"``.
+ALL_KINDS = tuple(k.kind for k in KINDS)
+
+#: The paper's two models (its Tables 1-2), in the paper's row order (EGPI, GPI).
+PAPER_KINDS = tuple(k.kind for k in reversed(KINDS) if k.paper)
+
+#: Kinds the compensation stage inverts (a ``"diagnosed"`` model: when its base is one).
+INVERSE_KINDS = tuple(k.kind for k in KINDS if k.inverse)
+
+#: Kinds fitted by default on a signed dataset (``"±"``, one model over the whole
+#: signed input of an axis), in fitting order: the two-tendon GPI and, for comparison,
+#: one GPI over the signed input. ``"all"`` on a signed fit means these.
+SIGNED_KINDS = tuple(k.kind for k in KINDS if k.on_signed)
+
+#: The default model of a signed dataset: the first signed-only kind (two-tendon GPI).
+SIGNED_DEFAULT = next(k.kind for k in KINDS if k.signed)
+
+#: The default model of a signed dataset when the other motor moves while this one
+#: does: the two-tendon GPI with coupling to the other motor (fitted after its nested
+#: kind, :data:`SIGNED_DEFAULT`).
+COUPLED_DEFAULT = next(k.kind for k in KINDS if k.coupled)
+
+#: Starting models of ``diagnose``.
+DIAGNOSIS_STARTS = tuple(k.kind for k in KINDS if k.diagnosis_start)
+
+
+def diagnosis_starts(signed: bool) -> tuple[str, ...]:
+    """The starting models of ``diagnose --start auto`` on a dataset: the signed-only
+    starting kinds (the two-tendon GPI) on a signed dataset, the others (GPI, EGPI) on
+    a motion-direction dataset."""
+    return tuple(k.kind for k in KINDS if k.diagnosis_start and k.signed == bool(signed))
+
+
+def kind_info(kind: str) -> ModelKind:
+    """The registry row of ``kind``; CalibError for an unknown kind."""
+    if not isinstance(kind, str) or kind not in _BY_NAME:
+        raise CalibError(f"unknown model '{kind}'; use {', '.join(BUILT_KINDS)} or all")
+    return _BY_NAME[kind]
+
+
+def kind_of(model: object) -> ModelKind | None:
+    """The registry row of a model's class (its nearest registered base class), or
+    None (a general EGPI, a model extended by effects: see ``diagnosis.effects.base_of``)."""
+    for cls in type(model).__mro__:
+        for k in KINDS:
+            if k.model_class is cls:
+                return k
+    return None
+
+
+def table_order(kinds) -> list[str]:
+    """``kinds`` in table order (the reverse of the fitting order: ``"diagnosed"``
+    first, GPI last); names not in the registry are left out."""
+    return [k.kind for k in reversed(KINDS) if k.kind in kinds]
+
+
+def fit_order(kinds) -> list[str]:
+    """``kinds`` in fitting order (a kind's nested kind first); names not in the
+    registry at the end, in their order."""
+    return [k for k in ALL_KINDS if k in kinds] + [k for k in kinds if k not in _BY_NAME]
+
+
+def start_recipe(model: object) -> Callable | None:
+    """The data-driven start recipe of a model (its kind's ``start``), or None."""
+    info = kind_of(model)
+    return None if info is None else info.start
 
 
 def model_for_kind(
@@ -38,7 +236,8 @@ def model_for_kind(
 
     Parameters
     ----------
-    kind : {"gpi", "egpi", "egpi_c"}
+    kind : str
+        One of :data:`BUILT_KINDS` (``"gpi"``, ``"egpi"``, ``"egpi_c"``, ...).
     n : int
         Number of non-zero thresholds (n + 1 operators, Eq14).
     deadband_counts : float
@@ -54,13 +253,13 @@ def model_for_kind(
     """
     func = "model_for_kind"
     if not isinstance(kind, str):
-        raise CalibError(f"{func}: kind is {describe(kind)}; give one of {', '.join(MODEL_KINDS)}")
-    factories = {"gpi": gpi_model, "egpi": i2ris_egpi_model, "egpi_c": continuous_egpi_model}
-    if kind not in factories:
-        raise CalibError(f"unknown model '{kind}'; use {', '.join(MODEL_KINDS)} or all")
+        raise CalibError(f"{func}: kind is {describe(kind)}; give one of {', '.join(BUILT_KINDS)}")
+    info = kind_info(kind)
+    if info.factory is None:
+        raise CalibError(f"unknown model '{kind}'; use {', '.join(BUILT_KINDS)} or all")
     check_settings(func, n, deadband_counts)
-    if kind == "gpi":
-        model = gpi_model(n=n)
+    if info.uses_deadband:
+        model = info.factory(n=n, deadband_counts=deadband_counts)
     else:
-        model = factories[kind](n=n, deadband_counts=deadband_counts)
+        model = info.factory(n=n)
     return checked_values(func, model, values)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from i2ris_calib.data.dataset import input_bands
+from i2ris_calib.hysteresis.bands import input_bands
 from i2ris_calib.hysteresis.kernel import density, motion_direction, thresholds
 from i2ris_calib.hysteresis.model import Model
 
@@ -47,8 +47,8 @@ def recipe_of(model: Model) -> str | None:
 
 
 def default_deadband(v: np.ndarray) -> float:
-    """The ``v'`` dead band derived from the input (:func:`i2ris_calib.data.input_bands`),
-    what the fit uses unless configured."""
+    """The ``v'`` dead band derived from the input
+    (:func:`i2ris_calib.hysteresis.bands.input_bands`), what the fit uses unless configured."""
     return input_bands(np.asarray(v, dtype=float)).deadband
 
 

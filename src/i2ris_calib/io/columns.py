@@ -4,88 +4,18 @@ The synced CSV's standard columns (docs/formats.md) are ``time_s, enc_yaw, enc_p
 yaw_deg, pitch_deg, status``. A lab's own export names them differently and may count
 time from 1970 in ms or give angles in radians: ``[columns]`` (or ``--columns`` of
 ``fit`` and ``diagnose``) says which of its columns is which and in what unit, so the
-file is read as it is. Read by :func:`i2ris_calib.io.synced.read_synced`.
+file is read as it is. Read by :func:`i2ris_calib.io.synced.read_synced`. The section
+itself (:class:`ColumnsConfig`) is declared with the others in :mod:`i2ris_calib.config`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
-from dataclasses import dataclass
 
-from i2ris_calib._validate import validated_config
+from i2ris_calib.config import ANGLE_UNITS, STANDARD_COLUMNS, ColumnsConfig
 from i2ris_calib.errors import CalibError
 
-#: the synced CSV's own column names, in file order (the keys naming a column)
-STANDARD_COLUMNS = ("time_s", "enc_yaw", "enc_pitch", "yaw_deg", "pitch_deg", "status")
-ANGLE_UNITS = ("deg", "rad")
-
-
-@dataclass(frozen=True)
-class ColumnsConfig:
-    """Which column of the file is which, and the file's units.
-
-    Each column key is a standard synced-CSV column; its value is that column's
-    header in the file (compared with surrounding spaces stripped). Default: the
-    standard names, i.e. a synced CSV as ``sync`` writes it.
-
-    Attributes
-    ----------
-    time_s, enc_yaw, enc_pitch, yaw_deg, pitch_deg, status : str
-        Header of the file's column holding the sample time, the yaw and pitch motor
-        encoders (counts), the measured yaw and pitch angles and the tracking status.
-        A column named here other than its standard name must be in the file; the
-        other axis's columns and ``status`` may be absent under their standard names.
-    time_unit_s : float
-        Seconds per unit of the time column: 1 for s, 0.001 for ms, 1e-9 for ns.
-        Times from 1970 (epoch clocks) are read at full precision and counted from
-        the first sample (docs/formats.md).
-    angle_unit : str
-        Unit of the angle columns: ``"deg"`` or ``"rad"`` (converted to degrees).
-    """
-
-    time_s: str = "time_s"
-    enc_yaw: str = "enc_yaw"
-    enc_pitch: str = "enc_pitch"
-    yaw_deg: str = "yaw_deg"
-    pitch_deg: str = "pitch_deg"
-    status: str = "status"
-    time_unit_s: float = 1.0
-    angle_unit: str = "deg"
-
-    def __post_init__(self) -> None:
-        """Validated on construction, not only when loaded from TOML: field types, then
-        :meth:`validate`; a CalibError either way."""
-        validated_config(self)
-
-    def validate(self) -> None:
-        """Raise ValueError on a unit no file has, an empty name or one column read twice."""
-        if not (math.isfinite(self.time_unit_s) and self.time_unit_s > 0):
-            raise ValueError(
-                f"time_unit_s = {self.time_unit_s} must be a number > 0 (seconds "
-                "per unit of the time column: 1 for s, 0.001 for ms, 1e-9 for ns)"
-            )
-        if self.angle_unit not in ANGLE_UNITS:
-            raise ValueError(f'angle_unit = \'{self.angle_unit}\' must be "deg" or "rad"')
-        seen: dict[str, str] = {}
-        for key in STANDARD_COLUMNS:
-            name = getattr(self, key).strip()
-            if not name:
-                raise ValueError(f"{key} is empty; give the header of the file's {key} column")
-            if name in seen:
-                raise ValueError(
-                    f"{seen[name]} and {key} both read column '{name}'; "
-                    "each column of the file can be only one of them"
-                )
-            seen[name] = key
-
-    def mapping(self) -> dict[str, str]:
-        """``{standard name: header in the file}`` (stripped) for every column key."""
-        return {key: getattr(self, key).strip() for key in STANDARD_COLUMNS}
-
-    def is_mapped(self, key: str) -> bool:
-        """True when column ``key`` is read under another name than its standard one."""
-        return getattr(self, key).strip() != key
+__all__ = ["ANGLE_UNITS", "STANDARD_COLUMNS", "ColumnsConfig", "parse_columns_option"]
 
 
 def parse_columns_option(text: str, base: ColumnsConfig | None = None) -> ColumnsConfig:

@@ -13,14 +13,18 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.compensation import STATUS_NAMES, compensate
+from i2ris_calib.compensation.inverse import forward
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.io.atomic import atomic_path, write_json
 from i2ris_calib.io.fit import read_fit_json, read_model_file
+from i2ris_calib.io.outputs import claim_output_file
 from i2ris_calib.io.provenance import provenance
 
 SCHEMA = "i2ris-calib.compensate/1"
-KINDS = ("egpi", "egpi_c", "gpi", "diagnosed")
+#: ``--model`` choices: the kinds with an inverse (registry) and ``"diagnosed"``
+KINDS = (*INVERSE_KINDS, "diagnosed")
 DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
 
 METHOD_NOTE = (
@@ -130,11 +134,91 @@ def load_model(doc: dict, record: dict, kind: str, path: Path, model_file: Path 
                 "diagnosed model; give the final_model.json that 'fit --model-file' used"
             )
         return base.with_values(np.array([rec["params"][n] for n in names], dtype=float))
-    return model_from_params(
-        kind,
-        rec["params"],
-        int(rec.get("n_operators") or 30),
-        float(rec.get("deadband_counts", 2.0)),
+    try:  # the values are numbers (read_fit_json); the model may still refuse them
+        return model_from_params(
+            kind,
+            rec["params"],
+            int(rec.get("n_operators") or 30),
+            float(rec.get("deadband_counts", 2.0)),
+        )
+    except CalibError as exc:
+        raise CalibError(
+            f"{path}: dataset '{record['name']}', model '{kind}': {exc} (re-run 'fit' or "
+            "restore the file)"
+        ) from None
+
+
+#: Share of the target outside the angles the model reaches above which compensate
+#: says why, not only how many samples are unreachable (:func:`range_warning`).
+OUTSIDE_SHARE = 0.5
+
+
+def reachable_angles(model, v_limits: tuple[float, float], sign: float) -> tuple[float, float]:
+    """(lowest, highest) angle (deg, the robot's sign: ``sign`` -1 for a ``-`` dataset)
+    the model shows over its input range ``v_limits``: its output along a slow sweep of
+    the whole range up and back down (both branches of the loop)."""
+    up = np.linspace(v_limits[0], v_limits[1], 1001)
+    v = np.concatenate([up, up[::-1]])
+    y = sign * forward(model, v, np.arange(v.size, dtype=float))
+    return float(np.min(y)), float(np.max(y))
+
+
+def range_warning(
+    name: str,
+    kind: str,
+    target_deg: np.ndarray,
+    reach: tuple[float, float],
+    tol_deg: float,
+    reached: float,
+) -> str | None:
+    """Why a target is mostly unreachable (the likely mistake), or None.
+
+    Said when most of the target lies outside the angles the model reaches (``reach``,
+    deg in the robot's sign, :func:`reachable_angles`), or when most of it is not
+    reached (``reached``: the share reached) and it is a sliver of the model's range in
+    radian-sized numbers. Gives the target's range against the model's and, when that
+    brings the target inside, the fix: degrees instead of radians, the other sign (the
+    other motion direction's dataset), or both.
+    """
+    lo, hi = reach
+    pad = max(float(tol_deg), 1e-6 * max(1.0, abs(lo), abs(hi)))
+
+    def inside(x: np.ndarray) -> float:
+        return float(np.mean((x >= lo - pad) & (x <= hi + pad)))
+
+    x = np.asarray(target_deg, dtype=float)
+    t_lo, t_hi = float(np.min(x)), float(np.max(x))
+    outside = 1.0 - inside(x)
+    radian_sized = max(abs(t_lo), abs(t_hi)) <= 2 * np.pi
+    sliver = radian_sized and t_hi - t_lo < 0.05 * (hi - lo)
+    if not (outside > OUTSIDE_SHARE or (1.0 - reached > OUTSIDE_SHARE and sliver)):
+        return None
+    other = name[:-1] + ("-" if name.endswith("+") else "+")
+    sign_fix = f"give --dataset {other} (the other motion direction) or negate the target"
+    deg = np.degrees(x)
+    in_deg = f"{np.degrees(t_lo):.3g} to {np.degrees(t_hi):.3g} deg"
+    fixes = []
+    if outside > OUTSIDE_SHARE:
+        fixes.append((inside(-x), f"the target has the other sign: {sign_fix}"))
+    if radian_sized:
+        fixes += [
+            (inside(deg), f"if the target is in radians, convert it to degrees ({in_deg})"),
+            (inside(-deg), f"the target looks like radians ({in_deg}) of the other sign: "
+                           f"convert it to degrees and {sign_fix}"),
+        ]  # fmt: skip
+    share, fix = max(fixes, key=lambda f: f[0], default=(0.0, ""))
+    if share < 0.9:
+        fix = "give a target within the model's angles, or fit recordings that reach the target's"
+    if outside > OUTSIDE_SHARE:
+        what = f"{outside:.0%} of the target lies outside the angles the model reaches"
+    else:
+        what = (
+            f"{1.0 - reached:.0%} of the target is unreachable, and it is a sliver of the "
+            "model's angles"
+        )
+    return (
+        f"{name} ({kind}): {what}: the target spans {t_lo:.3g} to {t_hi:.3g} deg, the model "
+        f"{lo:.3g} to {hi:.3g} deg; {fix}"
     )
 
 
@@ -185,8 +269,11 @@ def compensate_files(
     out = Path(out)
     if out.suffix.lower() != ".csv":
         raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
-    if out.is_dir():
-        raise CalibError(f"--out {out}: is a folder; give a file name ending in .csv")
+    claim_output_file(
+        out,
+        [*fit_paths, target, *([model_file] if model_file else [])],
+        companions=[out.with_name("compensate.json")],
+    )
     docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
     frame = read_target(target, axes)
     t = frame["time_s"].to_numpy()
@@ -232,6 +319,11 @@ def compensate_files(
             cols[f"reachable_{axis}"] = res.reachable.astype(int)
         summ = res.summary()
         bad = np.flatnonzero(~res.reachable)
+        reach = reachable_angles(fitted, (lo, hi), sign)
+        warn = range_warning(
+            name, kind, frame[f"{axis}_deg"].to_numpy(), reach, res.tol_deg,
+            float(res.reachable.mean()),
+        )  # fmt: skip
         axes_doc[axis] = {
             "dataset": name,
             "fit_json": str(path),
@@ -245,6 +337,8 @@ def compensate_files(
             **summ,
             "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
             "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
+            "reachable_deg": list(reach),
+            "warnings": [] if warn is None else [warn],
         }
     cols["reachable"] = reach_all.astype(int)
     table = pd.DataFrame(cols)

@@ -25,12 +25,14 @@ from i2ris_calib.diagnosis.serialize import model_to_dict
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
+from i2ris_calib.io.fit import datasets_for_fit
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
 
-STARTS = ("auto", "gpi", "egpi")
+STARTS = ("auto", *DIAGNOSIS_STARTS)
 SCHEMA = "i2ris-calib.diagnosis/1"
 #: The files ``diagnose`` writes in its output folder (``skipped.json`` inside ``run``).
 OUTPUTS = ("diagnosis.json", "diagnosis.md", "final_model.json", "residual_*.png", "skipped.json")
@@ -45,8 +47,10 @@ def diagnosis_dataset(path: str | Path, axis: str, direction: str, fit_config) -
     Read by the one reader (:func:`i2ris_calib.io.synced.load_datasets`), so ``fit``
     builds exactly the same dataset (samples, loss mask, held-out cycles) from the
     same file and ``[fit]`` settings. ``direction``: ``"+"`` or ``"-"`` (``"±"`` when
-    ``[fit] signed = true``), or ``"auto"``: the dataset with more in-direction
-    samples (``"+"`` on a tie).
+    ``[fit] signed = true``), or ``"auto"``: the dataset(s) of the default fit's model
+    choice (:func:`~i2ris_calib.io.fit.datasets_for_fit`: the signed dataset when the
+    input crosses zero or its excursions do not start at rest, else the split), the
+    one with more in-direction samples (``"+"`` on a tie).
     """
     if direction not in DIRECTIONS:
         raise CalibError(f"--direction must be auto, +, - or ±, got '{direction}'")
@@ -55,8 +59,10 @@ def diagnosis_dataset(path: str | Path, axis: str, direction: str, fit_config) -
             f"--direction {direction}: [fit] signed = true makes one signed dataset per axis; "
             "use --direction auto (or set signed = false)"
         )
-    wanted = None if direction == "auto" else (direction,)
-    found = load_datasets([path], axis, fit_config, wanted)
+    if direction == "auto":  # the dataset(s) the default fit fits: signed or split
+        found, _ = datasets_for_fit([path], axis, fit_config)
+    else:
+        found = load_datasets([path], axis, fit_config, (direction,))
     return max(found, key=lambda d: d.rows["in_direction"])
 
 
@@ -133,7 +139,7 @@ def diagnose_file(
     diagnosis.json ``paths``).
     """
     if start not in STARTS:
-        raise CalibError(f"--start must be auto, gpi or egpi, got '{start}'")
+        raise CalibError(f"--start must be {', '.join(STARTS)}, got '{start}'")
     cfg = config or PipelineConfig()
     claim_output_dir(Path(out) if out is not None else Path("diagnose_out"), "diagnose",
                      [Path(data)], OUTPUTS)  # fmt: skip
@@ -159,7 +165,7 @@ def diagnose_dataset(
     out = claim_output_dir(
         Path(out) if out is not None else Path("diagnose_out"), "diagnose", sources, OUTPUTS
     )
-    starts = ("gpi", "egpi") if start == "auto" else (start,)
+    starts = diagnosis_starts(dset.direction == "±") if start == "auto" else (start,)
     with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {dset.name}", total=None)
         auto = diagnose_from_starts(

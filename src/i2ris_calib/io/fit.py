@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import astuple, replace
 from pathlib import Path
 from typing import Any
 
@@ -16,18 +17,34 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
-from i2ris_calib.data.dataset import Dataset
+from i2ris_calib.data.coupling import MotorsTogether, motors_together
+from i2ris_calib.data.dataset import Dataset, other_axis
+from i2ris_calib.data.excursions import Excursions, excursions
 from i2ris_calib.diagnosis.effects import base_of
 from i2ris_calib.diagnosis.serialize import model_from_dict
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.fit import fit_model
-from i2ris_calib.fitting.pipeline import MODEL_KINDS, fit_dataset, fit_warnings
-from i2ris_calib.io.atomic import atomic_path, check_output_dir, write_json
+from i2ris_calib.fitting.pipeline import (
+    MODEL_KINDS,
+    ModelChoice,
+    choose_model,
+    fit_dataset,
+    fit_warnings,
+)
+from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
+from i2ris_calib.io.atomic import write_json
+from i2ris_calib.io.fit_schema import FIT_SCHEMA, check_fit_doc, check_model_doc
+from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
 
-SCHEMA = "i2ris-calib.fit/1"
-PRED_COLUMNS = ("dataset", "time_s", "v", "theta_deg", "gpi_deg", "egpi_deg", "egpi_c_deg", "split")
+SCHEMA = FIT_SCHEMA
+#: predictions.csv's fixed columns (the direction kinds' outputs always; the outputs of
+#: other kinds follow "split" when fitted)
+PRED_COLUMNS = ("dataset", "time_s", "v", "theta_deg", *(f"{k}_deg" for k in MODEL_KINDS), "split")
+
+#: The files ``fit`` writes in its output folder.
+OUTPUTS = ("fit.json", "predictions.csv")
 
 
 def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str, Any]:
@@ -51,6 +68,8 @@ def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str
         "n_operators": int(getattr(base_of(model), "n", 0)),
         "v_f": res.params.get("v_f"),
         "warnings": list(fit_warnings(res, np.zeros(0) if v is None else v)),
+        "stderr_reasons": dict(res.stderr_reasons),
+        "initial_state": None if res.initial_state is None else res.initial_state.as_dict(),
     }
     if hasattr(base_of(model), "deadband_counts"):
         rec["deadband_counts"] = float(base_of(model).deadband_counts)
@@ -83,8 +102,7 @@ def fit_datasets(
                 f"{d.source} [{d.name}]: the input is constant; nothing to fit (check --axis)"
             )
         results = {}
-        order = [k for k in MODEL_KINDS if k in kinds] + [k for k in kinds if k not in MODEL_KINDS]
-        for kind in order:
+        for kind in fit_order(kinds):
             if progress is not None:
                 progress(f"{d.name}: {kind}")
             try:
@@ -98,8 +116,11 @@ def fit_datasets(
     return out
 
 
-def fit_document(fitted, axis: str, kinds: Sequence[str], provenance: dict) -> dict[str, Any]:
-    """The fit.json document (schema i2ris-calib.fit/1)."""
+def fit_document(
+    fitted, axis: str, kinds: Sequence[str], provenance: dict, choice: ModelChoice | None = None
+) -> dict[str, Any]:
+    """The fit.json document (schema i2ris-calib.fit/1); ``choice``: which models on
+    which input and why (``model_choice``)."""
     datasets = []
     for d, results in fitted:
         datasets.append(
@@ -126,6 +147,8 @@ def fit_document(fitted, axis: str, kinds: Sequence[str], provenance: dict) -> d
         doc["direction"] = datasets[0]["direction"]
         doc["abs_fitted"] = datasets[0]["abs_fitted"]
         doc["models"] = datasets[0]["models"]
+    if choice is not None:
+        doc["model_choice"] = choice.as_dict()
     doc["provenance"] = provenance
     return doc
 
@@ -146,25 +169,60 @@ def predictions_frame(fitted) -> pd.DataFrame:
             "v": d.v,
             "theta_deg": d.theta_measured_deg,
         }
-        for kind in ("gpi", "egpi", "egpi_c", "diagnosed"):
+        for kind in fit_order({*MODEL_KINDS, *results}):
             if kind in results:
                 cols[f"{kind}_deg"] = results[kind].predict(d.signals)
-            elif kind != "diagnosed":
+            else:  # the direction kinds' columns are always there
                 cols[f"{kind}_deg"] = np.nan
         cols["split"] = np.where(~d.in_direction, "other", np.where(d.holdout, "holdout", "fit"))
         parts.append(pd.DataFrame(cols))
     frame = pd.concat(parts, ignore_index=True)
-    extra = ["diagnosed_deg"] if "diagnosed_deg" in frame else []
+    extra = [c for c in frame if c not in PRED_COLUMNS]
     return frame[[*PRED_COLUMNS, *extra]]
 
 
-def results_table(fitted, kinds: Sequence[str], axis: str):
+def source_labels(sources: Sequence[str]) -> dict[str, str]:
+    """The shortest trailing part of each file path that tells it from the others
+    (``A/synced.csv`` and ``B/synced.csv``; ``synced.csv`` alone), by source."""
+    parts = {s: Path(s).resolve().parts for s in dict.fromkeys(sources)}
+    labels = {}
+    for src, mine in parts.items():
+        others = [p for s, p in parts.items() if p != mine]
+        k = 1
+        while k < len(mine) and any(p[-k:] == mine[-k:] for p in others):
+            k += 1
+        labels[src] = "/".join(mine[-k:])
+    return labels
+
+
+def results_tables(fitted, kinds: Sequence[str], axis: str) -> list:
+    """:func:`results_table` of every dataset, or one per input file when the datasets
+    come from several (titled with the part of its path that tells it from the others,
+    :func:`source_labels`): same-named datasets of different files are never side by
+    side, and a table never gets wider than one file's directions."""
+    labels = source_labels([d.source for d, _ in fitted])
+    if len(set(labels.values())) < 2:
+        return [results_table(fitted, kinds, axis)]
+    groups: dict[str, list] = {}
+    for d, results in fitted:
+        groups.setdefault(labels[d.source], []).append((d, results))
+    return [results_table(group, kinds, axis, source=src) for src, group in groups.items()]
+
+
+def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = None):
     """A rich Table shaped like the paper's Tables 1-2: one row per model (fitted
     cycles and held-out cycles), RMSE / NRMSE / MAE (= max |error|) per dataset. A
-    ``*`` marks each cell group whose fit did not converge (per model and dataset)."""
-    absd = [d.name for d, _ in fitted if d.abs_fitted]
+    ``*`` marks each cell group whose fit did not converge (per model and dataset).
+    ``source``: the one input file of these datasets, in the title (the columns are
+    then labelled by direction: one dataset per direction in a file)."""
+
+    def label(d: Dataset) -> str:
+        return f"{d.axis}{d.direction}" if source else d.name
+
+    absd = [label(d) for d, _ in fitted if d.abs_fitted]
     table = Table(
-        title=f"GPI and EGPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %",
+        title=f"GPI and EGPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %"
+        + (f"\n{source}" if source else ""),
         caption="; ".join(
             [f"{', '.join(absd)}: fitted on |counts| -> |deg|"] * bool(absd)
             + ["* = not converged"]
@@ -175,10 +233,10 @@ def results_table(fitted, kinds: Sequence[str], axis: str):
     table.add_column("model", no_wrap=True)
     for d, _ in fitted:
         for m in ("RMSE", "NRMSE", "MAE"):
-            table.add_column(f"{d.name}\n{m}", justify="right", no_wrap=True)
-    for kind in [k for k in ("diagnosed", "egpi_c", "egpi", "gpi") if k in kinds]:
+            table.add_column(f"{label(d)}\n{m}", justify="right", no_wrap=True)
+    for kind in table_order(kinds):
         for label, attr in (("fit", "metrics"), ("hold", "holdout_metrics")):
-            row = [f"{kind.upper()} {label}"]
+            row = [f"{kind_info(kind).label} {label}"]
             for _, results in fitted:
                 mt = getattr(results[kind], attr)
                 star = "" if results[kind].converged else "*"
@@ -204,23 +262,16 @@ def fit_files(
     ``model_file`` is a ``final_model.json`` written by ``diagnose``: that model is
     refitted too, as model ``"diagnosed"`` in fit.json. Returns the fit.json document.
     """
-    if model not in (*MODEL_KINDS, "all"):
-        raise CalibError(f"--model must be {', '.join(MODEL_KINDS)} or all, got '{model}'")
+    if model not in (*BUILT_KINDS, "all"):
+        raise CalibError(f"--model must be {', '.join(BUILT_KINDS)} or all, got '{model}'")
     if not paths:
         raise CalibError("give at least one synced CSV to fit")
-    kinds = MODEL_KINDS if model == "all" else (model,)
     saved = read_model_file(model_file) if model_file is not None else None
-    if saved is not None:
-        kinds = (*kinds, "diagnosed")
     fit_config = config.fit
-    created = not Path(out).exists()
-    out = check_output_dir(out, ("predictions.csv", "fit.json"))
-    try:
-        datasets = load_datasets(paths, axis, fit_config)
-    except CalibError:
-        if created:  # a folder made only to check it can be written: leave nothing behind
-            out.rmdir()
-        raise
+    inputs = [*paths, *([model_file] if model_file is not None else [])]
+    out = claim_output_dir(out, "fit", inputs, OUTPUTS)
+    datasets, choice = datasets_for_fit(paths, axis, fit_config, model)
+    kinds = (*choice.kinds, *(["diagnosed"] if saved is not None else []))
     console = Console(stderr=True)
     with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
         task = bar.add_task("fitting", total=len(datasets) * len(kinds))
@@ -229,29 +280,65 @@ def fit_files(
             bar.update(task, description=f"fitting {label}", advance=1)
 
         fitted = fit_datasets(datasets, kinds, fit_config, progress=step, saved=saved)
-    inputs = [*paths, *([model_file] if model_file is not None else [])]
-    doc = fit_document(fitted, axis, kinds, provenance(inputs, config))
-    # both files or neither: fit.json is renamed into place only after predictions.csv
-    with atomic_path(out / "fit.json") as tmp_json:
-        write_json(tmp_json, doc)
-        with atomic_path(out / "predictions.csv") as tmp_csv:
-            predictions_frame(fitted).to_csv(tmp_csv, index=False, float_format="%.10g")
-    Console().print(results_table(fitted, kinds, axis))
+    doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice)
+    with output_dir(out, "fit", inputs, OUTPUTS) as tmp:
+        write_json(tmp / "fit.json", doc)
+        predictions_frame(fitted).to_csv(
+            tmp / "predictions.csv", index=False, float_format="%.10g"
+        )
+    for table in results_tables(fitted, kinds, axis):
+        Console().print(table)
+    labels = source_labels([d["source"] for d in doc["datasets"]])
+    several = len(set(labels.values())) > 1
+    console.print(choice.line)
     for d in doc["datasets"]:
         r = d["rows"]
+        name = f"{d['name']} [{labels[d['source']]}]" if several else d["name"]
         console.print(
-            f"{d['name']}: {r['total']} samples drive the models; {r['in_direction']} are its own "
+            f"{name}: {r['total']} samples drive the models; {r['in_direction']} are its own "
             f"({r['fitted']} fitted, {r['holdout']} held out, {r['angle_missing']} not measured)"
         )
         for kind, rec in d["models"].items():
             for w in rec["warnings"]:
                 if not w.startswith("not converged"):
-                    console.print(f"warning: {d['name']} {kind}: {w}")
+                    console.print(f"warning: {name} {kind}: {w}")
     if any(not r.converged for _, res in fitted for r in res.values()):
         console.print(
             "* not converged: see 'message' in fit.json (try more starts or --config [fit] max_nfev)"
         )
     return doc
+
+
+def recording_summary(whole: Sequence[Dataset]) -> tuple[Excursions, MotorsTogether | None]:
+    """How the recording drives the axis, over all its files: the excursions of its
+    signed input (:func:`~i2ris_calib.data.excursions.excursions`) and how the other
+    motor moves with it (:func:`~i2ris_calib.data.coupling.motors_together`; None
+    without the other motor's input). ``whole``: the signed datasets of the axis."""
+    counts = [astuple(excursions(d.enc, d.bands.zero_band, d.time_s)) for d in whole]
+    recording = Excursions(*(int(sum(c)) for c in zip(*counts, strict=True)))
+    if any(d.signals.v_other is None for d in whole):
+        return recording, None
+    other = other_axis(whole[0].axis)
+    enc = np.concatenate([d.enc for d in whole])
+    enc_other = np.concatenate([np.asarray(d.signals.v_other, float) for d in whole])
+    return recording, motors_together(enc, enc_other, other)
+
+
+def datasets_for_fit(
+    paths: Sequence[str | Path], axis: str, fit_config, model: str = "all"
+) -> tuple[list[Dataset], ModelChoice]:
+    """The datasets of a fit and the model choice (:func:`~i2ris_calib.fitting.pipeline.
+    choose_model`): unless ``[fit] signed`` forces it, the recording's excursions
+    (:func:`~i2ris_calib.data.excursions.excursions`, over all files) decide between
+    the signed dataset of the axis and the paper's per-direction split; whether the
+    other motor moves with this one decides the coupled model (:func:`recording_summary`)."""
+    whole = load_datasets(paths, axis, replace(fit_config, signed=True, split=False))
+    recording, together = recording_summary(whole)
+    choice = choose_model(None if fit_config.signed else recording, fit_config, model, together)
+    if choice.signed:
+        return whole, choice
+    split_config = replace(fit_config, signed=False, split=False)
+    return load_datasets(paths, axis, split_config), choice
 
 
 def read_model_file(path: str | Path):
@@ -263,6 +350,7 @@ def read_model_file(path: str | Path):
         raise CalibError(
             f"{p}: cannot read the model file ({exc}); give a final_model.json from 'diagnose'"
         ) from None
+    check_model_doc(obj, p)  # every value, naming the file and key (io/fit_schema.py)
     try:
         return model_from_dict(obj)
     except CalibError as exc:
@@ -270,12 +358,18 @@ def read_model_file(path: str | Path):
 
 
 def read_fit_json(path: str | Path) -> dict[str, Any]:
-    """Load a fit.json written by :func:`fit_files`; CalibError when unreadable."""
+    """Load a fit.json written by :func:`fit_files` and check it completely
+    (:func:`~i2ris_calib.io.fit_schema.check_fit_doc`: keys, types, every parameter a
+    finite number, ordered input range); CalibError naming the file and the key."""
     p = Path(path)
     try:
         doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise CalibError(f"{p}: cannot read fit.json ({exc})") from None
-    if doc.get("schema") != SCHEMA:
-        raise CalibError(f"{p}: schema is {doc.get('schema')!r}, expected {SCHEMA!r}; re-run 'fit'")
-    return doc
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CalibError(
+            f"{p}: not a JSON file ({exc}); re-run 'fit' or restore the file"
+        ) from None
+    except OSError as exc:
+        raise CalibError(
+            f"{p}: cannot read fit.json ({exc.strerror or exc}); give the fit.json written by 'fit'"
+        ) from None
+    return check_fit_doc(doc, p)

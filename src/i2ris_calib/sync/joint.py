@@ -32,10 +32,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from i2ris_calib.data.cycles import cycle_index
 from i2ris_calib.data.dataset import Bands, direction_datasets, direction_input, input_bands
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.cycles import cycle_index
 from i2ris_calib.fitting.fit import PROFILE_PARAMS, fit_model
 from i2ris_calib.fitting.pipeline import build_model, fit_kind
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
@@ -459,7 +459,7 @@ def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3
     list of (j_perp, r, cycle), each ndarray shape (m_b,)
         ``j_perp`` and ``r`` are 0 where a frame is not used (NaN-free, time order
         kept); ``cycle`` is the loading-cycle number of each frame
-        (:func:`i2ris_calib.fitting.cycles.cycle_index` of the direction's input).
+        (:func:`i2ris_calib.data.cycles.cycle_index` of the direction's input).
     """
     out = []
     for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):

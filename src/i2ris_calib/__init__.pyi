@@ -1,0 +1,88 @@
+# Types of the public API for IDEs, notebooks and type checkers. At run time the names
+# load lazily (``__getattr__`` in __init__.py); this stub declares them as if imported
+# (scikit-image's lazy-loader pattern). tests/test_api.py checks that it names exactly
+# ``__all__``, each from the module ``_API`` in __init__.py loads it from.
+
+import os
+from collections.abc import Sequence
+from typing import Literal
+
+from i2ris_calib.compensation import compensate as compensate
+from i2ris_calib.compensation.config import CompensateConfig as CompensateConfig
+from i2ris_calib.config import PipelineConfig as PipelineConfig
+from i2ris_calib.config import RunConfig as RunConfig
+from i2ris_calib.data.dataset import Dataset as Dataset
+from i2ris_calib.data.dataset import direction_datasets as direction_datasets
+from i2ris_calib.data.dataset import make_dataset as make_dataset
+from i2ris_calib.diagnosis.config import DiagnosisConfig as DiagnosisConfig
+from i2ris_calib.diagnosis.effects import CATALOGUE as CATALOGUE
+from i2ris_calib.diagnosis.effects import add_effect as add_effect
+from i2ris_calib.diagnosis.workflow import diagnose as diagnose
+from i2ris_calib.diagnosis.workflow import diagnose_from_starts as diagnose_from_starts
+from i2ris_calib.errors import CalibError as CalibError
+from i2ris_calib.fitting.config import FitConfig as FitConfig
+from i2ris_calib.fitting.fit import FitNote as FitNote
+from i2ris_calib.fitting.fit import FitResult as FitResult
+from i2ris_calib.fitting.fit import fit_model as fit_model
+from i2ris_calib.fitting.pipeline import fit as fit
+from i2ris_calib.hysteresis.model import Parameter as Parameter
+from i2ris_calib.hysteresis.model import Signals as Signals
+from i2ris_calib.hysteresis.models import continuous_egpi_model as continuous_egpi_model
+from i2ris_calib.hysteresis.models import egpi_model as egpi_model
+from i2ris_calib.hysteresis.models import gpi_model as gpi_model
+from i2ris_calib.hysteresis.models import i2ris_egpi_model as i2ris_egpi_model
+from i2ris_calib.hysteresis.registry import MODEL_KINDS as MODEL_KINDS
+from i2ris_calib.hysteresis.registry import model_for_kind as model_for_kind
+from i2ris_calib.report.config import ReportConfig as ReportConfig
+from i2ris_calib.simulation.config import SimulationConfig as SimulationConfig
+from i2ris_calib.sync.config import SyncConfig as SyncConfig
+from i2ris_calib.tracking.config import TrackingConfig as TrackingConfig
+
+__version__: str
+
+def load_synced(
+    path: str | os.PathLike[str],
+    axis: Literal["yaw", "pitch"],
+    config: FitConfig | None = None,
+    directions: Sequence[str] | None = None,
+) -> list[Dataset]:
+    """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
+
+def load_config(path: str | os.PathLike[str] | None = None) -> PipelineConfig:
+    """The pipeline TOML at ``path`` (defaults when None) as a PipelineConfig."""
+
+__all__ = [
+    "__version__",
+    "gpi_model",
+    "i2ris_egpi_model",
+    "continuous_egpi_model",
+    "egpi_model",
+    "model_for_kind",
+    "MODEL_KINDS",
+    "Parameter",
+    "Signals",
+    "Dataset",
+    "make_dataset",
+    "direction_datasets",
+    "fit",
+    "fit_model",
+    "FitResult",
+    "FitNote",
+    "FitConfig",
+    "diagnose",
+    "diagnose_from_starts",
+    "add_effect",
+    "CATALOGUE",
+    "compensate",
+    "PipelineConfig",
+    "RunConfig",
+    "TrackingConfig",
+    "SyncConfig",
+    "DiagnosisConfig",
+    "CompensateConfig",
+    "ReportConfig",
+    "SimulationConfig",
+    "CalibError",
+    "load_synced",
+    "load_config",
+]

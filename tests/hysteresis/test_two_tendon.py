@@ -1,0 +1,103 @@
+"""The two-tendon GPI (model kind ``agpi``): each tendon a GPI on its side of zero."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from i2ris_calib.data.dataset import input_bands
+from i2ris_calib.data.excursions import excursions
+from i2ris_calib.hysteresis.models import gpi_model
+from i2ris_calib.hysteresis.presets import (
+    loading_trajectory,
+    random_two_tendon_params,
+    through_zero_trajectory,
+)
+from i2ris_calib.hysteresis.registry import (
+    KINDS,
+    MODEL_KINDS,
+    SIGNED_KINDS,
+    kind_info,
+    kind_of,
+    model_for_kind,
+    table_order,
+)
+from i2ris_calib.hysteresis.two_tendon import TwoTendonGPIModel
+
+
+def _through_zero(seed=0, n=3000, rate=30.0):
+    rng = np.random.default_rng(seed)
+    truth = random_two_tendon_params(rng, offset_deg=-9.0)
+    t, v, start = through_zero_trajectory(rng, n, rate)
+    return truth, t, v, start
+
+
+def test_registry_is_the_one_table_of_kinds():
+    assert MODEL_KINDS == ("gpi", "egpi", "egpi_c")  # the paper's per-direction kinds
+    assert "agpi" in SIGNED_KINDS and kind_info("agpi").signed
+    assert table_order(["gpi", "agpi", "diagnosed"]) == ["diagnosed", "agpi", "gpi"]
+    for k in KINDS:
+        if k.factory is not None:
+            m = model_for_kind(k.kind, n=5)
+            assert kind_of(m) is k and m.name == k.kind and m.n == 5
+    assert kind_of(object()) is None
+
+
+def test_output_is_offset_plus_one_gpi_per_side():
+    """theta = theta0 + GPI_p[max(v, 0)] - GPI_n[max(-v, 0)], over the whole history."""
+    truth, _, v, _ = _through_zero()
+    m = model_for_kind("agpi").with_values(truth)
+    assert isinstance(m, TwoTendonGPIModel) and len(m.parameters) == 17
+    g = gpi_model()
+    side = {s: {k[:-2]: x for k, x in truth.items() if k.endswith(f"_{s}")} for s in "pn"}
+    want = (
+        truth["theta0"]
+        + g.evaluate_dict(np.maximum(v, 0), side["p"])
+        - g.evaluate_dict(np.maximum(-v, 0), side["n"])
+    )
+    np.testing.assert_allclose(m(v), want, atol=1e-12)
+    assert m(np.zeros(10))[0] == pytest.approx(truth["theta0"], abs=2.0)
+
+
+def test_jacobian_matches_finite_differences():
+    truth, _, v, _ = _through_zero(n=1500)
+    m = model_for_kind("agpi").with_values(truth)
+    x = m.values
+    jac = m.jacobian(v, x)
+    for i in range(x.size):
+        h = 1e-6 * max(abs(x[i]), 1e-3)
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        fd = (m.evaluate(v, xp) - m.evaluate(v, xm)) / (2 * h)
+        # kinks: a few samples may see a one-sided derivative
+        close = np.isclose(jac[:, i], fd, rtol=1e-4, atol=1e-6 * (np.abs(fd).max() + 1e-9))
+        assert close.mean() > 0.99, m.names[i]
+    rows = np.arange(0, v.size, 7)
+    np.testing.assert_array_equal(m.jacobian(v, x, rows=rows), jac[rows])
+
+
+def test_gauge_holds_a2_and_lam_and_guess_keeps_them():
+    m = model_for_kind("agpi")
+    fixed = {p.name for p in m.parameters if p.fixed}
+    assert fixed == {"a2_p", "a2_n", "lam_p", "lam_n"}
+    truth, _, v, _ = _through_zero(n=2000)
+    theta = m.with_values(truth)(v)
+    g = m.guess(v, theta)
+    assert g.value_dict()["a2_p"] == 0.0 and g.value_dict()["lam_n"] == m.value_dict()["lam_n"]
+    assert np.sqrt(np.mean((g(v) - theta) ** 2)) < 0.5 * np.std(theta)
+
+
+def test_excursions_tell_the_lab_recording_from_the_paper_protocol():
+    _, t, v, start = _through_zero(n=3000)
+    lab = excursions(v[start:], input_bands(v[start:]).zero_band, t[start:])
+    assert lab.signed and lab.n_crossings > 5
+    assert lab.reason.startswith("the input crosses zero")
+    rng = np.random.default_rng(1)
+    t1, v1 = loading_trajectory(rng, 4, n_samples=1500)
+    t2, v2 = loading_trajectory(rng, 4, n_samples=1500, start_s=t1[-1] + 1.0)
+    enc, t = np.concatenate([v1, -v2]), np.concatenate([t1, t2])
+    paper = excursions(enc, input_bands(enc).zero_band, t)
+    assert not paper.signed and paper.n_from_rest == paper.n_excursions == 8
+    one_side = excursions(v1, input_bands(v1).zero_band, t1)
+    assert not one_side.signed and one_side.reason == "the input stays on one side of zero"

@@ -2,30 +2,114 @@
 
 Heavy imports (cv2, numba, matplotlib) happen inside the commands, so ``--help`` is
 fast. Every user-fixable problem is a :class:`~i2ris_calib.errors.CalibError`,
-printed as one line with exit status 2; ``--debug`` shows the traceback.
+printed as one line with exit status 2; ``--debug`` shows the traceback first (the
+status stays 2). Help is plain text (no Rich markup): flags without value
+placeholders, ``SESSION...``/``[OUT]`` usage lines (:class:`_Command`).
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import traceback
 from pathlib import Path
 
 import typer
+from typer.core import TyperArgument, TyperCommand, TyperOption
 
 from i2ris_calib import __version__
 from i2ris_calib.interrupts import sigint_guard
 
-app = typer.Typer(
+# Words a user may put after a flag as if it took a value (`run S --force true`).
+_BOOL_WORDS = frozenset({"true", "false", "yes", "no", "on", "off", "1", "0"})
+# Value placeholders for options declared without metavar= (click's own names).
+_TYPE_METAVARS = {"int": "INTEGER", "float": "FLOAT", "str": "TEXT", "Path": "PATH"}
+
+
+class _Command(TyperCommand):
+    """Help in the usual notation: ``SESSION...`` for a required argument, ``[OUT]``
+    for an optional one, ``--out PATH`` for an option, a flag without a value; and a
+    usage error for a boolean word after a flag (``--force true``), which would
+    otherwise be read as the next argument."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            if isinstance(param, TyperOption) and param.metavar is None and not param.is_flag:
+                bare = param.bare_type().removeprefix("list[").removesuffix("]")
+                param.metavar = _TYPE_METAVARS.get(bare, bare.upper())
+            elif isinstance(param, TyperArgument) and param.metavar is None:
+                param.metavar = param.name.upper()
+
+    def collect_usage_pieces(self, ctx: typer.Context) -> list[str]:
+        pieces = [self.options_metavar] if self.options_metavar else []
+        for param in self.get_params(ctx):
+            if isinstance(param, TyperArgument):
+                pieces.append(_argument_label(param))
+            else:
+                pieces.extend(param.get_usage_pieces(ctx))
+        return pieces
+
+    def format_options(self, ctx: typer.Context, formatter) -> None:
+        args, opts = [], []
+        for param in self.get_params(ctx):
+            record = param.get_help_record(ctx)
+            if record is None:
+                continue
+            if isinstance(param, TyperArgument):  # the label alone, no "<list[Path]>"
+                args.append((_argument_label(param).strip("[]"), record[1]))
+            else:
+                opts.append(record)
+        for title, rows in (("Arguments", args), ("Options", opts)):
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
+
+    def parse_args(self, ctx: typer.Context, args: list[str]) -> list[str]:
+        flags = {
+            name
+            for p in self.params
+            if isinstance(p, TyperOption) and p.is_flag
+            for name in (*p.opts, *p.secondary_opts)
+        }
+        for flag, word in zip(args, args[1:], strict=False):
+            if flag in flags and word.lower() in _BOOL_WORDS and not Path(word).exists():
+                raise typer.BadParameter(
+                    f"'{word}' after {flag}: {flag} is a flag and takes no value (write "
+                    f"{flag} alone)",
+                    ctx=ctx,
+                )
+        return super().parse_args(ctx, args)
+
+
+def _argument_label(param: TyperArgument) -> str:
+    """``SESSION...`` (required, several), ``[OUT]`` (optional)."""
+    label = param.metavar + ("..." if param.nargs != 1 else "")
+    return label if param.required else f"[{label}]"
+
+
+class _Typer(typer.Typer):
+    """Every command of the app uses :class:`_Command`."""
+
+    def command(self, *args, cls=None, **kwargs):
+        return super().command(*args, cls=cls or _Command, **kwargs)
+
+
+app = _Typer(
     name="i2ris-calib",
     help="Calibrate the I2RIS snake robot: track markers, sync clocks, fit GPI/EGPI hysteresis, report.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain help: "[simulate]" stays text, no "<bool>" after flags
 )
 
 ConfigOpt = typer.Option(
-    None, "--config", "-c", help="Pipeline TOML (docs/config.md); defaults if omitted."
+    None,
+    "--config",
+    "-c",
+    metavar="PIPELINE.toml",
+    help="Pipeline TOML (docs/config.md); defaults if omitted.",
 )
 
 
@@ -53,9 +137,13 @@ def _config(path: Path | None):
 
 @app.command()
 def simulate(
-    out: Path = typer.Option(..., "--out", "-o", help="Session folder to create."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", metavar="SESSION", help="Session folder to create."
+    ),
     config: Path | None = ConfigOpt,
-    seed: int | None = typer.Option(None, help="Random seed (overrides [simulate] seed)."),
+    seed: int | None = typer.Option(
+        None, metavar="N", help="Random seed (overrides [simulate] seed)."
+    ),
     force: bool = typer.Option(False, "--force", help="Replace an existing session folder."),
 ) -> None:
     """Render a synthetic two-microscope session with known ground truth."""
@@ -67,9 +155,11 @@ def simulate(
 
 @app.command()
 def track(
-    session: Path = typer.Argument(..., help="Session folder (docs/session.md)."),
+    session: Path = typer.Argument(
+        ..., metavar="SESSION", help="Session folder (docs/session.md)."
+    ),
     out: Path | None = typer.Option(
-        None, "--out", "-o", help="Output folder (default SESSION/track)."
+        None, "--out", "-o", metavar="DIR", help="Output folder (default SESSION/track)."
     ),
     config: Path | None = ConfigOpt,
 ) -> None:
@@ -83,9 +173,11 @@ def track(
 @app.command()
 def calibrate(
     inputs: list[Path] = typer.Argument(
-        ..., help="ChArUco images/videos, or one ROS camera_info YAML."
+        ..., metavar="INPUTS", help="ChArUco images/videos, or one ROS camera_info YAML."
     ),
-    out: Path = typer.Option(..., "--out", "-o", help="Camera YAML to write (OpenCV FileStorage)."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", metavar="CAMERA.yaml", help="Camera YAML to write (OpenCV FileStorage)."
+    ),
     config: Path | None = ConfigOpt,
 ) -> None:
     """Camera intrinsics from ChArUco board views (or convert a ROS camera_info YAML)."""
@@ -97,16 +189,19 @@ def calibrate(
 
 @app.command()
 def sync(
-    session: Path = typer.Argument(..., help="Session folder."),
+    session: Path = typer.Argument(..., metavar="SESSION", help="Session folder."),
     angles: Path | None = typer.Option(
-        None, help="Tracked angles CSV (default SESSION/track/angles.csv)."
+        None, metavar="ANGLES.csv", help="Tracked angles CSV (default SESSION/track/angles.csv)."
     ),
     out: Path | None = typer.Option(
-        None, "--out", "-o", help="Output folder (default SESSION/sync)."
+        None, "--out", "-o", metavar="DIR", help="Output folder (default SESSION/sync)."
     ),
     config: Path | None = ConfigOpt,
     method: str | None = typer.Option(
-        None, "--method", help="auto, event, model or xcorr (overrides sync.method of the config)."
+        None,
+        "--method",
+        metavar="METHOD",
+        help="auto, event, model or xcorr (overrides sync.method of the config).",
     ),
 ) -> None:
     """Estimate camera/encoder clock offset and drift; write the synced CSV."""
@@ -118,15 +213,23 @@ def sync(
 
 @app.command()
 def fit(
-    data: list[Path] = typer.Argument(..., help="Synced CSV file(s) (docs/formats.md)."),
-    axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
-    model: str = typer.Option(
-        "all", "--model", help="gpi, egpi, egpi_c, agpi (two-tendon GPI, signed input) or all."
+    data: list[Path] = typer.Argument(
+        ..., metavar="DATA.csv", help="Synced CSV file(s) (docs/formats.md)."
     ),
-    out: Path = typer.Option(Path("fit_out"), "--out", "-o", help="Output folder."),
+    axis: str = typer.Option(..., "--axis", metavar="AXIS", help="yaw or pitch."),
+    model: str = typer.Option(
+        "all",
+        "--model",
+        metavar="MODEL",
+        help="gpi, egpi, egpi_c, agpi (two-tendon GPI, signed input) or all.",
+    ),
+    out: Path = typer.Option(Path("fit_out"), "--out", "-o", metavar="DIR", help="Output folder."),
     config: Path | None = ConfigOpt,
     model_file: Path | None = typer.Option(
-        None, "--model-file", help="Also refit a final_model.json written by 'diagnose'."
+        None,
+        "--model-file",
+        metavar="FINAL_MODEL.json",
+        help="Also refit a final_model.json written by 'diagnose'.",
     ),
     signed: bool = typer.Option(
         False, "--signed", help="One model on the whole signed input (loops that cross zero)."
@@ -135,7 +238,10 @@ def fit(
         False, "--split", help="The paper's split into motion directions, whatever the input."
     ),
     columns: str | None = typer.Option(
-        None, "--columns", help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".'
+        None,
+        "--columns",
+        metavar="COLUMNS",
+        help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".',
     ),
 ) -> None:
     """Fit hysteresis models (Levenberg-Marquardt): the paper's GPI/EGPI per motion
@@ -150,27 +256,46 @@ def fit(
 
     with reading_columns(cfg, columns) as cfg:
         fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
+    typer.echo(f"wrote {out / 'fit.json'} and predictions.csv")
 
 
 @app.command()
 def compensate(
-    fit_json: list[Path] = typer.Argument(..., help="fit.json file(s) from 'fit' (one per axis)."),
-    dataset: list[str] = typer.Option(
-        ..., "--dataset", help="yaw+, yaw-, pitch+ or pitch- (repeat for the other axis)."
+    fit_json: list[Path] = typer.Argument(
+        ..., metavar="FIT.json", help="fit.json file(s) from 'fit' (one per axis)."
     ),
-    target: Path = typer.Option(..., "--target", help="Target CSV: time_s, <axis>_deg."),
-    out: Path = typer.Option(..., "--out", "-o", help="COMMANDS.csv to write (+ compensate.json)."),
+    dataset: list[str] = typer.Option(
+        ...,
+        "--dataset",
+        metavar="DATASET",
+        help="yaw+, yaw-, pitch+ or pitch- (repeat for the other axis).",
+    ),
+    target: Path = typer.Option(
+        ..., "--target", metavar="TARGET.csv", help="Target CSV: time_s, yaw_deg and/or pitch_deg."
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", metavar="COMMANDS.csv", help="Commands to write (+ compensate.json)."
+    ),
     model: str | None = typer.Option(
-        None, "--model", help="egpi, egpi_c, gpi or diagnosed (default: best held-out)."
+        None,
+        "--model",
+        metavar="MODEL",
+        help="egpi, egpi_c, gpi or diagnosed (default: best held-out).",
     ),
     max_counts_per_s: float | None = typer.Option(
-        None, "--max-counts-per-s", help="Motor rate limit (counts/s)."
+        None, "--max-counts-per-s", metavar="RATE", help="Motor rate limit (counts/s)."
     ),
     start_counts: float | None = typer.Option(
-        None, "--start-counts", help="Encoder counts before the first sample (e.g. 0 at rest)."
+        None,
+        "--start-counts",
+        metavar="COUNTS",
+        help="Encoder counts before the first sample (e.g. 0 at rest).",
     ),
     model_file: Path | None = typer.Option(
-        None, "--model-file", help="final_model.json (structure of --model diagnosed)."
+        None,
+        "--model-file",
+        metavar="FINAL_MODEL.json",
+        help="final_model.json (structure of --model diagnosed).",
     ),
     config: Path | None = ConfigOpt,
 ) -> None:
@@ -194,7 +319,9 @@ def compensate(
 
 
 @app.command("paper-sim")
-def paper_sim(out: Path = typer.Option(..., "--out", "-o", help="Output folder.")) -> None:
+def paper_sim(
+    out: Path = typer.Option(..., "--out", "-o", metavar="DIR", help="Output folder."),
+) -> None:
     """Reproduce the paper's simulation verification (Section 3.1, Fig 3c/3d/4)."""
     from i2ris_calib.io.paper_sim import write_paper_sim
 
@@ -203,46 +330,55 @@ def paper_sim(out: Path = typer.Option(..., "--out", "-o", help="Output folder."
 
 @app.command()
 def diagnose(
-    data: Path = typer.Argument(..., help="Synced CSV with both axes."),
-    axis: str = typer.Option(..., "--axis", help="yaw or pitch."),
+    data: Path = typer.Argument(..., metavar="DATA.csv", help="Synced CSV with both axes."),
+    axis: str = typer.Option(..., "--axis", metavar="AXIS", help="yaw or pitch."),
     start: str = typer.Option(
         "auto",
         "--start",
+        metavar="MODEL",
         help="Starting model: auto (agpi on a signed input; else gpi and egpi, one reconciled "
         "answer), gpi, egpi or agpi.",
     ),
-    out: Path = typer.Option(Path("diagnose_out"), "--out", "-o", help="Output folder."),
+    out: Path = typer.Option(
+        Path("diagnose_out"), "--out", "-o", metavar="DIR", help="Output folder."
+    ),
     direction: str = typer.Option(
-        "auto", "--direction",
+        "auto",
+        "--direction",
+        metavar="DIRECTION",
         help="+, -, ± or auto (the input fit chooses: signed through zero, else the direction "
         "with more samples).",
     ),
     config: Path | None = ConfigOpt,
     columns: str | None = typer.Option(
-        None, "--columns", help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".'
+        None,
+        "--columns",
+        metavar="COLUMNS",
+        help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".',
     ),
 ) -> None:
     """Find where model and measurement disagree, name the missing effect, add it, refit."""
     cfg = _config(config)
+    from i2ris_calib.diagnosis.report import verdict_line
     from i2ris_calib.io.diagnose import diagnose_file
     from i2ris_calib.io.synced import reading_columns
 
     with reading_columns(cfg, columns) as cfg:
         rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
-    typer.echo(f"{rec['dataset']}: {rec['summary']}")
+    typer.echo(verdict_line(rec))  # the whole verdict, paths and alternatives: diagnosis.md
     for note in rec.get("notes", []):
         if note.startswith("coupling"):  # coupling named, or not separable (issue 20)
             typer.echo(note)
-    if rec.get("reconciliation") and len(rec.get("paths", {})) > 1:
-        typer.echo(f"starting models: {rec['reconciliation']}")
-    typer.echo(f"wrote {out}")
+    typer.echo(f"wrote {out} (details in {out / 'diagnosis.md'})")
 
 
 @app.command()
 def report(
-    run_dir: Path = typer.Argument(..., help="Run folder written by 'run' (or by track/sync/fit)."),
+    run_dir: Path = typer.Argument(
+        ..., metavar="RUN_DIR", help="Run folder written by 'run' (or by track/sync/fit)."
+    ),
     out: Path | None = typer.Option(
-        None, "--out", "-o", help="Output folder (default RUN_DIR/report)."
+        None, "--out", "-o", metavar="DIR", help="Output folder (default RUN_DIR/report)."
     ),
     config: Path | None = ConfigOpt,
 ) -> None:
@@ -256,11 +392,15 @@ def report(
 
 @app.command()
 def run(
-    sessions: list[Path] = typer.Argument(..., help="Session folder(s)."),
-    out: Path = typer.Option(Path("runs"), "--out", "-o", help="Folder for the run outputs."),
+    sessions: list[Path] = typer.Argument(..., metavar="SESSION", help="Session folder(s)."),
+    out: Path = typer.Option(
+        Path("runs"), "--out", "-o", metavar="DIR", help="Folder for the run outputs."
+    ),
     config: Path | None = ConfigOpt,
     force: bool = typer.Option(False, "--force", help="Redo every stage even if up to date."),
-    jobs: int = typer.Option(0, "--jobs", "-j", help="Parallel sessions (0 = number of cores)."),
+    jobs: int = typer.Option(
+        0, "--jobs", "-j", metavar="N", help="Parallel sessions (0 = number of cores)."
+    ),
 ) -> None:
     """track -> sync -> fit -> report for each session; stages skipped when up to date."""
     cfg = _config(config)
@@ -326,13 +466,14 @@ def _run(args: list[str], debug: bool) -> int:
         typer.echo(INTERRUPTED, err=True)
         return 130
     except CalibError as exc:
-        if debug:
-            raise
+        if debug:  # the traceback, then the same line and status as without --debug
+            traceback.print_exc()
         typer.echo(f"error: {exc}", err=True)
         return 2
     except Exception as exc:  # noqa: BLE001 - last line of defence, see --debug
         if debug:
-            raise
+            traceback.print_exc()
+            return 1
         typer.echo(
             f"internal error: {type(exc).__name__}: {exc} (rerun with --debug for the traceback)",
             err=True,

@@ -129,6 +129,31 @@ def diagnosis_summary(diag: Diagnosis) -> str:
     return text
 
 
+def verdict_line(rec: dict) -> str:
+    """The diagnosis.json record in one terminal line (diagnosis.md has the rest), e.g.
+    ``"yaw+: named time_delay (held-out RMSE 0.42 -> 0.15 deg); not told apart:
+    backlash; gpi and egpi starts agree"``."""
+    named = rec.get("named_effects") or []
+    b, f = rec["baseline"]["holdout_rmse_deg"], rec["final"]["holdout_rmse_deg"]
+    if named:
+        parts = [f"named {', then '.join(named)} (held-out RMSE {_fmt(b)} -> {_fmt(f)} deg)"]
+    else:
+        parts = [f"nothing missing (held-out RMSE {_fmt(f)} deg)"]
+    open_ = list(dict.fromkeys(a["effect"] for a in rec.get("not_excluded", [])))
+    if open_:
+        parts.append(f"not told apart: {', '.join(open_)}")
+    paths = rec.get("paths") or {}
+    if len(paths) > 1:
+        answers = {tuple(p.get("named_effects", [])) for p in paths.values()}
+        starts = " and ".join(paths)
+        parts.append(
+            f"{starts} starts agree"
+            if len(answers) == 1
+            else f"{starts} starts disagree (answer from {rec.get('start_model', '?')})"
+        )
+    return f"{rec.get('dataset', '?')}: " + "; ".join(parts)
+
+
 def paths_record(auto) -> dict:
     """``paths`` entry of diagnosis.json for ``--start auto``: each start's answer."""
     return {

@@ -193,9 +193,12 @@ def test_direction_dataset_is_the_whole_history(tmp_path):
     )
     assert plus.rows["in_direction"] < minus.rows["in_direction"]
     assert plus.rows["in_direction"] + minus.rows["in_direction"] == t.size
-    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw-"
+    # auto follows fit's model choice: the input crosses zero (no rest at t = 20 s) ->
+    # the signed dataset; with the paper's split forced, the larger direction
+    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw±"
+    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig(split=True)).name == "yaw-"
     pd.DataFrame({"time_s": t, "enc_yaw": -enc, "yaw_deg": -0.01 * enc}).to_csv(csv, index=False)
-    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig()).name == "yaw+"
+    assert diagnosis_dataset(csv, "yaw", "auto", FitConfig(split=True)).name == "yaw+"
     # [fit] signed = true: one signed dataset, chosen by auto; + / - are refused
     signed = FitConfig(signed=True)
     assert diagnosis_dataset(csv, "yaw", "auto", signed).name == "yaw±"

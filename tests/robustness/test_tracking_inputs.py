@@ -173,8 +173,8 @@ def test_invalid_track_and_simulate_config_values(tmp_path, capsys):
     cases = {
         "[track]\nmax_interp_gap_s = -1\n": "max_interp_gap_s = -1.0 must be a finite number >= 0",
         "[track]\nweak_perspective_focal_px = 0\n": "weak_perspective_focal_px = 0.0 must be",
-        "[track]\nreference_start_s = nan\n": "reference_start_s = nan must be",
-        "[simulate]\nfps = nan\n": "fps = nan must be a finite number > 0",
+        "[track]\nreference_start_s = nan\n": "[track]: TrackingConfig: reference_start_s is NaN",
+        "[simulate]\nfps = nan\n": "[simulate]: SimulationConfig: fps is NaN",
         "[simulate]\nbackground_gray = 300\n": "background_gray = 300.0 must be a grey level",
         "[simulate]\nmarker_size_mm = 0\n": "marker_size_mm = 0.0 must be a finite number > 0",
         "[simulate]\namplitude_counts = [0, 6000]\n": "amplitude_counts must be",

@@ -69,7 +69,11 @@ def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], where: str = "
                 else f"; valid keys: {', '.join(sorted(fields))}"
             )
             raise CalibError(f"{where or cls.__name__}: unknown key '{key}'{hint}")
-        kwargs[key] = _coerce(hints[key], value, f"{where}.{key}" if where else key)
+        if dataclasses.is_dataclass(hints[key]):  # a section: "config.toml [track]"
+            sub = f"{where} [{key}]" if where else f"[{key}]"
+        else:
+            sub = f"{where}.{key}" if where else key
+        kwargs[key] = _coerce(hints[key], value, sub)
     try:
         obj = cls(**kwargs)
         if hasattr(obj, "validate"):

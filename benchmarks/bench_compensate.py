@@ -22,6 +22,15 @@ in the fitted input range.
 4. Speed: >= 1e5 target samples per second (one core, compiled, whole counts).
 
 Also printed (no target): case 2 with a motor rate limit of 5000 counts/s.
+
+5. Safety (issue 21; ``--safety-targets N``, default 1000, 0 skips): plants = the true
+   EGPI and the true continuous EGPI, compensators fitted from their noisy recordings
+   (the best held-out kind); N random smooth targets (10 s, 100 Hz, sums of three
+   sines inside the plant's reach), inverted with the rate limit the fit stores (the
+   recording's fastest input move) and without one. Printed: tracking RMSE on the true
+   plant against the true model inverted with the same settings (<= 1.2x), the fastest
+   command step against the limit (<= limit), and up-and-back spikes
+   (``compensation.safety.find_spikes`` on the commands and the plant's output; 0).
 """
 
 from __future__ import annotations
@@ -286,16 +295,78 @@ def speed() -> bool:
     return ok
 
 
+def smooth_target(rng: np.random.Generator, n: int = 1000, lo: float = 6.0, hi: float = 26.0):
+    """(t, target): a random smooth angle, 10 s at 100 Hz, within [lo, hi] deg."""
+    t = np.arange(n) * 0.01
+    s = sum(
+        rng.uniform(0.3, 1.0) * np.sin(2 * np.pi * t / rng.uniform(2.0, 12.0) + rng.uniform(0, 6))
+        for _ in range(3)
+    )
+    s = (s - s.min()) / max(np.ptp(s), 1e-9)
+    a, b = np.sort(rng.uniform(lo, hi, 2))
+    b = max(b, a + 3.0)
+    return t, a + (b - a) * s
+
+
+def safety(config: FitConfig, n_targets: int) -> bool:
+    from i2ris_calib.compensation.safety import find_spikes, max_input_rate
+
+    print(f"\n== 5. safety: {n_targets} random smooth targets per plant")
+    ok = True
+    for plant_kind in ("egpi", "egpi_c"):
+        _, plant, data = recording(2024, kind=plant_kind)
+        fits = fit_dataset_all(data, config, KINDS)
+        kind = min(KINDS, key=lambda k: fits[k].holdout_metrics.rmse_deg)
+        limit = max_input_rate(data.v, data.time_s)
+        hi = float(np.max(data.v))
+        rng = np.random.default_rng(7)
+        for rate in (limit, None):
+            worst_rate, spikes, spikes_raw, e_fit, e_ideal = 0.0, 0, 0, [], []
+            for _ in range(n_targets):
+                t, target = smooth_target(rng)
+                kw = dict(v_limits=(0.0, hi), max_rate=rate, v_initial=0.0)
+                r = compensate(fits[kind].model, target, t, **kw)
+                ideal = compensate(plant, target, t, **kw)
+                y = forward(plant, np.concatenate((r.entry_commands, r.commands)),
+                            np.concatenate((r.entry_t_s, t)), 0.0)[r.entry_commands.size:]  # fmt: skip
+                e_fit.append(rmse(y - target))
+                e_ideal.append(rmse(ideal.predicted_deg - target))
+                worst_rate = max(worst_rate, r.max_rate_seen())
+                spikes += find_spikes(r.commands, y, target, r.tol_deg, hi, 1.0).size
+                raw = compensate(fits[kind].model, target, t, repair_spikes=False, **kw)
+                y_raw = forward(plant, np.concatenate((raw.entry_commands, raw.commands)),
+                                np.concatenate((raw.entry_t_s, t)), 0.0)[raw.entry_commands.size:]  # fmt: skip
+                spikes_raw += find_spikes(raw.commands, y_raw, target, raw.tol_deg, hi, 1.0).size
+            ratio = float(np.mean(e_fit)) / max(float(np.mean(e_ideal)), 1e-12)
+            ok_r = ratio <= 1.2 and (rate is None or worst_rate <= rate + 1e-6) and spikes == 0
+            ok &= ok_r
+            lim = "none" if rate is None else f"{rate:.0f} counts/s (the fit's recording)"
+            print(
+                f"plant {plant_kind:>6}, compensator {kind:>6}, rate limit {lim}: mean tracking "
+                f"RMSE {np.mean(e_fit):.3f} deg vs ideal inverse {np.mean(e_ideal):.3f} "
+                f"({ratio:.2f}x, <= 1.2); fastest command {worst_rate:.0f} counts/s; "
+                f"spikes {spikes} (without the repair {spikes_raw}) {verdict(ok_r)}"
+            )
+    return ok
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--figure", default=None, help="write the docs figure here (PNG)")
     ap.add_argument("--no-delay", action="store_true", help="skip the hidden-delay scenario")
+    ap.add_argument("--safety-targets", type=int, default=1000, help="targets of check 5 (0: skip)")
+    ap.add_argument("--safety-only", action="store_true", help="run check 5 alone")
     args = ap.parse_args()
     config = FitConfig()
+    if args.safety_only:
+        print(f"\noverall: {verdict(safety(config, args.safety_targets))}")
+        return
     oks = [closed_loop(config, args.figure)]
     if not args.no_delay:
         oks.append(hidden_delay(config))
     oks.append(speed())
+    if args.safety_targets > 0:
+        oks.append(safety(config, args.safety_targets))
     print(f"\noverall: {verdict(all(oks))}")
 
 

@@ -141,3 +141,64 @@ def test_readme_scripts_exist():
     scripts = re.findall(r"^bash (\S+)", text, re.M)
     assert scripts == ["scripts/demo.sh", "scripts/test.sh"]
     assert all((ROOT / s).is_file() for s in scripts)
+
+
+# --------------------------------------------------------------- relative links
+
+
+LINK_PAGES = [ROOT / "README.md", ROOT / "CONTRIBUTING.md", *sorted((ROOT / "docs").rglob("*.md"))]
+#: ``[text](target)``; the target ends at the first space or ``)`` (no titles are used)
+LINK = re.compile(r"(?<!!)\[[^\]\n]*\]\(([^)\s]+)\)|!\[[^\]\n]*\]\(([^)\s]+)\)")
+FENCED = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
+
+
+def heading_anchors(text: str) -> set[str]:
+    """GitHub's anchors of a page's Markdown headings (``-1``, ``-2`` for repeats)."""
+    seen: dict[str, int] = {}
+    anchors = set()
+    for title in re.findall(r"^#{1,6}\s+(.+?)\s*#*\s*$", FENCED.sub("", text), re.M):
+        title = re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", title)  # a link's text only
+        slug = re.sub(r"[^\w\- ]", "", title.strip().lower().replace("`", "")).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        anchors.add(slug if n == 0 else f"{slug}-{n}")
+    return anchors
+
+
+def relative_links(page: Path) -> list[str]:
+    """The relative link targets of ``page`` outside code blocks and code spans."""
+    text = re.sub(r"`[^`\n]*`", "", FENCED.sub("", page.read_text()))
+    targets = [a or b for a, b in LINK.findall(text)]
+    return [t for t in targets if not re.match(r"[a-z][a-z0-9+.-]*:", t)]  # http:, mailto:
+
+
+def broken_links(pages=LINK_PAGES) -> list[str]:
+    anchors: dict[Path, set[str]] = {}
+    bad = []
+    for page in pages:
+        for target in relative_links(page):
+            path, _, anchor = target.partition("#")
+            dest = (page.parent / path).resolve() if path else page
+            where = f"{page.relative_to(ROOT)}: ({target})"
+            if not dest.exists():
+                bad.append(f"{where}: no such file")
+            elif anchor and dest.suffix == ".md":
+                if dest not in anchors:
+                    anchors[dest] = heading_anchors(dest.read_text())
+                if anchor not in anchors[dest]:
+                    bad.append(f"{where}: no heading #{anchor} in {dest.relative_to(ROOT)}")
+    return bad
+
+
+def test_heading_anchors_follow_github():
+    text = "# Starting model (`--start auto`)\n## In the pipeline (`[run] diagnose = true`)\n## A\n## A\n"
+    assert heading_anchors(text) == {"starting-model---start-auto",
+                                     "in-the-pipeline-run-diagnose--true", "a", "a-1"}  # fmt: skip
+
+
+def test_relative_links_resolve():
+    """Every relative link in README.md, CONTRIBUTING.md and docs/**/*.md names an existing
+    file and, with ``#anchor``, a heading of that page."""
+    assert len(LINK_PAGES) > 10
+    bad = broken_links()
+    assert not bad, "\n".join(bad)

@@ -264,11 +264,11 @@ def compensate(
     fit_json: list[Path] = typer.Argument(
         ..., metavar="FIT.json", help="fit.json file(s) from 'fit' (one per axis)."
     ),
-    dataset: list[str] = typer.Option(
-        ...,
+    dataset: list[str] | None = typer.Option(
+        None,
         "--dataset",
         metavar="DATASET",
-        help="yaw+, yaw-, pitch+ or pitch- (repeat for the other axis).",
+        help="yaw+, yaw-, yaw±, pitch+, pitch- or pitch± (one per axis); omit to let compensate choose from the target.",
     ),
     target: Path = typer.Option(
         ..., "--target", metavar="TARGET.csv", help="Target CSV: time_s, yaw_deg and/or pitch_deg."
@@ -297,22 +297,25 @@ def compensate(
         metavar="FINAL_MODEL.json",
         help="final_model.json (structure of --model diagnosed).",
     ),
+    time_unit_s: float | None = typer.Option(
+        None,
+        "--time-unit-s",
+        metavar="SECONDS",
+        help="Seconds per unit of the target's time_s (0.001 for ms).",
+    ),
     config: Path | None = ConfigOpt,
 ) -> None:
     """Feedforward motor commands that make the fitted model follow a target angle."""
     cfg = _config(config)
-    from i2ris_calib.io.compensate import compensate_files
+    from i2ris_calib.io.compensate import compensate_files, summary_lines
 
     doc = compensate_files(
         fit_json, dataset, target, out, cfg, model=model, max_counts_per_s=max_counts_per_s,
-        start_counts=start_counts, model_file=model_file,
+        start_counts=start_counts, model_file=model_file, time_unit_s=time_unit_s,
     )  # fmt: skip
+    for line in summary_lines(doc):
+        typer.echo(line)
     for rec in doc["axes"].values():
-        typer.echo(
-            f"{rec['dataset']} ({rec['model']}): predicted RMSE {rec['rmse_deg']:.4f} deg, "
-            f"max {rec['max_abs_err_deg']:.4f} deg, {rec['n_unreachable']} of "
-            f"{rec['n_samples']} samples unreachable"
-        )
         for warning in rec.get("warnings", ()):
             typer.echo(f"warning: {warning}", err=True)
     typer.echo(f"wrote {out} and {out.with_name('compensate.json')}")

@@ -16,7 +16,7 @@ from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
 from i2ris_calib.io.compensate import compensate_files
 
 
-def _fit_json(path, axis="yaw", kinds=("egpi", "egpi_c", "gpi")):
+def _fit_json(path, axis="yaw", kinds=("egpi", "egpi_c", "gpi"), rate=1e6):
     P = paper_like_params(f"{axis}+")
     hold = {"egpi": 0.2, "egpi_c": 0.1, "gpi": 0.5}
     datasets = []
@@ -31,7 +31,14 @@ def _fit_json(path, axis="yaw", kinds=("egpi", "egpi_c", "gpi")):
             }
             for k in kinds
         }
-        datasets.append({"name": name, "input_range_counts": [0.0, 6000.0], "models": models})
+        datasets.append(
+            {
+                "name": name,
+                "input_range_counts": [0.0, 6000.0],
+                "max_input_rate_counts_per_s": rate,
+                "models": models,
+            }
+        )
     doc = {"schema": "i2ris-calib.fit/1", "axis": axis, "datasets": datasets}
     path.write_text(json.dumps(doc))
     return P
@@ -53,7 +60,7 @@ def test_minus_dataset_signs_and_exact_prediction(files):
         [tmp / "fit.json"], ["yaw-"], tmp / "target.csv", tmp / "out" / "cmd.csv", model="egpi"
     )
     df = pd.read_csv(tmp / "out" / "cmd.csv")
-    assert list(df.columns) == ["time_s", "enc_yaw", "predicted_yaw_deg", "reachable"]
+    assert list(df.columns) == ["time_s", "enc_yaw", "predicted_yaw_deg", "reachable", "flags"]
     assert df["enc_yaw"].dtype == np.int64 and (df["enc_yaw"] <= 0).all()
     model = model_from_params("egpi", P, 30, 2.0)
     # predicted angle = -(model output for |counts|): the "-" dataset's convention
@@ -70,13 +77,15 @@ def test_minus_dataset_signs_and_exact_prediction(files):
     assert "v_f" in saved["method"]
 
 
-def test_default_model_is_best_held_out_and_rate_limit(files):
+def test_default_model_is_best_ranked_and_rate_limit(files):
     tmp, _ = files
     doc = compensate_files(
         [tmp / "fit.json"], ["yaw-"], tmp / "target.csv", tmp / "c.csv",
         max_counts_per_s=2000.0, start_counts=0.0,
     )  # fmt: skip
-    assert doc["axes"]["yaw"]["model"] == "egpi_c"
+    rec = doc["axes"]["yaw"]
+    assert rec["model"] == rec["ranking"][0]["model"] and rec["ranking"][0]["chosen"]
+    assert {r["model"] for r in rec["ranking"]} == {"egpi", "egpi_c", "gpi"}
     enc = pd.read_csv(tmp / "c.csv")["enc_yaw"].to_numpy()
     assert np.max(np.abs(np.diff(np.concatenate(([0], enc))))) <= 2000 * 0.02 + 1e-9
 
@@ -221,8 +230,9 @@ def test_fit_json_written_by_fit(tmp_path):
     target = -(14 + 8 * np.sin(0.7 * tt))
     pd.DataFrame({"time_s": tt, "yaw_deg": target}).to_csv(tmp_path / "target.csv", index=False)
     doc = compensate_files(
-        [tmp_path / "fit" / "fit.json"], ["yaw-"], tmp_path / "target.csv", tmp_path / "c.csv"
-    )
+        [tmp_path / "fit" / "fit.json"], ["yaw-"], tmp_path / "target.csv", tmp_path / "c.csv",
+        max_counts_per_s=float("inf"),  # exact tracking; the fit's own rate: test_safe_*
+    )  # fmt: skip
     rec = doc["axes"]["yaw"]
     assert rec["model"] == "gpi"
     df = pd.read_csv(tmp_path / "c.csv")
@@ -493,3 +503,131 @@ def test_ctrl_c_at_any_time_during_compensate_is_130(tmp_path, launcher):
             assert not out.exists() and not out.with_name("compensate.json").exists()
         else:  # the Ctrl-C came after the outputs were complete (while Python shut down)
             assert out.is_file() and out.with_name("compensate.json").is_file()
+
+
+# ---------------------------------------------------------------- safe by default (issue 21)
+
+
+def test_ms_times_refused_or_converted(files):
+    tmp, _ = files
+    t = np.arange(0, 10, 0.01)
+    pd.DataFrame({"time_s": t * 1000, "yaw_deg": 15 + 5 * np.sin(t)}).to_csv(
+        tmp / "ms.csv", index=False
+    )
+    with pytest.raises(CalibError, match=r"look like ms: give --time-unit-s 0.001") as exc:
+        compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "ms.csv", tmp / "c.csv",
+                         max_counts_per_s=5000.0)  # fmt: skip
+    assert "\n" not in str(exc.value) and not (tmp / "c.csv").exists()
+    doc = compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "ms.csv", tmp / "c.csv",
+                           max_counts_per_s=5000.0, time_unit_s=0.001)  # fmt: skip
+    df = pd.read_csv(tmp / "c.csv")
+    assert np.max(np.abs(np.diff(df["enc_yaw"])) / np.diff(df["time_s"])) <= 5000 + 1e-6
+    assert doc["axes"]["yaw"]["max_command_rate_per_s"] <= 5000 + 1e-6
+    assert df["time_s"].iloc[-1] == pytest.approx(9.99)
+
+
+def test_start_counts_outside_the_fitted_range_refused(files):
+    tmp, _ = files
+    with pytest.raises(CalibError, match=r"--start-counts 1e\+06 is outside") as exc:
+        compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "target.csv", tmp / "c.csv",
+                         start_counts=1e6)  # fmt: skip
+    assert "\n" not in str(exc.value)
+    with pytest.raises(CalibError, match="outside the yaw- fit's input range -6000..0"):
+        compensate_files([tmp / "fit.json"], ["yaw-"], tmp / "target.csv", tmp / "c.csv",
+                         start_counts=500)  # fmt: skip
+
+
+def test_default_rate_is_the_fits_and_flags_are_counted(tmp_path, capsys):
+    # yaw- target -15 - 10 sin(t) without --start-counts (the issue's case)
+    _fit_json(tmp_path / "fit.json", rate=420.0)
+    t = np.arange(0, 20, 0.01)
+    pd.DataFrame({"time_s": t, "yaw_deg": -15 - 10 * np.sin(t)}).to_csv(
+        tmp_path / "t.csv", index=False
+    )
+    out = tmp_path / "c.csv"
+    code = main(["compensate", str(tmp_path / "fit.json"), "--dataset", "yaw-", "--target",
+                 str(tmp_path / "t.csv"), "--out", str(out)])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "rate limit 420 counts/s (fit.json max_input_rate_counts_per_s" in text
+    assert "rate_limited" in text and "entry" in text
+    df = pd.read_csv(out, keep_default_na=False)
+    doc = json.loads((tmp_path / "compensate.json").read_text())["axes"]["yaw"]
+    assert doc["max_counts_per_s"] == 420.0 and doc["start_counts"] == 0.0
+    enc = np.concatenate(([0], df["enc_yaw"].to_numpy()))
+    tt = np.concatenate(([df["time_s"].iloc[0] - 0.01], df["time_s"]))
+    assert np.max(np.abs(np.diff(enc)) / np.diff(tt)) <= 420 + 1e-6
+    d = np.diff(enc)
+    assert not np.any((d[:-1] * d[1:] < 0) & (np.minimum(abs(d[:-1]), abs(d[1:])) > 60))
+    for name, n in doc["flags"].items():
+        assert df["flags"].str.contains(name).sum() == n, name
+    assert (df["flags"] == "entry").sum() == doc["n_entry"] > 0
+    assert (df["time_s"] < 0).sum() == doc["n_entry"]
+
+
+def test_older_fit_json_without_rate_falls_back_with_a_line(files, capsys):
+    tmp, _ = files
+    doc = json.loads((tmp / "fit.json").read_text())
+    for d in doc["datasets"]:
+        del d["max_input_rate_counts_per_s"]
+    (tmp / "fit.json").write_text(json.dumps(doc))
+    code = main(["compensate", str(tmp / "fit.json"), "--dataset", "yaw-", "--target",
+                 str(tmp / "target.csv"), "--out", str(tmp / "c.csv")])  # fmt: skip
+    assert code == 0
+    err = capsys.readouterr().err
+    assert "has no max_input_rate_counts_per_s" in err and "rate limit 600 counts/s" in err
+
+
+def test_model_file_lacking_the_fits_delay_refused(tmp_path):
+    from i2ris_calib.diagnosis.effects import add_effect
+    from i2ris_calib.diagnosis.serialize import model_to_dict
+
+    P = _fit_json(tmp_path / "fit.json", kinds=("egpi",))
+    base = model_from_params("egpi", P, 30, 2.0)
+    delayed = add_effect(base, "time_delay", {"tau_s": 0.15})
+    (tmp_path / "final_model.json").write_text(json.dumps(model_to_dict(base)))  # no delay
+    doc = json.loads((tmp_path / "fit.json").read_text())
+    rec = dict(doc["datasets"][0]["models"]["egpi"])
+    rec["params"] = {p.name: p.value for p in delayed.parameters}
+    doc["datasets"][0]["models"]["diagnosed"] = rec
+    (tmp_path / "fit.json").write_text(json.dumps(doc))
+    pd.DataFrame({"time_s": [0.0, 0.01, 0.02], "yaw_deg": [15.0, 15.1, 15.2]}).to_csv(
+        tmp_path / "t.csv", index=False
+    )
+    with pytest.raises(CalibError, match="does not match .* has time_delay.tau_s") as exc:
+        compensate_files([tmp_path / "fit.json"], ["yaw+"], tmp_path / "t.csv",
+                         tmp_path / "c.csv", model="diagnosed",
+                         model_file=tmp_path / "final_model.json")  # fmt: skip
+    assert "\n" not in str(exc.value) and not (tmp_path / "c.csv").exists()
+
+
+def test_signed_fit_compensated_and_dataset_chosen(tmp_path):
+    from dataclasses import replace
+
+    from i2ris_calib.io.config_io import load_config
+    from i2ris_calib.io.fit import fit_files
+
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 60, 1 / 30)
+    enc = np.round(3000 * np.sin(2 * np.pi * t / 20))  # through zero
+    truth = model_from_params("gpi", gpi_values(paper_like_params("yaw+")))
+    theta = forward(truth, enc, t) + rng.normal(0, 0.02, t.size)
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": theta}).to_csv(
+        tmp_path / "s.csv", index=False
+    )
+    cfg = load_config(None)
+    cfg = replace(cfg, fit=replace(cfg.fit, signed=True))
+    fit_files([tmp_path / "s.csv"], "yaw", "gpi", tmp_path / "fit", cfg)
+    fit_doc = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    assert fit_doc["datasets"][0]["max_input_rate_counts_per_s"] > 0
+    tt = np.arange(0, 20, 0.02)
+    target = forward(truth, np.round(2500 * np.sin(2 * np.pi * tt / 10)), tt)
+    pd.DataFrame({"time_s": tt, "yaw_deg": target}).to_csv(tmp_path / "t.csv", index=False)
+    doc = compensate_files([tmp_path / "fit" / "fit.json"], None, tmp_path / "t.csv",
+                           tmp_path / "c.csv", max_counts_per_s=float("inf"))  # fmt: skip
+    rec = doc["axes"]["yaw"]
+    assert rec["dataset"] == "yaw±" and rec["model"] == "gpi"
+    df = pd.read_csv(tmp_path / "c.csv")
+    assert (df["enc_yaw"] < 0).any() and (df["enc_yaw"] > 0).any()
+    achieved = forward(truth, df["enc_yaw"].to_numpy(float), df["time_s"].to_numpy())
+    assert np.sqrt(np.mean((achieved - target) ** 2)) < 0.3

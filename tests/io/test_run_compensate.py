@@ -32,7 +32,9 @@ def run_dir(tmp_path_factory):
 
 
 def test_compensate_stage_writes_commands_and_report_section(run_dir):
-    cfg = PipelineConfig(compensate=CompensateConfig(target="target.csv"))
+    cfg = PipelineConfig(
+        compensate=CompensateConfig(target="target.csv", max_counts_per_s=float("inf"))
+    )
     target = compensation_target(run_dir, "target.csv")
     compensate_run(run_dir, target, run_dir / "compensate", cfg)
     doc = json.loads((run_dir / "compensate" / "compensate.json").read_text())

@@ -10,7 +10,7 @@ from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 
 #: The kinds compensation inverts (the registry's ``inverse``) and ``"diagnosed"``
 _KINDS = ("", *INVERSE_KINDS, "diagnosed")
-_DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
+_DATASETS = ("yaw+", "yaw-", "yaw±", "pitch+", "pitch-", "pitch±")
 
 
 @dataclass(frozen=True)
@@ -28,16 +28,20 @@ class CompensateConfig:
         per axis in the target, ``"+"`` when the target's median angle is >= 0, else
         ``"-"``.
     model : str
-        ``gpi``, ``egpi``, ``egpi_c`` or ``diagnosed``; empty: the dataset's model with
-        the lowest held-out RMSE.
+        ``gpi``, ``egpi``, ``egpi_c`` or ``diagnosed``; empty: the model with the best
+        predicted tracking of this target (docs/compensate.md).
     max_counts_per_s : float
-        Motor rate limit (counts/s); 0: none.
+        Motor rate limit (counts/s); 0: the fit's fastest input move (fit.json
+        ``max_input_rate_counts_per_s``); ``inf``: none.
+    time_unit_s : float
+        Seconds per unit of the target's ``time_s`` (0.001 for ms).
     """
 
     target: str = ""
     datasets: tuple[str, ...] = ()
     model: str = ""
     max_counts_per_s: float = 0.0
+    time_unit_s: float = 1.0
 
     def __post_init__(self) -> None:
         """Validated on construction, not only when loaded from TOML: field types, then
@@ -56,4 +60,8 @@ class CompensateConfig:
         if len({d[:-1] for d in self.datasets}) != len(self.datasets):
             raise ValueError("datasets: at most one direction per axis")
         if self.max_counts_per_s < 0:
-            raise ValueError("max_counts_per_s must be >= 0 (0 = no limit)")
+            raise ValueError(
+                "max_counts_per_s must be >= 0 (0 = the fit's fastest input move, inf = none)"
+            )
+        if not (self.time_unit_s > 0 and self.time_unit_s < float("inf")):
+            raise ValueError("time_unit_s must be a number > 0 (seconds per unit of time_s)")

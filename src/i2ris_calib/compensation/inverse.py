@@ -9,12 +9,14 @@ signed encoder counts and angles to and from it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+import i2ris_calib._display as _display
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation._args import check_args
+from i2ris_calib.compensation.safety import entry_ramp, find_spikes
 from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Signals
@@ -39,6 +41,23 @@ or the reversal jump of the ``r = 0`` operator), the nearer side is taken;
 no command can reach any more."""
 
 SUPPORTED_EFFECTS = ("time_delay",)
+
+#: Per-sample flags of a result (:attr:`CompensationResult.flags`), in this order:
+#: the status reasons (``rate_limit`` is called ``rate_limited`` here) and
+#: ``spike_removed`` (an up-and-back command spike was replaced by holding the previous
+#: command). The entry ramp's samples (before the target's first time) are ``entry``.
+FLAG_NAMES = (
+    "above_range", "below_range", "within_delay", "rate_limited", "output_step", "spike_removed",
+)  # fmt: skip
+_FLAG_CODES = {
+    "above_range": K.STATUS_ABOVE,
+    "below_range": K.STATUS_BELOW,
+    "within_delay": K.STATUS_DELAY,
+    "rate_limited": K.STATUS_RATE,
+    "output_step": K.STATUS_GAP,
+}
+#: Rounds of spike repair (each one re-inverts with the spikes found held)
+MAX_REPAIR_ROUNDS = 25
 
 
 @dataclass(frozen=True)
@@ -74,6 +93,21 @@ class CompensationResult:
     delay_s : float
         Total delay of the model's time-delay effects; the target was inverted
         ``delay_s`` ahead.
+    spike_removed : ndarray of bool, shape (n,)
+        Samples where an up-and-back command spike of the inverse
+        (:func:`~i2ris_calib.compensation.safety.find_spikes`) was replaced by holding
+        the previous command.
+    spikes_left : int
+        Spikes still in ``commands`` after :data:`MAX_REPAIR_ROUNDS` repair rounds
+        (0 unless the repair did not converge).
+    entry_commands : ndarray, shape (m,)
+        The rate-limited ramp from ``v_initial`` to ``commands[0]``, sent before the
+        first target sample (empty without ``v_initial``, a rate limit, or when one
+        step does).
+    entry_t_s : ndarray, shape (m,)
+        Its times (s): one target interval apart, ending one before ``t_s[0]``.
+    entry_predicted_deg : ndarray, shape (m,)
+        The model's output along the entry ramp (deg).
     """
 
     commands: np.ndarray
@@ -88,6 +122,30 @@ class CompensationResult:
     quantum: float
     delay_s: float = 0.0
     tol_deg: float = 0.0
+    spike_removed: np.ndarray | None = None
+    spikes_left: int = 0
+    entry_commands: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    entry_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    entry_predicted_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def flags(self) -> dict[str, np.ndarray]:
+        """Per-sample flags (:data:`FLAG_NAMES`) -> bool arrays, shape (n,)."""
+        out = {name: self.status == code for name, code in _FLAG_CODES.items()}
+        spikes = self.spike_removed
+        out["spike_removed"] = np.zeros(self.status.size, bool) if spikes is None else spikes
+        return {name: out[name] for name in FLAG_NAMES}
+
+    def max_rate_seen(self) -> float:
+        """Largest |command step| / interval over the entry ramp and the commands
+        (input unit per s); 0 for fewer than two commands or no times."""
+        if self.t_s is None:
+            return 0.0
+        u = np.concatenate((self.entry_commands, self.commands))
+        t = np.concatenate((self.entry_t_s, self.t_s))
+        if u.size < 2:
+            return 0.0
+        return float(np.max(np.abs(np.diff(u)) / np.diff(t)))
 
     @property
     def reachable(self) -> np.ndarray:
@@ -123,7 +181,35 @@ class CompensationResult:
                 for code, name in STATUS_NAMES.items()
                 if code != K.STATUS_OK
             },
+            "flags": {name: int(f.sum()) for name, f in self.flags.items()},
+            "n_entry": int(self.entry_commands.size),
+            "spikes_left": int(self.spikes_left),
+            "max_command_rate_per_s": self.max_rate_seen(),
         }
+
+    def __repr__(self) -> str:
+        n = int(self.status.size)
+        bad = int(np.sum(self.status != K.STATUS_OK))
+        e = self.predicted_deg - self.target_deg
+        rmse = float(np.sqrt(np.mean(e**2))) if n else float("nan")
+        text = (
+            f"<CompensationResult {self.kind}: {n} samples, RMSE {_display.num(rmse)} deg, "
+            f"{bad} unreachable, inputs {_display.num(self.v_limits[0])}.."
+            f"{_display.num(self.v_limits[1])}"
+            + (f", {self.spikes_left} spikes left" if self.spikes_left else "")
+            + ">"
+        )
+        return _display.clip(text)
+
+    def _repr_html_(self) -> str:
+        """Notebook display: the numbers of :meth:`summary`."""
+        summ = self.summary()
+        rows = [(k, v) for k, v in summ.items() if not isinstance(v, dict)]
+        rows += [(f"unreachable: {k}", v) for k, v in summ["unreachable"].items()]
+        rows += [(f"flag: {k}", v) for k, v in summ["flags"].items()]
+        return _display.table(
+            ("", ""), rows, f"<b>CompensationResult</b> {_display.esc(self.kind)}"
+        )
 
 
 def _base_and_delay(model) -> tuple[object, float]:
@@ -193,6 +279,8 @@ def compensate(
     quantum: float = 1.0,
     v_initial: float | None = None,
     tol_deg: float | None = None,
+    entry: bool = True,
+    repair_spikes: bool = True,
 ) -> CompensationResult:
     """Commands that make ``model`` follow ``target_deg``: exact inversion, sample by sample.
 
@@ -222,6 +310,16 @@ def compensate(
         cannot resolve anyway). Default: 0 (numerical precision) for real-valued
         commands; half the angle of one ``quantum`` on the steepest envelope
         (``0.5 quantum max(a1, a3) sum p``) for whole counts.
+    entry : bool
+        With ``v_initial`` and ``max_rate``: the first target sample is one unlimited
+        step from ``v_initial``, and a ramp at ``max_rate`` from ``v_initial`` to it is
+        returned (``entry_commands``) to be sent before the target starts. False: the
+        first sample is an ordinary rate-limited step (flagged while it lags).
+    repair_spikes : bool
+        Replace every up-and-back command spike
+        (:func:`~i2ris_calib.compensation.safety.find_spikes`; a branch switch of the
+        model that the next sample undoes) by holding the previous command, re-inverting
+        from there (flag ``spike_removed``).
 
     Returns
     -------
@@ -259,16 +357,39 @@ def compensate(
     v0 = 0.0 if v_initial is None else float(v_initial)
     if quantum > 0 and v_initial is not None:
         v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
-    u, u_real, _, status = K.invert(
-        code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
-        float(quantum), v0, v_initial is not None, float(tol_deg),
-    )  # fmt: skip
+    has_init = v_initial is not None
+    first_free = bool(entry and has_init and np.isfinite(rate))
+    hold = np.zeros(target.size, dtype=bool)
+    spikes = np.zeros(0, dtype=int)
+    for _ in range(MAX_REPAIR_ROUNDS if repair_spikes else 1):
+        u, u_real, y_model, status = K.invert(
+            code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
+            float(quantum), v0, has_init, float(tol_deg), hold=hold, first_free=first_free,
+        )  # fmt: skip
+        spikes = find_spikes(u, y_model, goal, float(tol_deg), hi - lo, float(quantum))
+        new = spikes[~hold[spikes]]
+        if not repair_spikes or new.size == 0:
+            break
+        hold[new] = True
+    spikes_left = int(spikes.size) if not repair_spikes else int((~hold[spikes]).sum())
+    ramp = np.zeros(0)
+    ramp_t = np.zeros(0)
+    if first_free and t.size > 1:
+        dt0 = float(t[1] - t[0])
+        ramp = entry_ramp(v0, float(u[0]), rate, dt0, float(quantum))
+        ramp_t = t[0] - dt0 * np.arange(ramp.size, 0, -1)
     if delay > 0:
         # command k serves the target at t_k + delay: report status on the target's samples
         j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
         status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
     with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
-        predicted = forward(model, u, t, None if v_initial is None else v0)
+        both = forward(
+            model,
+            np.concatenate((ramp, u)),
+            None if t is None else np.concatenate((ramp_t, t)),
+            None if v_initial is None else v0,
+        )
+    predicted = both[ramp.size :]
     kind = base.name + ("+time_delay" if delay > 0 else "")
     return CompensationResult(
         commands=u,
@@ -283,6 +404,11 @@ def compensate(
         quantum=float(quantum),
         delay_s=delay,
         tol_deg=float(tol_deg),
+        spike_removed=hold.copy(),
+        spikes_left=spikes_left,
+        entry_commands=ramp,
+        entry_t_s=ramp_t,
+        entry_predicted_deg=both[: ramp.size],
     )
 
 

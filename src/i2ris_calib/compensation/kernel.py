@@ -239,13 +239,13 @@ def _choose(xs, errs, keep, nc, v_prev, tk, y_prev, init, tol_deg):  # pragma: n
 CHUNK = 1 << 15
 
 # invert's state between chunks, in one float array (``STATE_SIZE`` values)
-_DSTATE, _ANCHOR, _V_PREV, _Y_PREV, _INIT = range(5)
-STATE_SIZE = 5
+_DSTATE, _ANCHOR, _V_PREV, _Y_PREV, _INIT, _T_MOVE = range(6)
+STATE_SIZE = 6
 
 
 def invert(
     kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init, tol_deg,
-    chunk=CHUNK,
+    chunk=CHUNK, hold=None, first_free=False,
 ):  # fmt: skip
     """Invert the model on ``target`` sample by sample.
 
@@ -284,6 +284,19 @@ def invert(
         inputs, status); at least 1e-10 relative.
     chunk : int
         Samples per compiled call.
+    hold : ndarray of bool, shape (n,), optional
+        Samples where the previous command is held whatever the inverse says (the
+        spike repair of :func:`~i2ris_calib.compensation.inverse.compensate`); the
+        sample is still searched for its status, and a held sample whose output misses
+        the target by more than ``tol_deg`` is ``STATUS_GAP`` at least.
+    first_free : bool
+        With ``has_init``: the first step is not rate limited (the caller sends a
+        rate-limited entry ramp from ``v_init`` before it: a monotone ramp leaves the
+        same operator state as one step).
+
+    Rate limit with whole counts: when ``max_rate`` allows less than one ``quantum``
+    per sample, one quantum may move once ``max_rate`` times the time since the last
+    move reaches it (the command would otherwise never move).
 
     Returns
     -------
@@ -309,12 +322,15 @@ def invert(
     status = np.zeros(n, dtype=np.int8)
     kind, kappa, vf, db = int(kind), float(kappa), float(vf), float(db)
     lo, hi, max_rate, quantum, tol_deg = (float(x) for x in (lo, hi, max_rate, quantum, tol_deg))
+    hold = np.zeros(n, np.bool_) if hold is None else np.ascontiguousarray(hold, dtype=np.bool_)
     _invert_start(kind, c, r, p, kappa, vf, db, float(v_init), bool(has_init), w, state)
+    state[_T_MOVE] = (t[0] if n else 0.0) - (t[1] - t[0] if n > 1 else 1.0)
     step = max(1, int(chunk))
     for k0 in range(0, n, step):
         _invert_chunk(
             kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
-            k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status,
+            k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status, hold,
+            bool(first_free),
         )  # fmt: skip
     return u_out, u_real, y_out, status
 
@@ -349,7 +365,7 @@ def _invert_start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # 
 @njit(cache=True)
 def _invert_chunk(
     kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
-    k0, k1, w, state, u_out, u_real, y_out, status,
+    k0, k1, w, state, u_out, u_real, y_out, status, hold, first_free,
 ):  # pragma: no cover - compiled  # fmt: skip
     """Invert samples ``k0 .. k1 - 1`` from the state in ``w`` and ``state`` (updated in
     place), writing ``u_out``, ``u_real``, ``y_out`` and ``status`` there; returns
@@ -364,6 +380,7 @@ def _invert_chunk(
     v_prev = state[_V_PREV]
     y_prev = state[_Y_PREV]
     init = state[_INIT] != 0.0
+    t_move = state[_T_MOVE]
     dt0 = t[1] - t[0] if n > 1 else 1.0
     bps = np.empty(3)
     edges = np.empty(6)
@@ -376,8 +393,15 @@ def _invert_chunk(
             a_lim, b_lim = lo, hi
         else:
             step = max_rate * (t[k] - t[k - 1]) if k > 0 else max_rate * dt0
+            if k == 0 and first_free:
+                step = np.inf
             if not np.isfinite(step):
                 step = np.inf
+            elif 0 < quantum and step < quantum:
+                # less than a count per sample: one count once the time since the last
+                # move allows it
+                if max_rate * (t[k] - t_move) >= quantum * (1.0 - 1e-9):
+                    step = quantum
             a_lim = max(lo, v_prev - step)
             b_lim = min(hi, v_prev + step)
             a_lim = min(a_lim, v_prev)
@@ -507,6 +531,13 @@ def _invert_chunk(
                     status[k] = STATUS_RATE
         elif best_q > qb or best_q < qa:
             best_q = qb if best_q > qb else qa
+        if hold[k] and not init:
+            best_q = v_prev
+            y_f = _exact(
+                kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_q, init
+            )
+            if abs(y_f - tk) > tol and status[k] == STATUS_OK:
+                status[k] = STATUS_GAP
         u_real[k] = best_r
         # apply the chosen command to every family and to v'
         u = best_q
@@ -521,6 +552,8 @@ def _invert_chunk(
         for i in range(m):
             acc += p[i] * w[fam, i]
         y_prev = acc
+        if u != v_prev or init:
+            t_move = t[k]
         v_prev = u
         init = False
         u_out[k] = u
@@ -530,3 +563,4 @@ def _invert_chunk(
     state[_V_PREV] = v_prev
     state[_Y_PREV] = y_prev
     state[_INIT] = 1.0 if init else 0.0
+    state[_T_MOVE] = t_move

@@ -13,10 +13,11 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.compensation import STATUS_NAMES, compensate
-from i2ris_calib.compensation.inverse import forward
+from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
+from i2ris_calib.interrupts import deferred
 from i2ris_calib.io.atomic import atomic_path, write_json
 from i2ris_calib.io.fit import read_fit_json, read_model_file
 from i2ris_calib.io.outputs import claim_output_file
@@ -25,7 +26,14 @@ from i2ris_calib.io.provenance import provenance
 SCHEMA = "i2ris-calib.compensate/1"
 #: ``--model`` choices: the kinds with an inverse (registry) and ``"diagnosed"``
 KINDS = (*INVERSE_KINDS, "diagnosed")
-DATASETS = ("yaw+", "yaw-", "pitch+", "pitch-")
+#: ``--dataset`` choices (``yaw+-`` is accepted for ``yaw±``)
+DATASETS = ("yaw+", "yaw-", "yaw±", "pitch+", "pitch-", "pitch±")
+#: Median target sample interval (s) a motor command stream can plausibly have
+#: (100 kHz .. 1 Hz); outside it the target's time unit is questioned
+PLAUSIBLE_TARGET_STEP_S = (1e-5, 1.0)
+#: Rate limit when fit.json does not store the recording's fastest input move (older
+#: files): this share of the fitted input range per second
+FALLBACK_RANGE_SHARE_PER_S = 0.1
 
 METHOD_NOTE = (
     "exact inversion of the stateful model sample by sample (one root find per branch "
@@ -39,11 +47,13 @@ METHOD_NOTE = (
 )
 
 
-def read_target(path: str | Path, axes: Sequence[str]) -> pd.DataFrame:
+def read_target(path: str | Path, axes: Sequence[str], time_unit_s: float = 1.0) -> pd.DataFrame:
     """Read and validate a target CSV: ``time_s`` and ``<axis>_deg`` for every axis.
 
-    One-line CalibError for: unreadable file, missing columns, non-numeric or NaN
-    values, time not strictly increasing.
+    ``time_s`` is multiplied by ``time_unit_s`` (seconds per unit of the column: 1e-3
+    for ms). One-line CalibError for: unreadable file, missing columns, non-numeric or
+    NaN values, time not strictly increasing, a median sample interval outside
+    :data:`PLAUSIBLE_TARGET_STEP_S` (naming the ``time_unit_s`` that fits).
     """
     p = Path(path)
     if not p.is_file():
@@ -78,7 +88,32 @@ def read_target(path: str | Path, axes: Sequence[str]) -> pd.DataFrame:
             f"{p}: time_s must increase strictly; line {d[0] + 3} (t = {t[d[0] + 1]:g} s) "
             f"does not (previous t = {t[d[0]]:g} s)"
         )
+    df["time_s"] = t * float(time_unit_s)
+    _check_target_step(p, df["time_s"].to_numpy(), float(time_unit_s))
     return df
+
+
+def _check_target_step(p: Path, t: np.ndarray, unit_s: float) -> None:
+    """CalibError when the median sample interval (s) is implausible for a command
+    stream (:data:`PLAUSIBLE_TARGET_STEP_S`), naming the ``time_unit_s`` that fits."""
+    if t.size < 2:
+        return
+    step = float(np.median(np.diff(t)))
+    lo, hi = PLAUSIBLE_TARGET_STEP_S
+    if lo <= step <= hi:
+        return
+    hint = "give time_s in seconds or the unit with --time-unit-s / [compensate] time_unit_s"
+    for unit, name in ((1e-3, "ms"), (1e-6, "us"), (1e-9, "ns"), (60.0, "min")):
+        if lo <= step * unit <= hi:
+            hint = (
+                f"the times look like {name}: give --time-unit-s {unit_s * unit:g} "
+                "(or [compensate] time_unit_s)"
+            )
+            break
+    raise CalibError(
+        f"{p}: time_s steps by {step:g} s per sample (median, time_unit_s = {unit_s:g}), "
+        f"outside {lo:g}..{hi:g} s for motor commands; {hint}"
+    )
 
 
 def _dataset_record(doc: dict, name: str, path: Path) -> dict:
@@ -88,7 +123,38 @@ def _dataset_record(doc: dict, name: str, path: Path) -> dict:
             return d
     raise CalibError(
         f"{path}: no dataset '{name}' (it has {', '.join(map(str, names)) or 'none'}); "
-        "choose --dataset from those or fit that direction"
+        "choose --dataset from those (omit it to let compensate choose) or fit that direction"
+    )
+
+
+def _dataset_names(doc: dict) -> list[str]:
+    return [str(d.get("name")) for d in doc.get("datasets", [])]
+
+
+def choose_dataset(doc: dict, axis: str, target_deg: np.ndarray, path: Path) -> str:
+    """The dataset of ``doc`` that serves a target on ``axis`` (``--dataset`` omitted):
+    a target crossing zero needs the signed ``<axis>±`` dataset; otherwise the
+    direction of the target's median angle (``+`` when >= 0), or the signed dataset
+    when that direction was not fitted."""
+    names = _dataset_names(doc)
+    signed = f"{axis}±"
+    lo, hi = float(np.min(target_deg)), float(np.max(target_deg))
+    if lo < 0 < hi:
+        if signed in names:
+            return signed
+        raise CalibError(
+            f"{path}: the {axis} target crosses zero ({lo:.3g} to {hi:.3g} deg) but the fit "
+            f"has only {', '.join(names)}; fit the axis with 'fit --signed' (one model across "
+            "zero) or split the target"
+        )
+    name = f"{axis}{'+' if not np.median(target_deg) < 0 else '-'}"
+    if name in names:
+        return name
+    if signed in names:
+        return signed
+    raise CalibError(
+        f"{path}: no dataset for a {axis} target of that sign ({name}; it has "
+        f"{', '.join(names)}); give --dataset or fit that direction"
     )
 
 
@@ -132,6 +198,13 @@ def load_model(doc: dict, record: dict, kind: str, path: Path, model_file: Path 
             raise CalibError(
                 f"{model_file}: its parameters {', '.join(missing)} are not in {path}'s "
                 "diagnosed model; give the final_model.json that 'fit --model-file' used"
+            )
+        lacking = [n for n in rec["params"] if n not in names]
+        if lacking:  # e.g. the fit's time delay: inverting without it is wrong
+            raise CalibError(
+                f"{model_file} does not match {path} [{record['name']}]: the fit's diagnosed "
+                f"model has {', '.join(lacking)}, the model file not (another base kind or "
+                "effects); give the final_model.json that 'fit --model-file' used"
             )
         return base.with_values(np.array([rec["params"][n] for n in names], dtype=float))
     try:  # the values are numbers (read_fit_json); the model may still refuse them
@@ -222,9 +295,114 @@ def range_warning(
     )
 
 
+def rate_limit(
+    record: dict,
+    explicit: float | None,
+    configured: float,
+    range_counts: float,
+) -> tuple[float, str, str | None]:
+    """(rate limit in counts/s, where it comes from, a warning line or None).
+
+    ``explicit`` (``--max-counts-per-s``) wins, then ``configured`` (``[compensate]
+    max_counts_per_s``, 0 = not set); ``inf`` means no limit. Otherwise the fastest
+    input move of the fit's recording (fit.json ``max_input_rate_counts_per_s``); a
+    fit.json without it (older files) falls back to :data:`FALLBACK_RANGE_SHARE_PER_S`
+    of the fitted input range per second, with a warning.
+    """
+    for value, source in ((explicit, "--max-counts-per-s"),
+                          (configured or None, "[compensate] max_counts_per_s")):  # fmt: skip
+        if value is not None:
+            if not float(value) > 0:
+                raise CalibError(f"{source} = {value:g}: give a rate > 0 counts/s (inf: no limit)")
+            return float(value), source, None
+    stored = record.get("max_input_rate_counts_per_s")
+    if stored is not None and float(stored) > 0:
+        return (
+            float(stored),
+            "fit.json max_input_rate_counts_per_s (the recording's fastest move)",
+            None,
+        )
+    rate = FALLBACK_RANGE_SHARE_PER_S * range_counts
+    return (
+        rate,
+        "fallback",
+        (
+            f"{record.get('name')}: fit.json has no max_input_rate_counts_per_s (written by an "
+            f"older 'fit'); rate limit {rate:g} counts/s ({FALLBACK_RANGE_SHARE_PER_S:g} of the "
+            "fitted input range per second): re-run 'fit' or give --max-counts-per-s"
+        ),
+    )
+
+
+def _flag_column(per_axis: dict[str, list[list[str]]], prefix: bool) -> list[str]:
+    """The ``flags`` column: the sample's flags joined by ``;`` (``axis:flag`` with two
+    axes), empty when none."""
+    axes = list(per_axis)
+    n = len(per_axis[axes[0]])
+    out = []
+    for i in range(n):
+        names = []
+        for a in axes:
+            names += [f"{a}:{f}" if prefix else f for f in per_axis[a][i]]
+        out.append(";".join(names))
+    return out
+
+
+#: Share of the target's samples with an output step (or a removed spike) above which a
+#: model counts as stepping where the target passes (ranked after the continuous ones)
+STEP_SHARE = 0.005
+
+
+#: Predicted tracking error that ranks a model: its error on the target (its own
+#: prediction) and its held-out fit error, combined in quadrature (deg)
+def _score(pred_rmse: float, holdout: float | None) -> float:
+    h = 0.0 if holdout is None or not np.isfinite(holdout) else float(holdout)
+    return float(np.hypot(pred_rmse, h))
+
+
+def _holdout(rec: dict) -> float | None:
+    for key in ("holdout_metrics", "metrics"):
+        x = (rec.get(key) or {}).get("rmse_deg")
+        if x is not None and np.isfinite(x):
+            return float(x)
+    return None
+
+
+def _invert_axis(fitted, goal, t, lo, hi, rate, v0):
+    return compensate(
+        fitted, goal, t, v_limits=(lo, hi), max_rate=None if not np.isfinite(rate) else rate,
+        quantum=1.0, v_initial=v0,
+    )  # fmt: skip
+
+
+def rank_models(candidates: dict, record: dict) -> list[dict]:
+    """Ranking of the models that can serve this target (best first): models whose
+    output steps where the target passes (more than :data:`STEP_SHARE` of the samples
+    flagged ``output_step`` or ``spike_removed``) after those that stay continuous, then by the predicted tracking
+    error (:func:`_score`: the model's own error on this target and its held-out fit
+    error in quadrature). ``candidates``: kind -> CompensationResult."""
+    rows = []
+    for kind, res in candidates.items():
+        s = res.summary()
+        steps = s["flags"]["output_step"] + s["flags"]["spike_removed"]
+        hold = _holdout(record["models"][kind])
+        rows.append({
+            "model": kind,
+            "predicted_rmse_deg": s["rmse_deg"],
+            "holdout_rmse_deg": hold,
+            "score_deg": _score(s["rmse_deg"], hold),
+            "output_steps": int(steps),
+            "continuous": steps <= STEP_SHARE * s["n_samples"],
+        })  # fmt: skip
+    rows.sort(key=lambda r: (not r["continuous"], r["score_deg"]))
+    for i, r in enumerate(rows):
+        r["rank"] = i + 1
+    return rows
+
+
 def compensate_files(
     fit_paths: Sequence[str | Path],
-    datasets: Sequence[str],
+    datasets: Sequence[str] | None,
     target: str | Path,
     out: str | Path,
     config=None,
@@ -232,40 +410,49 @@ def compensate_files(
     max_counts_per_s: float | None = None,
     start_counts: float | None = None,
     model_file: str | Path | None = None,
+    time_unit_s: float | None = None,
 ) -> dict[str, Any]:
     """Command body of ``i2ris-calib compensate``; returns the compensate.json document.
 
     Parameters
     ----------
     fit_paths : sequence of path
-        fit.json file(s); each dataset is looked up in the one whose axis matches.
-    datasets : sequence of str
-        ``yaw+``, ``yaw-``, ``pitch+``, ``pitch-``: at most one per axis.
+        fit.json file(s), one per axis; each dataset is looked up in the one whose axis
+        matches.
+    datasets : sequence of str or None
+        ``yaw+``, ``yaw-``, ``yaw±``, ``pitch+``, ...: at most one per axis. Empty: per
+        axis of the target with a fit.json, :func:`choose_dataset`.
     target : path
         Target CSV (``time_s``, ``<axis>_deg`` per axis).
     out : path
         COMMANDS.csv to write; compensate.json is written beside it.
     model : str, optional
-        egpi, egpi_c, gpi or diagnosed; default the best held-out model.
+        Force a model kind; default: the best of :func:`rank_models` on this target.
     max_counts_per_s : float, optional
-        Motor rate limit (counts/s).
+        Motor rate limit (counts/s; ``inf``: none); default ``[compensate]
+        max_counts_per_s``, else the fit's fastest input move (:func:`rate_limit`).
     start_counts : float, optional
-        Signed encoder counts before the first target sample (e.g. 0 at rest).
+        Signed encoder counts before the first target sample; default 0 (rest), or the
+        fitted range's nearest end when 0 is outside it. Outside the fitted input range:
+        refused.
     model_file : path, optional
-        final_model.json (``--model diagnosed``).
+        final_model.json (``--model diagnosed``); must match the fit's diagnosed model.
+    time_unit_s : float, optional
+        Seconds per unit of the target's ``time_s`` (default ``[compensate]
+        time_unit_s``, else 1).
     """
+    cc = getattr(config, "compensate", None)
     if model is not None and model not in KINDS:
         raise CalibError(f"--model must be one of {', '.join(KINDS)}, got '{model}'")
     if not fit_paths:
         raise CalibError("give at least one fit.json")
-    if not datasets:
-        raise CalibError("give --dataset (yaw+, yaw-, pitch+ or pitch-)")
+    datasets = [d.replace("+-", "±") for d in (datasets or [])]
     for name in datasets:
         if name not in DATASETS:
             raise CalibError(f"--dataset must be one of {', '.join(DATASETS)}, got '{name}'")
-    axes = [n[:-1] for n in datasets]
-    if len(set(axes)) != len(axes):
-        raise CalibError("give at most one --dataset per axis (the direction of each motor)")
+    unit = time_unit_s if time_unit_s is not None else getattr(cc, "time_unit_s", 1.0)
+    if not (np.isfinite(unit) and unit > 0):
+        raise CalibError(f"--time-unit-s {unit:g}: give seconds per unit of time_s (> 0)")
     out = Path(out)
     if out.suffix.lower() != ".csv":
         raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
@@ -275,11 +462,27 @@ def compensate_files(
         companions=[out.with_name("compensate.json")],
     )
     docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
-    frame = read_target(target, axes)
+    if not datasets:
+        head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns if Path(
+            target).is_file() else []  # fmt: skip
+        present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in map(str.strip, head)]
+        if not present:
+            raise CalibError(
+                f"{target}: no <axis>_deg column for the fit(s) given (axes "
+                f"{', '.join(str(d.get('axis')) for _, d in docs)}); give the target's angle "
+                "column(s) or --dataset"
+            )
+        frame = read_target(target, present, unit)
+        for axis in present:
+            path, doc = next((p, d) for p, d in docs if d.get("axis") == axis)
+            datasets.append(choose_dataset(doc, axis, frame[f"{axis}_deg"].to_numpy(), path))
+    axes = [n[:-1] for n in datasets]
+    if len(set(axes)) != len(axes):
+        raise CalibError("give at most one --dataset per axis (the direction of each motor)")
+    frame = read_target(target, axes, unit)
     t = frame["time_s"].to_numpy()
-    cols: dict[str, Any] = {"time_s": t}
-    axes_doc: dict[str, Any] = {}
-    reach_all = np.ones(t.size, dtype=bool)
+    configured = float(getattr(cc, "max_counts_per_s", 0.0) or 0.0)
+    results = {}
     for name, axis in zip(datasets, axes, strict=True):
         found = [(p, d) for p, d in docs if d.get("axis") == axis]
         if not found:
@@ -289,59 +492,57 @@ def compensate_files(
             )
         path, doc = found[0]
         record = _dataset_record(doc, name, path)
-        kind = model or best_kind(record)
-        fitted = load_model(
-            doc, record, kind, path, None if model_file is None else Path(model_file)
-        )
         sign = -1.0 if name.endswith("-") else 1.0
         lo, hi = (float(x) for x in record["input_range_counts"])
-        lo = min(lo, 0.0)
-        v0 = None
-        if start_counts is not None:
-            v0 = max(sign * float(start_counts), 0.0)
-        try:
-            res = compensate(
-                fitted,
-                sign * frame[f"{axis}_deg"].to_numpy(),
-                t,
-                v_limits=(lo, hi),
-                max_rate=max_counts_per_s,
-                quantum=1.0,
-                v_initial=None if v0 is None else float(np.clip(v0, lo, hi)),
-            )
-        except CalibError as exc:
-            raise CalibError(f"{target} [{name}]: {exc}") from None
-        enc = np.rint(sign * res.commands).astype(np.int64)
-        cols[f"enc_{axis}"] = enc
-        cols[f"predicted_{axis}_deg"] = sign * res.predicted_deg
-        reach_all &= res.reachable
-        if len(datasets) > 1:
-            cols[f"reachable_{axis}"] = res.reachable.astype(int)
-        summ = res.summary()
-        bad = np.flatnonzero(~res.reachable)
-        reach = reachable_angles(fitted, (lo, hi), sign)
-        warn = range_warning(
-            name, kind, frame[f"{axis}_deg"].to_numpy(), reach, res.tol_deg,
-            float(res.reachable.mean()),
-        )  # fmt: skip
-        axes_doc[axis] = {
-            "dataset": name,
-            "fit_json": str(path),
-            "model": kind,
-            "params": record["models"][kind]["params"],
-            "input_range_counts": [lo, hi],
-            "max_counts_per_s": max_counts_per_s,
-            "start_counts": start_counts,
-            "delay_s": res.delay_s,
-            "tol_deg": res.tol_deg,
-            **summ,
-            "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
-            "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
-            "reachable_deg": list(reach),
-            "warnings": [] if warn is None else [warn],
-        }
-    cols["reachable"] = reach_all.astype(int)
-    table = pd.DataFrame(cols)
+        if not name.endswith("±"):
+            lo = min(lo, 0.0)
+        rate, rate_source, rate_warn = rate_limit(record, max_counts_per_s, configured, hi - lo)
+        if start_counts is None:
+            v0, start_source = float(np.clip(0.0, lo, hi)), "default (rest at 0)"
+            if v0 != 0.0:
+                start_source = "default (the fitted range's end nearest 0)"
+        else:
+            v0, start_source = sign * float(start_counts), "--start-counts"
+            if not lo <= v0 <= hi:
+                rng = sorted((sign * lo + 0.0, sign * hi + 0.0))
+                raise CalibError(
+                    f"--start-counts {start_counts:g} is outside the {name} fit's input range "
+                    f"{rng[0]:g}..{rng[1]:g} counts ({path}); give the encoder counts the "
+                    "motor rests at, inside that range"
+                )
+        goal = sign * frame[f"{axis}_deg"].to_numpy()
+        mf = None if model_file is None else Path(model_file)
+        if model is not None:
+            kinds = [model]
+        else:
+            kinds = [k for k in record.get("models", {}) if k in INVERSE_KINDS]
+            if "diagnosed" in record.get("models", {}) and mf is not None:
+                kinds.append("diagnosed")
+            if not kinds:
+                raise CalibError(
+                    f"{path} [{name}]: none of its models ({', '.join(record.get('models', {}))}) "
+                    f"can be inverted; compensate inverts {', '.join(INVERSE_KINDS)} and "
+                    "diagnosed models (not yet the two-tendon agpi: use its gpi)"
+                )
+        candidates, models = {}, {}
+        for kind in kinds:
+            fitted = load_model(doc, record, kind, path, mf)
+            try:
+                candidates[kind] = _invert_axis(fitted, goal, t, lo, hi, rate, v0)
+            except CalibError as exc:
+                raise CalibError(f"{target} [{name}] {kind}: {exc}") from None
+            models[kind] = fitted
+        ranking = rank_models(candidates, record)
+        kind = model or ranking[0]["model"]
+        for r in ranking:
+            r["chosen"] = r["model"] == kind
+        results[axis] = {
+            "name": name, "path": path, "record": record, "kind": kind, "sign": sign,
+            "res": candidates[kind], "model": models[kind], "lo": lo, "hi": hi, "rate": rate,
+            "rate_source": rate_source, "rate_warn": rate_warn, "v0": v0,
+            "start_source": start_source, "ranking": ranking,
+        }  # fmt: skip
+    table, axes_doc = _outputs(results, frame, t, target, unit)
     inputs = [*(p for p, _ in docs), Path(target), *([Path(model_file)] if model_file else [])]
     doc_out = {
         "schema": SCHEMA,
@@ -356,3 +557,92 @@ def compensate_files(
         with atomic_path(out) as tmp_csv:
             table.to_csv(tmp_csv, index=False, float_format="%.10g")
     return doc_out
+
+
+def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: float):
+    """(COMMANDS.csv table, compensate.json ``axes``): every axis's entry ramp padded
+    to the longest (holding its start counts before its own ramp)."""
+    n_entry = max(a["res"].entry_commands.size for a in results.values())
+    dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
+    t_all = np.concatenate((t[0] - dt0 * np.arange(n_entry, 0, -1), t))
+    cols: dict[str, Any] = {"time_s": t_all}
+    reach_all = np.ones(t_all.size, dtype=bool)
+    flags_by_axis: dict[str, list[list[str]]] = {}
+    axes_doc: dict[str, Any] = {}
+    preds, reach_cols = {}, {}
+    for axis, a in results.items():
+        res, sign = a["res"], a["sign"]
+        ramp = res.entry_commands
+        seq = np.concatenate((np.full(n_entry - ramp.size, a["v0"]), ramp, res.commands))
+        with deferred():
+            y = forward(a["model"], seq, t_all, a["v0"])
+        cols[f"enc_{axis}"] = np.rint(sign * seq).astype(np.int64)
+        preds[f"predicted_{axis}_deg"] = sign * y
+        ok = np.concatenate((np.ones(n_entry, dtype=bool), res.reachable))
+        reach_all &= ok
+        reach_cols[f"reachable_{axis}"] = ok.astype(int)
+        per = [["entry"] for _ in range(n_entry)]
+        fl = res.flags
+        for i in range(t.size):
+            per.append([f for f in FLAG_NAMES if fl[f][i]])
+        flags_by_axis[axis] = per
+        summ = res.summary()
+        bad = np.flatnonzero(~res.reachable)
+        reach = reachable_angles(a["model"], (a["lo"], a["hi"]), sign)
+        warn = range_warning(
+            a["name"], a["kind"], frame[f"{axis}_deg"].to_numpy(), reach, res.tol_deg,
+            float(res.reachable.mean()),
+        )  # fmt: skip
+        rec = a["record"]
+        axes_doc[axis] = {
+            "dataset": a["name"],
+            "fit_json": str(a["path"]),
+            "model": a["kind"],
+            "model_choice": "--model" if len(a["ranking"]) == 1 else "ranking",
+            "ranking": a["ranking"],
+            "params": rec["models"][a["kind"]]["params"],
+            "input_range_counts": [a["lo"], a["hi"]],
+            "max_counts_per_s": a["rate"] if np.isfinite(a["rate"]) else None,
+            "max_counts_per_s_source": a["rate_source"],
+            "recording_max_rate_counts_per_s": rec.get("max_input_rate_counts_per_s"),
+            "start_counts": float(sign * a["v0"]) + 0.0,
+            "start_counts_source": a["start_source"],
+            "time_unit_s": unit,
+            "delay_s": res.delay_s,
+            "tol_deg": res.tol_deg,
+            **summ,
+            "n_entry": int(ramp.size),
+            "entry_s": float(ramp.size * dt0),
+            "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
+            "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
+            "reachable_deg": list(reach),
+            "warnings": [w for w in (a["rate_warn"], warn) if w is not None],
+        }
+    cols.update(preds)
+    if len(results) > 1:
+        cols.update(reach_cols)
+    cols["reachable"] = reach_all.astype(int)
+    cols["flags"] = _flag_column(flags_by_axis, prefix=len(results) > 1)
+    return pd.DataFrame(cols), axes_doc
+
+
+def summary_lines(doc: dict) -> list[str]:
+    """The terminal summary of a compensate.json document: per axis the model (and
+    why), the predicted error, every flag counted, the rate limit and where it comes
+    from."""
+    lines = []
+    for rec in doc["axes"].values():
+        fl = ", ".join(f"{k} {v}" for k, v in rec["flags"].items() if v) or "none"
+        rate = rec["max_counts_per_s"]
+        rate_txt = "no rate limit" if rate is None else (
+            f"rate limit {rate:g} counts/s ({rec['max_counts_per_s_source']}; commands "
+            f"reach {rec['max_command_rate_per_s']:.4g})"
+        )  # fmt: skip
+        why = "forced by --model" if rec["model_choice"] == "--model" else "best predicted tracking"
+        lines.append(
+            f"{rec['dataset']} ({rec['model']}, {why}): predicted RMSE {rec['rmse_deg']:.4f} "
+            f"deg, max {rec['max_abs_err_deg']:.4f} deg, {rec['n_unreachable']} of "
+            f"{rec['n_samples']} samples unreachable; flags: {fl}; {rate_txt}; entry "
+            f"{rec['n_entry']} samples from {rec['start_counts']:g} counts"
+        )
+    return lines

@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
+from i2ris_calib.compensation.safety import max_input_rate
 from i2ris_calib.data.coupling import MotorsTogether, motors_together
 from i2ris_calib.data.dataset import Dataset, other_axis
 from i2ris_calib.data.excursions import Excursions, excursions
@@ -139,6 +140,8 @@ def fit_document(
                     "derived": list(d.bands.derived),
                 },
                 "input_range_counts": [float(d.v.min()), float(d.v.max())],
+                # the fastest input move: compensate's default rate limit
+                "max_input_rate_counts_per_s": max_input_rate(d.v, d.time_s),
                 "models": {k: model_record(results[k], k, results[k].model, d.v) for k in kinds},
             }
         )

@@ -207,6 +207,11 @@ def _check_dataset(at: _Where, d: dict, key: str, complete: bool) -> None:
     for n in ("n_samples", "n_angles"):
         at.number(d, n, f"{key}.{n}", label)
     _check_range(at, d, f"{key}.input_range_counts", label, complete)
+    if d.get("max_input_rate_counts_per_s") is not None:  # absent/null in older files
+        at.number(
+            d, "max_input_rate_counts_per_s", f"{key}.max_input_rate_counts_per_s", label,
+            finite=True, minimum=0.0,
+        )  # fmt: skip
     for kind, rec in models.items():
         _check_model(at, kind, rec, f"{key}.models.{kind}", label, complete)
 

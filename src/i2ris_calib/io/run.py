@@ -307,14 +307,11 @@ def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineC
     """
     cc = config.compensate
     datasets = list(cc.datasets)
-    if not datasets:
-        head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns
-        for axis in AXES:
-            if f"{axis}_deg" in head:
-                col = pd.read_csv(target, usecols=[f"{axis}_deg"], skipinitialspace=True)
-                med = float(pd.to_numeric(col.iloc[:, 0], errors="coerce").median())
-                datasets.append(f"{axis}{'+' if not med < 0 else '-'}")
-    fits = [run_dir / "fit" / d[:-1] / "fit.json" for d in datasets]
+    axes = [d[:-1] for d in datasets]
+    if not datasets:  # every axis of the target; compensate chooses the dataset
+        head = [str(c).strip() for c in pd.read_csv(target, nrows=0).columns]
+        axes = [axis for axis in AXES if f"{axis}_deg" in head]
+    fits = [run_dir / "fit" / a / "fit.json" for a in axes]
     missing = [str(f) for f in fits if not f.is_file()]
     if missing:
         raise CalibError(
@@ -323,12 +320,13 @@ def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineC
         )
     compensate_files(
         fits,
-        datasets,
+        datasets or None,
         target,
         out_dir / "commands.csv",
         config=config,
         model=cc.model or None,
         max_counts_per_s=cc.max_counts_per_s or None,
+        time_unit_s=cc.time_unit_s,
     )
 
     write_bytes(out_dir / "target.csv", target.read_bytes())  # the target as used, for the report

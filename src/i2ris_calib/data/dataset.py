@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import i2ris_calib._display as _display
 from i2ris_calib._validate import (
     as_1d_bool,
     as_1d_float,
@@ -178,6 +179,42 @@ class Dataset:
     def n_samples(self) -> int:
         """Samples in the recording (every one drives the model)."""
         return int(self.v.size)
+
+    def _display_facts(self) -> list[tuple[str, str]]:
+        """(label, text) of what :meth:`__repr__` and :meth:`_repr_html_` show (counts
+        and ranges only: cheap on any recording)."""
+        v = np.asarray(self.v, dtype=float)
+        th = np.asarray(self.theta_deg, dtype=float)
+        fitted = int(np.sum(np.isfinite(th) & ~np.asarray(self.holdout, bool)))
+        held = int(np.sum(np.isfinite(th) & np.asarray(self.holdout, bool)))
+        num = _display.num
+        measured = th[np.isfinite(th)]
+        angle = f"{num(measured.min())}..{num(measured.max())} deg" if measured.size else "none"
+        t = self.time_s
+        facts = [
+            ("samples", f"{v.size} ({fitted} fitted, {held} held out)"),
+            ("input", f"{num(v.min())}..{num(v.max())}" if v.size else "empty"),
+            ("angle", angle),
+        ]
+        if t is not None and np.size(t) > 1:
+            facts.append(("duration", f"{num(float(t[-1]) - float(t[0]))} s"))
+        if self.source:
+            facts.append(("source", os.path.basename(str(self.source))))
+        return facts
+
+    def __repr__(self) -> str:
+        facts = dict(self._display_facts())
+        text = (
+            f"<Dataset {self.name}: {facts['samples'].replace(' (', ' samples (', 1)}, "
+            f"input {facts['input']}, "
+            f"angle {facts['angle']}" + (f", {facts['source']}" if "source" in facts else "") + ">"
+        )
+        return _display.clip(text)
+
+    def _repr_html_(self) -> str:
+        """Notebook display: samples, input and angle ranges, duration, source."""
+        title = f"<b>Dataset</b> {_display.esc(self.name)}"
+        return _display.table(("", ""), self._display_facts(), title)
 
 
 _ANGLE_HINT = "mark an unmeasured angle with NaN, never inf"

@@ -27,9 +27,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+import i2ris_calib._display as _display
 from i2ris_calib._validate import as_real, check_model, check_signals, describe
 from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.results import decode_model, encode_model, register_model_codec
 from i2ris_calib.hysteresis.model import Model, NamedParameters, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
 
@@ -626,6 +628,15 @@ class EffectModel(NamedParameters):
             effect_values=tuple(float(x) for x in values[m:]),
         )
 
+    def __repr__(self) -> str:
+        # the effects' values first (what a diagnosis added), then the base model's
+        params = self.parameters
+        m = len(base_of(self).parameters)
+        n_fixed = sum(bool(p.fixed) for p in params)
+        head = f"<EffectModel '{self.name}' ({len(params)} parameters, {n_fixed} fixed): "
+        order = (*params[m:], *params[:m])
+        return _display.name_values(((p.name, p.value) for p in order), head)
+
     def nested(self) -> tuple[Model, np.ndarray]:
         """The model this one extends and the values that switch the extension off.
 
@@ -749,3 +760,39 @@ def build_model(base: Model, effects: Mapping[str, Mapping[str, float]]) -> Mode
     for name, values in effects.items():
         model = add_effect(model, name, values)
     return model
+
+
+# A saved fit (FitResult.save) of an extended model: the base model's record, then each
+# effect innermost first with its label, values and fixed flags (values exact, not
+# checked against the effect's bounds: a fit may end outside them).
+def _encode_effects(model: Model) -> dict | None:
+    if not isinstance(model, EffectModel):
+        return None
+    stack = []
+    while isinstance(model, EffectModel):
+        stack.append(
+            {
+                "name": model.effect.name,
+                "label": model.label,
+                "values": [float(x) for x in model.effect_values],
+                "fixed": [bool(f) for f in model.fixed],
+            }
+        )
+        model = model.inner
+    return {"base": encode_model(model), "effects": stack[::-1]}
+
+
+def _decode_effects(rec: Mapping) -> Model:
+    model = decode_model(rec["base"])
+    for e in rec["effects"]:
+        model = EffectModel(
+            inner=model,
+            effect=get_effect(e["name"]),
+            effect_values=tuple(float(x) for x in e["values"]),
+            label=str(e["label"]),
+            fixed=tuple(bool(f) for f in e["fixed"]),
+        )
+    return model
+
+
+register_model_codec("effects", _encode_effects, _decode_effects)

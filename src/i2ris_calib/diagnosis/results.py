@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import i2ris_calib._display as _display
 from i2ris_calib.diagnosis.effects import effects_of
 from i2ris_calib.hysteresis.model import Model
 
@@ -294,6 +295,38 @@ class Diagnosis:
         """Effect names in the order they were added (empty if nothing is missing)."""
         return [s.effect for s in self.steps]
 
+    def __repr__(self) -> str:
+        named = ", ".join(self.named_effects) or "nothing"
+        b, f = self.baseline.holdout_rmse_deg, self.final.holdout_rmse_deg
+        text = (
+            f"<Diagnosis {self.start_model.name}: named {named}; held-out RMSE "
+            f"{_display.num(b)} -> {_display.num(f)} deg"
+            + (f"; {len(self.not_excluded)} not excluded" if self.not_excluded else "")
+            + ">"
+        )
+        return _display.clip(text)
+
+    def _repr_html_(self) -> str:
+        """Notebook display: each added effect with the held-out RMSE before and after
+        and its evidence, then what the data cannot exclude."""
+        rows = [
+            (s.effect, s.before.holdout_rmse_deg, s.after.holdout_rmse_deg,
+             s.comparison.z, s.comparison.p_value, s.comparison.delta_bic)
+            for s in self.steps
+        ]  # fmt: skip
+        title = (
+            f"<b>Diagnosis</b> from {_display.esc(self.start_model.name)}: final model "
+            f"{_display.esc(self.final_model.name)}, held-out RMSE "
+            f"{_display.num(self.baseline.holdout_rmse_deg)} -> "
+            f"{_display.num(self.final.holdout_rmse_deg)} deg"
+        )
+        header = ("effect", "held-out RMSE before", "after", "z", "p", "delta BIC")
+        out = _display.table(header, rows, title) if rows else f"<p>{title}; no effect named</p>"
+        if self.not_excluded:
+            names = ", ".join(a.effect for a in self.not_excluded)
+            out += f"<p>not excluded by the held-out cycles: {_display.esc(names)}</p>"
+        return out
+
 
 @dataclass(frozen=True)
 class AutoDiagnosis:
@@ -327,6 +360,20 @@ class AutoDiagnosis:
     z: float
     sentence: str
     other_excluded: bool = False
+
+    def __repr__(self) -> str:
+        d = self.diagnosis
+        named = ", ".join(d.named_effects) or "nothing"
+        text = (
+            f"<AutoDiagnosis: start {self.start}, named {named}; held-out RMSE "
+            f"{_display.num(d.final.holdout_rmse_deg)} deg; paths {', '.join(self.paths)} "
+            f"{'agree' if self.agree else 'disagree'}>"
+        )
+        return _display.clip(text)
+
+    def _repr_html_(self) -> str:
+        """Notebook display: the reconciling sentence and the answer's diagnosis."""
+        return f"<p>{_display.esc(self.sentence)}</p>" + self.diagnosis._repr_html_()
 
     @property
     def not_excluded(self) -> tuple[tuple[str, Alternative], ...]:

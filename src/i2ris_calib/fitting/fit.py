@@ -22,7 +22,9 @@ from __future__ import annotations
 
 import functools
 import html
+import inspect
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -38,7 +40,9 @@ from i2ris_calib._validate import (
     describe,
 )
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting import results
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
+from i2ris_calib.fitting.results import ParamTable
 from i2ris_calib.hysteresis.model import Model, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
 
@@ -282,6 +286,9 @@ class FitResult:
     initial_state : InitialState or None
         The operator state estimated at the first sample of a recording that does
         not start at rest (None: it starts at rest, the model's own relaxed start).
+    start : dict
+        Value of every parameter in the first start vector (the model's own values
+        unless ``starts`` were given; empty when not recorded).
     """
 
     model: Model
@@ -303,6 +310,7 @@ class FitResult:
     notes: tuple[FitNote, ...] = ()
     stderr_reasons: dict[str, str] = field(default_factory=dict)
     initial_state: InitialState | None = None
+    start: dict[str, float] = field(default_factory=dict)
 
     def predict(self, signals: Signals | np.ndarray) -> np.ndarray:
         """Fitted model output (deg) for ``signals``."""
@@ -463,22 +471,82 @@ class FitResult:
             f"{'converged' if self.converged else 'NOT converged'}>"
         )
 
-    def _repr_html_(self) -> str:
-        """Notebook display: the statistics and the parameter table."""
-        rows = "".join(
-            f"<tr><td>{html.escape(p.name)}</td><td>{self.params[p.name]:.6g}</td>"
-            f"<td>{'fixed' if p.name not in self.free else format(self.stderr.get(p.name, float('nan')), '.3g')}</td>"
-            f"<td>{html.escape(p.unit)}</td><td>{html.escape(p.doc)}</td></tr>"
-            for p in self.model.parameters
+    # ---- the table, the figure and the file (fitting/results.py) ----
+
+    @property
+    def parameters(self) -> ParamTable:
+        """Every parameter as a :class:`~i2ris_calib.fitting.results.FittedParameter`
+        (value, stderr, start, bounds, fixed, unit, meaning, why a stderr is missing)
+        in a frozen mapping by name, with ``correlations`` (a labelled matrix) and
+        ``to_frame()``. Its values and standard errors are :attr:`params` and
+        :attr:`stderr`."""
+        return results.param_table(self)
+
+    def plot(self, signals=None, theta_deg=None, *, ax=None, band=True, sigma=2.0):
+        """Figure of the fit: angle vs input (measured, held out, model), angle vs time
+        with the prediction band (:meth:`eval_uncertainty`), residuals vs time.
+
+        Parameters
+        ----------
+        signals : Dataset, Signals or ndarray, shape (n,)
+            The data: a Dataset gives the input, times, the measured angle and its
+            held-out cycles. With Signals or a bare input, ``theta_deg`` is the measured
+            angle (default: the fit's own, ``predict - residuals``, when the input is
+            the fitted one).
+        theta_deg : ndarray, shape (n,), optional
+            Measured angle (deg).
+        ax : sequence of three matplotlib Axes, optional
+            Where to draw (loop, time, residuals); default a new figure.
+        band : bool
+            Draw the ``sigma`` band of the model curve from the parameter covariance.
+        sigma : float
+            Band width in standard errors (or a two-sided probability below 1).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        return results.plot_fit(self, signals, theta_deg, ax=ax, band=band, sigma=sigma)
+
+    def save(self, path) -> Path:
+        """Write the fit to ``path`` as JSON (format ``i2ris-calib.fit/1``): the model's
+        kind, settings and every parameter's declaration and value, standard errors,
+        start, covariance, residuals, metrics, notes and message. A file already at
+        ``path`` is replaced (written beside it and renamed, never half-written).
+        :meth:`load` rebuilds a result whose ``predict`` is this one's to the last bit.
+        A model with diagnosed effects is saved too; loading it needs the effect
+        catalogue imported (``from i2ris_calib import add_effect``). Returns the path."""
+        return results.write_record(path, results.fit_record(self))
+
+    @classmethod
+    def load(cls, path) -> FitResult:
+        """The FitResult :meth:`save` wrote to ``path``; CalibError naming the file when
+        it is not one."""
+        kw = results.fit_fields(results.read_record(path), str(path))
+        state = kw.pop("initial_state")
+        return cls(
+            **kw
+            | {
+                "notes": tuple(
+                    FitNote(n["code"], n["text"], tuple(n.get("params", ()))) for n in kw["notes"]
+                ),
+                "initial_state": None if state is None else InitialState(**state),
+            }
         )
+
+    def _repr_html_(self) -> str:
+        """Notebook display: the statistics, the parameter table (value, stderr, start,
+        bounds, unit, meaning) and the correlations above 0.9."""
         m, h = self.metrics, self.holdout_metrics
+        cor = [f"C({a}, {b}) = {c:+.3f}" for (a, b), c in sorted(self.correlations.items(), key=lambda kc: -abs(kc[1])) if abs(c) >= 0.9]  # fmt: skip
         return (
             f"<b>FitResult {html.escape(self.model.name)}</b>: "
             f"{'converged' if self.converged else '<b>NOT converged</b>'}; RMSE "
             f"{m.rmse_deg:.4g} deg, held-out {h.rmse_deg:.4g} deg, max {m.max_abs_err_deg:.4g} deg, "
-            f"reduced chi-square {self.redchi:.4g}, AIC {self.aic:.5g}, BIC {self.bic:.5g}"
-            "<table><tr><th>name</th><th>value</th><th>stderr</th><th>unit</th><th>meaning</th></tr>"
-            f"{rows}</table>"
+            f"reduced chi-square {self.redchi:.4g}, AIC {self.aic:.5g}, BIC {self.bic:.5g}, "
+            f"{self.n_samples} samples"
+            + self.parameters._repr_html_()
+            + (f"<p>correlations: {html.escape('; '.join(cor))}</p>" if cor else "")
         )
 
 
@@ -757,7 +825,12 @@ def fit_model(*args, **kwargs) -> FitResult:
     # machine OpenBLAS threads made scipy's trf 7x slower (SVD of a 25k x 8 Jacobian:
     # 66 ms instead of 2 ms per iteration). The docstring is _fit_model's.
     with threadpool_limits(limits=1, user_api="blas"):
-        return _fit_model(*args, **kwargs)
+        res = _fit_model(*args, **kwargs)
+    # the first start, for FitResult.parameters (the model's values unless starts given)
+    bound = inspect.signature(_fit_model).bind(*args, **kwargs).arguments
+    names = [p.name for p in bound["model"].parameters]
+    x0 = bound.get("starts") or [[p.value for p in bound["model"].parameters]]
+    return replace(res, start=dict(zip(names, map(float, x0[0]), strict=True)))
 
 
 def _fit_model(

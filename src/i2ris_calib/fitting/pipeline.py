@@ -329,9 +329,11 @@ def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = No
         else res.covariance
     )
     base = res.model if model is None else model
+    start = {k: float(x * factor.get(unit.get(k, ""), 1.0)) for k, x in res.start.items()}
     return replace(
-        res, params=params, stderr=stderr, covariance=cov, model=base.with_values(params)
-    )
+        res, params=params, stderr=stderr, covariance=cov, model=base.with_values(params),
+        start=start,
+    )  # fmt: skip
 
 
 def fit_dataset(

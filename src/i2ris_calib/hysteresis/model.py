@@ -15,6 +15,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+import i2ris_calib._display as _display
+
 
 @dataclass(frozen=True)
 class Parameter:
@@ -64,6 +66,33 @@ class NamedParameters:
     def value_dict(self) -> dict[str, float]:
         """``{name: value}`` of the current parameters."""
         return {p.name: float(p.value) for p in self.parameters}
+
+    # Display: one line (name, parameter values) and, in a notebook, a table of the
+    # declared parameters. A dataclass subclass would get a generated repr (a dump of
+    # every field, 1-2k characters): every subclass keeps this one unless it defines
+    # its own.
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        for name in ("__repr__", "_repr_html_"):
+            if name not in cls.__dict__:
+                setattr(cls, name, getattr(NamedParameters, name))
+
+    def __repr__(self) -> str:
+        params = self.parameters
+        n_fixed = sum(bool(p.fixed) for p in params)
+        head = f"<{type(self).__name__} '{self.name}' ({len(params)} parameters, {n_fixed} fixed): "
+        return _display.name_values(((p.name, p.value) for p in params), head)
+
+    def _repr_html_(self) -> str:
+        """Notebook display: every declared parameter (value, bounds, fixed, unit, meaning)."""
+        rows = [
+            (p.name, float(p.value), float(p.lower), float(p.upper), "yes" if p.fixed else "",
+             p.unit, p.doc)
+            for p in self.parameters
+        ]  # fmt: skip
+        title = f"<b>{_display.esc(type(self).__name__)}</b> {_display.esc(self.name)}"
+        header = ("name", "value", "lower", "upper", "fixed", "unit", "meaning")
+        return _display.table(header, rows, title)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,623 @@
+"""What a scientist expects of a fit: the parameter table, correlations, a figure, a file.
+
+* :class:`ParamTable` (``FitResult.parameters``): a frozen mapping name ->
+  :class:`FittedParameter` (value, standard error, start, bounds, fixed, unit,
+  meaning, why a standard error is missing), with the :class:`Correlations` of the
+  parameters the covariance covers and a DataFrame view (``to_frame()``), as lmfit's
+  ``Parameters``.
+* :func:`plot_fit` (``FitResult.plot``): angle vs input and vs time with the prediction
+  band (``FitResult.eval_uncertainty``), and the residuals, as lmfit's
+  ``ModelResult.plot``.
+* :func:`fit_record` / :func:`fit_fields` (``FitResult.save`` / ``FitResult.load``): a
+  fit as strict JSON (format ``i2ris-calib.fit/1``): the model's kind, settings and
+  every parameter's declaration and value, the standard errors, covariance, residuals,
+  metrics and messages. Loading rebuilds the same model, so ``predict`` gives the
+  saved fit's output to the last bit.
+
+Models are written by *codecs*: the registry kinds (:mod:`i2ris_calib.hysteresis.registry`)
+and the general EGPI here; models extended by diagnosed effects by the codec
+:mod:`i2ris_calib.diagnosis.effects` registers (:func:`register_model_codec`) when it is
+imported (``from i2ris_calib import add_effect`` does).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import i2ris_calib._display as _display
+from i2ris_calib import __version__
+from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.metrics import Metrics
+from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.models import EGPIModel, egpi_model
+from i2ris_calib.hysteresis.registry import kind_of, model_for_kind
+
+#: The format of a saved fit (``FitResult.save``).
+SCHEMA = "i2ris-calib.fit/1"
+
+
+# ----------------------------------------------------------------------- the table
+
+
+@dataclass(frozen=True)
+class FittedParameter:
+    """One parameter of a fit.
+
+    Attributes
+    ----------
+    name : str
+    value : float
+        Fitted value (the held value of a fixed parameter).
+    stderr : float
+        Standard error (0 for a fixed parameter; NaN: see ``stderr_reason``).
+    start : float
+        Value of the first start vector of the fit (the model's own value unless the
+        caller gave starts); NaN when not recorded (a result from an older file).
+    lower, upper : float
+        Declared bounds.
+    fixed : bool
+        Held at ``value`` during the fit.
+    unit, meaning : str
+        From the model's declaration.
+    stderr_reason : str
+        Why ``stderr`` is NaN ("" when it is not).
+    """
+
+    name: str
+    value: float
+    stderr: float
+    start: float
+    lower: float
+    upper: float
+    fixed: bool
+    unit: str = ""
+    meaning: str = ""
+    stderr_reason: str = ""
+
+    @property
+    def rel_stderr(self) -> float:
+        """``stderr / |value|`` (NaN for a zero value)."""
+        return self.stderr / abs(self.value) if self.value else float("nan")
+
+    def __repr__(self) -> str:
+        se = "(fixed)" if self.fixed else f"+/- {_display.num(self.stderr, 3)}"
+        unit = f" {self.unit}" if self.unit and self.unit != "1" else ""
+        return f"<FittedParameter {self.name} = {self.value:.6g} {se}{unit}>"
+
+
+class Correlations:
+    """Correlation matrix of the fitted parameters the covariance covers (free, with a
+    finite positive variance): symmetric, unit diagonal, labelled by ``names``.
+
+    ``corr["a1", "a2"]`` is one coefficient; ``to_frame()`` the labelled DataFrame;
+    ``pairs(min_abs)`` the off-diagonal ones, largest first.
+    """
+
+    __slots__ = ("names", "matrix")
+
+    def __init__(self, names: Sequence[str], matrix: np.ndarray):
+        m = np.array(matrix, dtype=float)
+        m.flags.writeable = False
+        object.__setattr__(self, "names", tuple(names))
+        object.__setattr__(self, "matrix", m)
+
+    def __setattr__(self, name, value):
+        raise AttributeError("Correlations is immutable")
+
+    def __getitem__(self, key: tuple[str, str]) -> float:
+        a, b = key
+        try:
+            return float(self.matrix[self.names.index(a), self.names.index(b)])
+        except ValueError:
+            raise KeyError(
+                f"{key!r}: correlations cover {', '.join(self.names) or 'no parameter'}"
+            ) from None
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def pairs(self, min_abs: float = 0.0) -> list[tuple[tuple[str, str], float]]:
+        """``((a, b), C)`` of every pair with ``|C| >= min_abs``, largest ``|C|`` first."""
+        out = [
+            ((a, b), float(self.matrix[i, j]))
+            for i, a in enumerate(self.names)
+            for j, b in enumerate(self.names)
+            if j > i and abs(self.matrix[i, j]) >= min_abs
+        ]
+        return sorted(out, key=lambda kc: -abs(kc[1]))
+
+    def to_frame(self):
+        """The matrix as a pandas DataFrame indexed and labelled by parameter name."""
+        import pandas as pd
+
+        return pd.DataFrame(np.array(self.matrix), index=list(self.names), columns=list(self.names))
+
+    def __repr__(self) -> str:
+        top = self.pairs()[:3]
+        text = ", ".join(f"C({a}, {b}) = {c:+.3f}" for (a, b), c in top)
+        return _display.clip(
+            f"<Correlations of {len(self.names)} parameters"
+            + (f"; largest {text}" if text else "")
+            + ">"
+        )
+
+    def _repr_html_(self) -> str:
+        rows = [
+            (a, *(float(x) for x in row)) for a, row in zip(self.names, self.matrix, strict=True)
+        ]
+        return _display.table(("", *self.names), rows, "<b>Correlations</b>")
+
+
+class ParamTable(Mapping):
+    """The parameters of a fit: a frozen mapping name -> :class:`FittedParameter`, in
+    model order.
+
+    ``table["a1"].stderr``, ``table.value_dict()`` (the same as ``FitResult.params``),
+    ``table.stderr_dict()`` (``FitResult.stderr``), ``table.correlations``,
+    ``table.covariance`` (every parameter, model order), ``table.to_frame()``.
+    """
+
+    __slots__ = ("_params", "_index", "_cov", "model_name")
+
+    def __init__(self, params: Sequence[FittedParameter], covariance: np.ndarray, model_name=""):
+        cov = np.array(covariance, dtype=float)
+        cov.flags.writeable = False
+        object.__setattr__(self, "_params", tuple(params))
+        object.__setattr__(self, "_index", {p.name: i for i, p in enumerate(self._params)})
+        object.__setattr__(self, "_cov", cov)
+        object.__setattr__(self, "model_name", str(model_name))
+
+    def __setattr__(self, name, value):
+        raise AttributeError("ParamTable is immutable; fit again or use model.with_values")
+
+    def __getitem__(self, name: str) -> FittedParameter:
+        try:
+            return self._params[self._index[name]]
+        except KeyError:
+            import difflib
+
+            close = difflib.get_close_matches(str(name), list(self._index), n=1)
+            hint = f"did you mean '{close[0]}'?" if close else f"valid: {', '.join(self._index)}"
+            raise KeyError(f"no parameter {name!r} ({hint})") from None
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._index)
+
+    def __len__(self) -> int:
+        return len(self._params)
+
+    @property
+    def free(self) -> tuple[str, ...]:
+        """Names of the fitted (not fixed) parameters."""
+        return tuple(p.name for p in self._params if not p.fixed)
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """Covariance of every parameter in model order, shape (p, p) (read-only; zero
+        rows and columns for fixed and profiled ones)."""
+        return self._cov
+
+    def value_dict(self) -> dict[str, float]:
+        """``{name: value}``."""
+        return {p.name: p.value for p in self._params}
+
+    def stderr_dict(self) -> dict[str, float]:
+        """``{name: stderr}``."""
+        return {p.name: p.stderr for p in self._params}
+
+    @property
+    def correlations(self) -> Correlations:
+        """:class:`Correlations` of the free parameters with a finite positive variance."""
+        d = np.diag(self._cov) if self._cov.shape == (len(self), len(self)) else np.zeros(len(self))
+        idx = [
+            i
+            for i, p in enumerate(self._params)
+            if not p.fixed and math.isfinite(p.stderr) and p.stderr > 0 and d[i] > 0
+        ]
+        sd = np.sqrt(d[idx])
+        c = self._cov[np.ix_(idx, idx)] / np.outer(sd, sd)
+        c = 0.5 * (c + c.T)
+        np.fill_diagonal(c, 1.0)
+        return Correlations([self._params[i].name for i in idx], c)
+
+    def to_frame(self):
+        """The table as a pandas DataFrame indexed by name (columns ``value``,
+        ``stderr``, ``start``, ``lower``, ``upper``, ``fixed``, ``unit``, ``meaning``,
+        ``stderr_reason``)."""
+        import pandas as pd
+
+        cols = ("value", "stderr", "start", "lower", "upper", "fixed", "unit", "meaning",
+                "stderr_reason")  # fmt: skip
+        frame = pd.DataFrame(
+            [[getattr(p, c) for c in cols] for p in self._params],
+            index=[p.name for p in self._params],
+            columns=list(cols),
+        )
+        frame.index.name = "name"
+        return frame
+
+    def __repr__(self) -> str:
+        head = f"<ParamTable {self.model_name}: {len(self)} parameters, {len(self.free)} free: "
+        return _display.name_values(((p.name, p.value) for p in self._params), head)
+
+    def _repr_html_(self) -> str:
+        def se(p):
+            if p.fixed:
+                return "fixed"
+            return _display.num(p.stderr, 3) if math.isfinite(p.stderr) else "nan"
+
+        rows = [
+            (p.name, p.value, se(p), p.start, p.lower, p.upper, p.unit, p.meaning)
+            for p in self._params
+        ]
+        header = ("name", "value", "stderr", "start", "lower", "upper", "unit", "meaning")
+        return _display.table(header, rows, f"<b>Parameters</b> {_display.esc(self.model_name)}")
+
+
+def param_table(res) -> ParamTable:
+    """The :class:`ParamTable` of a FitResult ``res`` (its ``params``, ``stderr``,
+    ``start``, ``stderr_reasons`` and covariance with the model's declarations)."""
+    start = getattr(res, "start", {}) or {}
+    rows = [
+        FittedParameter(
+            name=p.name,
+            value=float(res.params.get(p.name, p.value)),
+            stderr=float(res.stderr.get(p.name, float("nan"))),
+            start=float(start.get(p.name, float("nan"))),
+            lower=float(p.lower),
+            upper=float(p.upper),
+            fixed=p.name not in res.free,
+            unit=p.unit,
+            meaning=p.doc,
+            stderr_reason=res.stderr_reasons.get(p.name, ""),
+        )
+        for p in res.model.parameters
+    ]
+    return ParamTable(rows, res.covariance, res.model.name)
+
+
+# ---------------------------------------------------------------------- the figure
+
+
+def _plot_inputs(res, signals, theta_deg):
+    """(signals, measured angle, fitted mask, held-out mask) for :func:`plot_fit`."""
+    from i2ris_calib.data.dataset import Dataset
+
+    if signals is None:
+        signals = res.extra.get("signals")
+        if signals is None:
+            raise CalibError(
+                "plot: this FitResult does not keep its data; pass them, e.g. res.plot(data) "
+                "with the Dataset, or res.plot(signals, theta_deg)"
+            )
+    if isinstance(signals, Dataset):
+        data = signals
+        theta = np.asarray(data.theta_measured_deg if theta_deg is None else theta_deg, float)
+        hold = np.asarray(data.holdout, bool) & np.isfinite(theta)
+        used = np.asarray(data.in_direction, bool) & np.isfinite(theta) & ~hold
+        return data.signals, theta, used, hold
+    s = signals if isinstance(signals, Signals) else Signals(v=np.asarray(signals, dtype=float))
+    n = np.asarray(s.v).size
+    if theta_deg is None:
+        if np.size(res.residuals) != n:
+            raise CalibError(
+                f"plot: {n} input samples but the fit has {np.size(res.residuals)} residuals; "
+                "pass theta_deg (the measured angle) too"
+            )
+        theta = None  # the fitted samples' angle: predicted - residual (set by the caller)
+    else:
+        theta = np.asarray(theta_deg, dtype=float)
+        if theta.shape != (n,):
+            raise CalibError(f"plot: theta_deg has shape {theta.shape}; give one angle per input")
+    used = np.isfinite(theta) if theta is not None else np.isfinite(res.residuals)
+    return s, theta, used, np.zeros(n, bool)
+
+
+def plot_fit(res, signals=None, theta_deg=None, ax=None, band=True, sigma=2.0):
+    """The figure of a fit: angle vs input, angle vs time with the prediction band,
+    residuals vs time. See ``FitResult.plot``."""
+    import matplotlib.pyplot as plt
+
+    s, theta, used, hold = _plot_inputs(res, signals, theta_deg)
+    y = res.predict(s)
+    if theta is None:
+        theta = np.where(np.isfinite(res.residuals), y - np.asarray(res.residuals, float), np.nan)
+    t = np.arange(y.size, dtype=float) if s.t_s is None else np.asarray(s.t_s, dtype=float)
+    t_label = "sample" if s.t_s is None else "time (s)"
+    v = np.asarray(s.v, dtype=float)
+    if ax is None:
+        fig, axes = plt.subplots(3, 1, figsize=(8, 9), constrained_layout=True)
+    else:
+        axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
+        if len(axes) != 3:
+            raise CalibError("plot: ax must be three matplotlib Axes (loop, time, residuals)")
+        fig = axes[0].figure
+    a_loop, a_time, a_res = axes
+    width = res.eval_uncertainty(s, sigma) if band else None
+    name = res.model.name
+    a_loop.plot(v[used], theta[used], ".", ms=2, color="0.6", label="measured (fitted)")
+    if hold.any():
+        a_loop.plot(v[hold], theta[hold], ".", ms=2, color="tab:orange", label="held out")
+    a_loop.plot(v, y, "-", lw=0.8, color="tab:blue", label=name)
+    a_loop.set(xlabel="input", ylabel="angle (deg)", title=f"{name}: angle vs input")
+    a_loop.legend(loc="best", fontsize="small")
+    shown = used | hold
+    a_time.plot(t[shown], theta[shown], ".", ms=2, color="0.6", label="measured")
+    a_time.plot(t, y, "-", lw=0.8, color="tab:blue", label=name)
+    if width is not None:
+        a_time.fill_between(t, y - width, y + width, color="tab:blue", alpha=0.3,
+                            label=f"{_display.num(sigma)}-sigma band")  # fmt: skip
+    a_time.set(xlabel=t_label, ylabel="angle (deg)", title="angle vs time")
+    a_time.legend(loc="best", fontsize="small")
+    r = theta - y
+    a_res.axhline(0.0, color="0.3", lw=0.6)
+    a_res.plot(t[used], r[used], ".", ms=2, color="0.4", label="fitted")
+    if hold.any():
+        a_res.plot(t[hold], r[hold], ".", ms=2, color="tab:orange", label="held out")
+    if width is not None:
+        a_res.fill_between(t, -width, width, color="tab:blue", alpha=0.3, label="band")
+    a_res.set(xlabel=t_label, ylabel="measured - model (deg)", title="residuals")
+    a_res.legend(loc="best", fontsize="small")
+    return fig
+
+
+# ------------------------------------------------------------------- model codecs
+
+#: ``(name, encode)``: ``encode(model)`` -> JSON-ready record, or None when the codec
+#: does not write this model. Tried in order; the first record wins.
+_ENCODERS: list[tuple[str, Callable[[Model], dict | None]]] = []
+#: ``name -> decode(record)`` -> Model.
+_DECODERS: dict[str, Callable[[Mapping], Model]] = {}
+
+
+def register_model_codec(
+    name: str, encode: Callable[[Model], dict | None], decode: Callable[[Mapping], Model]
+) -> None:
+    """Let saved fits carry a further kind of model.
+
+    ``encode(model)`` returns the model's JSON-ready record (or None for a model it does
+    not write); ``decode(record)`` rebuilds the model. Registered codecs are tried before
+    the built-in ones; registering a name again replaces it.
+    """
+    global _ENCODERS
+    _ENCODERS = [(name, encode)] + [(n, e) for n, e in _ENCODERS if n != name]
+    _DECODERS[name] = decode
+
+
+def encode_model(model: Model) -> dict:
+    """JSON-ready record of ``model``: its codec, structure and every parameter's value,
+    bounds and fixed flag (:func:`decode_model` rebuilds it)."""
+    for name, enc in (*_ENCODERS, ("kind", _encode_kind)):
+        rec = enc(model)
+        if rec is not None:
+            return {"codec": name, **rec}
+    raise CalibError(
+        f"cannot save model '{model.name}' ({type(model).__name__}): saved fits carry the "
+        "registry's model kinds, the general EGPI and models extended by catalogue effects"
+    )
+
+
+def decode_model(rec: Mapping) -> Model:
+    """The model :func:`encode_model` wrote."""
+    name = rec.get("codec")
+    if name == "kind":
+        return _decode_kind(rec)
+    if name not in _DECODERS:
+        hint = (
+            " (a model with diagnosed effects: import i2ris_calib.diagnosis.effects first, "
+            "e.g. `from i2ris_calib import add_effect`)"
+            if name == "effects"
+            else ""
+        )
+        raise CalibError(f"saved model: unknown codec {name!r}{hint}")
+    return _DECODERS[name](rec)
+
+
+def declarations(model: Model) -> list[dict]:
+    """Every parameter's ``name``, ``value``, ``lower``, ``upper``, ``fixed``."""
+    return [
+        {"name": p.name, "value": float(p.value), "lower": float(p.lower),
+         "upper": float(p.upper), "fixed": bool(p.fixed)}
+        for p in model.parameters
+    ]  # fmt: skip
+
+
+def declared(model, decl: Sequence[Mapping]):
+    """``model`` (a ParametricModel) with the values, bounds and fixed flags of ``decl``
+    (units and meanings stay the model's); CalibError when the names differ."""
+    names = [d["name"] for d in decl]
+    if list(model.names) != names:
+        raise CalibError(
+            f"saved model: parameters {names} do not match model '{model.name}' "
+            f"({list(model.names)})"
+        )
+    params = tuple(
+        replace(p, value=float(d["value"]), lower=float(d["lower"]), upper=float(d["upper"]),
+                fixed=bool(d["fixed"]))
+        for p, d in zip(model.parameters, decl, strict=True)
+    )  # fmt: skip
+    return replace(model, parameters=params)
+
+
+def _encode_kind(model: Model) -> dict | None:
+    info = kind_of(model)
+    if info is not None and type(model) is info.model_class:
+        rec = {"kind": info.kind, "n": int(model.n), "parameters": declarations(model)}
+        if info.uses_deadband:
+            rec["deadband_counts"] = float(model.deadband_counts)
+        return rec
+    if type(model) is EGPIModel:
+        return {
+            "kind": "egpi_general",
+            "envelopes": [[el.kind, er.kind] for el, er in model.envelopes],
+            "n": int(model.n),
+            "deadband": float(model.deadband),
+            "parameters": declarations(model),
+        }
+    return None
+
+
+def _decode_kind(rec: Mapping) -> Model:
+    decl = rec["parameters"]
+    if rec["kind"] == "egpi_general":
+        values = {d["name"]: float(d["value"]) for d in decl}
+        model = egpi_model(
+            [tuple(e) for e in rec["envelopes"]], values, n=int(rec["n"]),
+            deadband=float(rec["deadband"]),
+        )  # fmt: skip
+    else:
+        extra = (
+            {"deadband_counts": float(rec["deadband_counts"])} if "deadband_counts" in rec else {}
+        )
+        model = model_for_kind(rec["kind"], n=int(rec["n"]), **extra)
+    return declared(model, decl)
+
+
+# ---------------------------------------------------------------------- the file
+
+
+def _jsonable(x: Any) -> Any:
+    """Strict JSON: NaN -> null, +-inf -> "inf"/"-inf", arrays -> lists."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None if math.isnan(x) else ("inf" if x > 0 else "-inf")
+    return x
+
+
+def _number(x: Any) -> float:
+    """Inverse of :func:`_jsonable` for one number."""
+    if x is None:
+        return float("nan")
+    return float(x)
+
+
+def _array(x: Any) -> np.ndarray:
+    if x is None:
+        return np.zeros(0)
+    return np.array(
+        [[_number(v) for v in row] for row in x] if x and isinstance(x[0], list) else
+        [_number(v) for v in x], dtype=float,
+    )  # fmt: skip
+
+
+def fit_record(res) -> dict:
+    """The JSON-ready record of a FitResult (format :data:`SCHEMA`)."""
+    return _jsonable(
+        {
+            "schema": SCHEMA,
+            "written_by": f"i2ris-calib {__version__}",
+            "model": encode_model(res.model),
+            "params": dict(res.params),
+            "stderr": dict(res.stderr),
+            "start": dict(getattr(res, "start", {}) or {}),
+            "stderr_reasons": dict(res.stderr_reasons),
+            "free": list(res.free),
+            "covariance": np.asarray(res.covariance, dtype=float),
+            "residuals": np.asarray(res.residuals, dtype=float),
+            "metrics": res.metrics.as_dict(),
+            "holdout_metrics": res.holdout_metrics.as_dict(),
+            "aic": res.aic,
+            "bic": res.bic,
+            "converged": bool(res.converged),
+            "message": res.message,
+            "nfev": int(res.nfev),
+            "n_samples": int(res.n_samples),
+            "starts_tried": int(res.starts_tried),
+            "outside_bounds": list(res.extra.get("outside_bounds", [])),
+            "notes": [
+                {"code": n.code, "text": n.text, "params": list(n.params)} for n in res.notes
+            ],
+            "initial_state": None if res.initial_state is None else res.initial_state.as_dict(),
+        }
+    )
+
+
+def fit_fields(obj: Mapping, where: str = "fit file") -> dict:
+    """The FitResult fields of a record :func:`fit_record` wrote (``notes`` as dicts,
+    ``initial_state`` a dict or None: the caller builds them); CalibError naming
+    ``where`` for a record of another format or a missing key."""
+    if not isinstance(obj, Mapping) or obj.get("schema") != SCHEMA:
+        got = obj.get("schema") if isinstance(obj, Mapping) else type(obj).__name__
+        raise CalibError(f"{where}: schema is {got!r}, expected '{SCHEMA}' (FitResult.save)")
+    try:
+        model = decode_model(obj["model"])
+
+        def metric(d):
+            return Metrics(
+                **{k: (int(v) if k == "n_samples" else _number(v)) for k, v in d.items()}
+            )
+
+        def numbers(d):
+            return {k: _number(v) for k, v in d.items()}
+
+        return {
+            "model": model,
+            "params": numbers(obj["params"]),
+            "stderr": numbers(obj["stderr"]),
+            "covariance": _array(obj["covariance"]).reshape(len(model.parameters), -1)
+            if obj["covariance"]
+            else np.zeros((0, 0)),
+            "residuals": _array(obj["residuals"]),
+            "metrics": metric(obj["metrics"]),
+            "holdout_metrics": metric(obj["holdout_metrics"]),
+            "aic": _number(obj["aic"]),
+            "bic": _number(obj["bic"]),
+            "converged": bool(obj["converged"]),
+            "message": str(obj["message"]),
+            "nfev": int(obj["nfev"]),
+            "n_samples": int(obj["n_samples"]),
+            "free": tuple(obj["free"]),
+            "starts_tried": int(obj.get("starts_tried", 1)),
+            "extra": {"outside_bounds": list(obj.get("outside_bounds", []))},
+            "notes": list(obj.get("notes", [])),
+            "stderr_reasons": dict(obj.get("stderr_reasons", {})),
+            "initial_state": obj.get("initial_state"),
+            "start": numbers(obj.get("start", {})),
+        }
+    except CalibError as exc:
+        raise CalibError(f"{where}: {exc}") from None
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise CalibError(f"{where}: bad fit record ({type(exc).__name__}: {exc})") from None
+
+
+def write_record(path: str | os.PathLike, record: dict) -> Path:
+    """Write ``record`` as strict JSON to ``path`` (replacing a file there) through a
+    temporary file beside it, so a crash never leaves half a file; returns the path."""
+    final = Path(path)
+    if final.is_dir():
+        raise CalibError(f"{final}: is a folder; give a file name, e.g. {final / 'fit.json'}")
+    text = json.dumps(record, indent=1, allow_nan=False) + "\n"
+    try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, final)
+    except OSError as exc:
+        raise CalibError(f"{final}: cannot write ({exc.strerror or exc})") from None
+    return final
+
+
+def read_record(path: str | os.PathLike) -> dict:
+    """The JSON object in ``path``; CalibError naming the file when unreadable."""
+    p = Path(path)
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise CalibError(f"{p}: cannot read a saved fit ({exc})") from None

@@ -52,6 +52,7 @@ _API = {
     "compensate": "i2ris_calib.compensation",
     "PipelineConfig": "i2ris_calib.config",
     "RunConfig": "i2ris_calib.config",
+    "ColumnsConfig": "i2ris_calib.config",
     "TrackingConfig": "i2ris_calib.tracking.config",
     "SyncConfig": "i2ris_calib.sync.config",
     "DiagnosisConfig": "i2ris_calib.diagnosis.config",
@@ -90,15 +91,20 @@ def _load(name: str):
             checked_fit_config = import_module("i2ris_calib.fitting.pipeline").checked_fit_config
             checked_directions = import_module("i2ris_calib.data.dataset").checked_directions
 
-            def load_synced(path, axis, config=None, directions=None):  # typed in __init__.pyi
-                """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
+            def load_synced(path, axis, config=None, directions=None, columns=None):  # .pyi
+                """Motion-direction datasets of ``axis`` in a synced CSV (whole history);
+                ``columns``: a lab file's column mapping (``ColumnsConfig``, docs/formats.md)."""
                 func = "load_synced"
                 v.check_path(func, "path", path, "a synced CSV", _FRAME_HINT)
                 v.check_choice(func, "axis", axis, ("yaw", "pitch"))
                 config = checked_fit_config(func, config)
                 if directions is not None:
                     directions = checked_directions(func, directions)
-                return obj([path], axis, config, directions)
+                if columns is not None:
+                    from i2ris_calib.config import ColumnsConfig
+
+                    v.check_instance(func, "columns", columns, ColumnsConfig)
+                return obj([path], axis, config, directions, columns=columns)
 
             return load_synced
 

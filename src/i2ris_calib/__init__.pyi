@@ -9,6 +9,7 @@ from typing import Literal
 
 from i2ris_calib.compensation import compensate as compensate
 from i2ris_calib.compensation.config import CompensateConfig as CompensateConfig
+from i2ris_calib.config import ColumnsConfig as ColumnsConfig
 from i2ris_calib.config import PipelineConfig as PipelineConfig
 from i2ris_calib.config import RunConfig as RunConfig
 from i2ris_calib.data.dataset import Dataset as Dataset
@@ -45,8 +46,10 @@ def load_synced(
     axis: Literal["yaw", "pitch"],
     config: FitConfig | None = None,
     directions: Sequence[str] | None = None,
+    columns: ColumnsConfig | None = None,
 ) -> list[Dataset]:
-    """Motion-direction datasets of ``axis`` in a synced CSV (whole history)."""
+    """Motion-direction datasets of ``axis`` in a synced CSV (whole history);
+    ``columns``: a lab file's column mapping (``ColumnsConfig``, docs/formats.md)."""
 
 def load_config(path: str | os.PathLike[str] | None = None) -> PipelineConfig:
     """The pipeline TOML at ``path`` (defaults when None) as a PipelineConfig."""
@@ -76,6 +79,7 @@ __all__ = [
     "compensate",
     "PipelineConfig",
     "RunConfig",
+    "ColumnsConfig",
     "TrackingConfig",
     "SyncConfig",
     "DiagnosisConfig",

@@ -252,10 +252,10 @@ def fit(
 
         cfg = replace(cfg, fit=replace(cfg.fit, signed=signed, split=split))
     from i2ris_calib.io.fit import fit_files
-    from i2ris_calib.io.synced import reading_columns
+    from i2ris_calib.io.synced import with_columns
 
-    with reading_columns(cfg, columns) as cfg:
-        fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
+    cfg = with_columns(cfg, columns)
+    fit_files(data, axis=axis, model=model, out=out, config=cfg, model_file=model_file)
     typer.echo(f"wrote {out / 'fit.json'} and predictions.csv")
 
 
@@ -364,10 +364,10 @@ def diagnose(
     cfg = _config(config)
     from i2ris_calib.diagnosis.report import verdict_line
     from i2ris_calib.io.diagnose import diagnose_file
-    from i2ris_calib.io.synced import reading_columns
+    from i2ris_calib.io.synced import with_columns
 
-    with reading_columns(cfg, columns) as cfg:
-        rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
+    cfg = with_columns(cfg, columns)
+    rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
     typer.echo(verdict_line(rec))  # the whole verdict, paths and alternatives: diagnosis.md
     for note in rec.get("notes", []):
         if note.startswith("coupling"):  # coupling named, or not separable (issue 20)

@@ -216,18 +216,18 @@ def test_config_unknown_columns_key_suggests_closest(tmp_path):
         load_config(toml)
 
 
-def test_option_overrides_config_key_by_key_and_only_inside_the_block(lab_csv, tmp_path):
+def test_option_overrides_config_key_by_key(lab_csv, tmp_path):
     from dataclasses import replace
 
     from i2ris_calib.io.columns import ColumnsConfig
-    from i2ris_calib.io.synced import reading_columns
+    from i2ris_calib.io.synced import with_columns
 
     cfg = load_config()
     cfg = replace(cfg, columns=ColumnsConfig(time_s="Img TS", yaw_deg="yaws"))
-    with reading_columns(cfg, "enc_yaw=Encoder counts 0,enc_pitch=Encoder counts 1") as eff:
-        assert eff.columns.time_s == "Img TS" and eff.columns.enc_yaw == "Encoder counts 0"
-        assert read_synced(lab_csv, "yaw")["enc_yaw"].iloc[-1] == 0.0
-    with pytest.raises(CalibError, match="missing column"):  # the standard names again
+    eff = with_columns(cfg, "enc_yaw=Encoder counts 0,enc_pitch=Encoder counts 1")
+    assert eff.columns.time_s == "Img TS" and eff.columns.enc_yaw == "Encoder counts 0"
+    assert read_synced(lab_csv, "yaw", eff.columns)["enc_yaw"].iloc[-1] == 0.0
+    with pytest.raises(CalibError, match="missing column"):  # the standard names
         read_synced(lab_csv, "yaw")
 
 

@@ -41,7 +41,9 @@ OUTPUTS = ("diagnosis.json", "diagnosis.md", "final_model.json", "residual_*.png
 DIRECTIONS = ("auto", "+", "-", "±")
 
 
-def diagnosis_dataset(path: str | Path, axis: str, direction: str, fit_config) -> Dataset:
+def diagnosis_dataset(
+    path: str | Path, axis: str, direction: str, fit_config, columns=None
+) -> Dataset:
     """The one :class:`~i2ris_calib.data.Dataset` of ``axis`` to diagnose in a synced CSV.
 
     Read by the one reader (:func:`i2ris_calib.io.synced.load_datasets`), so ``fit``
@@ -60,9 +62,9 @@ def diagnosis_dataset(path: str | Path, axis: str, direction: str, fit_config) -
             "use --direction auto (or set signed = false)"
         )
     if direction == "auto":  # the dataset(s) the default fit fits: signed or split
-        found, _ = datasets_for_fit([path], axis, fit_config)
+        found, _ = datasets_for_fit([path], axis, fit_config, columns=columns)
     else:
-        found = load_datasets([path], axis, fit_config, (direction,))
+        found = load_datasets([path], axis, fit_config, (direction,), columns=columns)
     return max(found, key=lambda d: d.rows["in_direction"])
 
 
@@ -143,7 +145,7 @@ def diagnose_file(
     cfg = config or PipelineConfig()
     claim_output_dir(Path(out) if out is not None else Path("diagnose_out"), "diagnose",
                      [Path(data)], OUTPUTS)  # fmt: skip
-    dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit)
+    dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit, cfg.columns)
     check_dataset(dset, cfg.diagnose)
     return diagnose_dataset(dset, axis, start, out, cfg, sources=[Path(data)])
 

@@ -273,7 +273,7 @@ def fit_files(
     fit_config = config.fit
     inputs = [*paths, *([model_file] if model_file is not None else [])]
     out = claim_output_dir(out, "fit", inputs, OUTPUTS)
-    datasets, choice = datasets_for_fit(paths, axis, fit_config, model)
+    datasets, choice = datasets_for_fit(paths, axis, fit_config, model, config.columns)
     kinds = (*choice.kinds, *(["diagnosed"] if saved is not None else []))
     console = Console(stderr=True)
     with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
@@ -286,9 +286,7 @@ def fit_files(
     doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice)
     with output_dir(out, "fit", inputs, OUTPUTS) as tmp:
         write_json(tmp / "fit.json", doc)
-        predictions_frame(fitted).to_csv(
-            tmp / "predictions.csv", index=False, float_format="%.10g"
-        )
+        predictions_frame(fitted).to_csv(tmp / "predictions.csv", index=False, float_format="%.10g")
     for table in results_tables(fitted, kinds, axis):
         Console().print(table)
     labels = source_labels([d["source"] for d in doc["datasets"]])
@@ -328,20 +326,23 @@ def recording_summary(whole: Sequence[Dataset]) -> tuple[Excursions, MotorsToget
 
 
 def datasets_for_fit(
-    paths: Sequence[str | Path], axis: str, fit_config, model: str = "all"
+    paths: Sequence[str | Path], axis: str, fit_config, model: str = "all", columns=None
 ) -> tuple[list[Dataset], ModelChoice]:
     """The datasets of a fit and the model choice (:func:`~i2ris_calib.fitting.pipeline.
     choose_model`): unless ``[fit] signed`` forces it, the recording's excursions
     (:func:`~i2ris_calib.data.excursions.excursions`, over all files) decide between
     the signed dataset of the axis and the paper's per-direction split; whether the
-    other motor moves with this one decides the coupled model (:func:`recording_summary`)."""
-    whole = load_datasets(paths, axis, replace(fit_config, signed=True, split=False))
+    other motor moves with this one decides the coupled model (:func:`recording_summary`).
+    ``columns``: the files' column mapping (``[columns]``, default the standard names)."""
+    whole = load_datasets(
+        paths, axis, replace(fit_config, signed=True, split=False), columns=columns
+    )
     recording, together = recording_summary(whole)
     choice = choose_model(None if fit_config.signed else recording, fit_config, model, together)
     if choice.signed:
         return whole, choice
     split_config = replace(fit_config, signed=False, split=False)
-    return load_datasets(paths, axis, split_config), choice
+    return load_datasets(paths, axis, split_config, columns=columns), choice
 
 
 def read_model_file(path: str | Path):

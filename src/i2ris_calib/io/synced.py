@@ -7,9 +7,7 @@ diagnosed on a dataset is refitted and plotted on exactly the same samples.
 from __future__ import annotations
 
 import difflib
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
-from contextvars import ContextVar
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -28,32 +26,20 @@ EPOCH_MIN_S = 1e6
 #: a slower one that becomes plausible in ms/us/ns is refused naming the time_unit_s to set
 PLAUSIBLE_STEP_S = (1e-4, 10.0)
 
-_COLUMNS: ContextVar[ColumnsConfig | None] = ContextVar("i2ris_calib_synced_columns", default=None)
 
-
-@contextmanager
-def reading_columns(config, option: str | None = None) -> Iterator:
-    """Read synced CSVs with ``config.columns`` (``[columns]``), overridden key by key by
-    the ``--columns`` text ``option``, inside the ``with`` block; yields ``config`` with
-    that effective ``columns`` section (so provenance records the mapping used).
-
-    For the commands whose stage functions do not pass ``columns`` to
-    :func:`load_datasets` themselves (``fit``, ``diagnose``). Outside the block the
-    standard names are read again.
-    """
-    columns = config.columns if option is None else parse_columns_option(option, config.columns)
-    token = _COLUMNS.set(columns)
-    try:
-        yield replace(config, columns=columns)
-    finally:
-        _COLUMNS.reset(token)
+def with_columns(config, option: str | None = None):
+    """``config`` with the effective ``[columns]`` section: ``config.columns``
+    overridden key by key by the ``--columns`` text ``option`` (so provenance records
+    the mapping used)."""
+    if option is None:
+        return config
+    return replace(config, columns=parse_columns_option(option, config.columns))
 
 
 def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = None) -> pd.DataFrame:
     """Read and validate a synced CSV for ``axis``; one-line CalibError on bad input.
 
-    ``columns`` (``[columns]``, default: the one set by :func:`reading_columns`, else
-    the standard names) says which column of the file is which standard column and
+    ``columns`` (``[columns]``, default: the standard names) says which column of the file is which standard column and
     the file's time and angle units. The frame returned has the standard columns only,
     in s, counts and deg (time as float64 throughout; epoch times counted from the
     first sample, the origin in ``df.attrs["time_origin_s"]``).
@@ -68,7 +54,7 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     p = Path(path)
     if axis not in AXES:
         raise CalibError(f"--axis must be yaw or pitch, got '{axis}'")
-    cols = _COLUMNS.get() if columns is None else columns
+    cols = ColumnsConfig() if columns is None else columns
     cols = ColumnsConfig() if cols is None else cols
     if not p.is_file():
         raise CalibError(f"{p}: file not found (give a synced CSV, see docs/formats.md)")
@@ -287,8 +273,8 @@ def load_datasets(
 ) -> list[Dataset]:
     """All motion-direction datasets of ``axis`` in the given synced CSVs, uniquely
     named (``"yaw+ (file stem)"`` when two files give the same name). ``columns``:
-    the column mapping and units of the files (``[columns]``; default: the one set by
-    :func:`reading_columns`, else the standard synced CSV)."""
+    the column mapping and units of the files (``[columns]``; default: the standard
+    synced CSV)."""
     found: list[Dataset] = []
     frames = []
     for path in paths:

@@ -94,8 +94,13 @@ def test_predictions_csv(fitted):
     _, out, df = fitted
     pred = pd.read_csv(out / "predictions.csv")
     assert list(pred.columns) == [
-        "dataset", "time_s", "v", "theta_deg", "gpi_deg", "egpi_deg", "egpi_c_deg", "split"
+        "dataset", "time_s", "v", "theta_deg", "gpi_deg", "egpi_deg", "egpi_c_deg", "split",
+        "gpi_sd_deg", "egpi_sd_deg", "egpi_c_sd_deg",
     ]  # fmt: skip
+    # the 1-sd band of the model curve: positive and small against the data's noise
+    # (3000+ samples pin the curve far better than one sample)
+    sd = pred.loc[pred["split"] != "other", "egpi_sd_deg"]
+    assert (sd.dropna() >= 0).all() and 0 < sd.median() < NOISE
     assert set(pred["split"]) == {"fit", "holdout", "other"}
     for name in ("yaw+", "yaw-"):  # the whole recording, in time order, in every dataset
         np.testing.assert_allclose(

@@ -209,10 +209,14 @@ class _FromLevel:
         return np.asarray(self.inner.evaluate(sig, np.asarray(values[:-1], float)))[n_pre:]
 
     def jacobian(self, signals, values, rows=None):
+        jac = self.inner_jacobian(signals, values, rows)
+        return np.hstack([jac, np.zeros((jac.shape[0], 1))])  # v_from is profiled
+
+    def inner_jacobian(self, signals, values, rows=None):
+        """:meth:`jacobian` without the (zero) column of the profiled level."""
         sig, n_pre = self.prehistory(signals, float(values[-1]))
         rows = np.arange(np.asarray(signals.v).size) if rows is None else np.asarray(rows)
-        jac = self.jac_inner(sig, np.asarray(values[:-1], float), rows=rows + n_pre)
-        return np.hstack([jac, np.zeros((jac.shape[0], 1))])  # v_from is profiled
+        return self.jac_inner(sig, np.asarray(values[:-1], float), rows=rows + n_pre)
 
     def flag_point_families(self, signals, values):
         sig, n_pre = self.prehistory(signals, float(values[-1]))
@@ -312,10 +316,26 @@ class FitResult:
     initial_state: InitialState | None = None
     start: dict[str, float] = field(default_factory=dict)
 
-    def predict(self, signals: Signals | np.ndarray) -> np.ndarray:
-        """Fitted model output (deg) for ``signals``."""
+    def predict(
+        self, signals: Signals | np.ndarray, initial_state: bool | None = None
+    ) -> np.ndarray:
+        """Fitted model output (deg) for ``signals``.
+
+        ``initial_state``: run the model after the fitted pre-history
+        (:attr:`initial_state`, a recording that did not start at rest), as the fit
+        did. Default: when the fit has one and ``signals`` start at the fitted
+        recording's first input (the fit's own data); False runs from relaxed operators.
+        """
         s = as_signals(signals)
-        return self.model.evaluate(s, np.array([p.value for p in self.model.parameters]))
+        x = np.array([p.value for p in self.model.parameters])
+        st = self.initial_state
+        if initial_state is None:
+            v = np.asarray(s.v, dtype=float)
+            initial_state = st is not None and v.size > 0 and float(v[0]) == st.v0
+        if initial_state and st is not None:
+            lead = _FromLevel(self.model, np.asarray(s.v, dtype=float))
+            return lead.evaluate(s, np.append(x, st.v_from))
+        return self.model.evaluate(s, x)
 
     def eval_uncertainty(
         self, signals: Signals | np.ndarray | None = None, sigma: float = 1.0
@@ -606,11 +626,22 @@ class _Counter:
         r = y[self.used_idx] - self.theta_used
         return r if np.isfinite(r).all() else np.where(np.isfinite(r), r, _BIG)
 
-    def jacobian(self, full: np.ndarray) -> np.ndarray:
+    def jacobian(self, full: np.ndarray, cols: np.ndarray | None = None) -> np.ndarray:
         """d residual / d parameters at the fitted samples, shape (n_used, p) (the
-        model's exact Jacobian; counted as one evaluation)."""
+        model's exact Jacobian; counted as one evaluation); ``cols``: only those
+        columns (the free ones, in that order), shape (n_used, len(cols))."""
         self.n += 1
-        jac = self.jac_fn(self.signals, full, rows=self.used_idx)
+        if cols is not None and isinstance(self.model, _FromLevel) and (
+            np.asarray(cols) < len(self.model.parameters) - 1
+        ).all():
+            # the profiled level's zero column is never asked for: not built
+            jac = self.model.inner_jacobian(self.signals, full, rows=self.used_idx)
+        else:
+            jac = self.jac_fn(self.signals, full, rows=self.used_idx)
+        if cols is not None and not (
+            len(cols) == jac.shape[1] and np.array_equal(cols, np.arange(jac.shape[1]))
+        ):
+            jac = jac[:, cols]
         return jac if np.isfinite(jac).all() else np.where(np.isfinite(jac), jac, 0.0)
 
 
@@ -661,7 +692,7 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
         def jac(x):
             full = x0_full.copy()
             full[free] = x
-            return counter.jacobian(full)[:, free]
+            return counter.jacobian(full, free)
 
     x0 = x0_full[free]
     if method == "trf":

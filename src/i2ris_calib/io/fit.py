@@ -177,11 +177,24 @@ def predictions_frame(fitted) -> pd.DataFrame:
                 cols[f"{kind}_deg"] = results[kind].predict(d.signals)
             else:  # the direction kinds' columns are always there
                 cols[f"{kind}_deg"] = np.nan
+        for kind in fit_order(results):  # 1-sd prediction band (the report's Fig-6 bands)
+            cols[f"{kind}_sd_deg"] = prediction_sd(results[kind], d)
         cols["split"] = np.where(~d.in_direction, "other", np.where(d.holdout, "holdout", "fit"))
         parts.append(pd.DataFrame(cols))
     frame = pd.concat(parts, ignore_index=True)
     extra = [c for c in frame if c not in PRED_COLUMNS]
     return frame[[*PRED_COLUMNS, *extra]]
+
+
+def prediction_sd(res, d: Dataset) -> np.ndarray:
+    """1-sd band of a fit's model curve from its parameter covariance (deg), per sample
+    (:meth:`~i2ris_calib.fitting.fit.FitResult.eval_uncertainty`); NaN where the
+    covariance is not available (a parameter not identified)."""
+    try:
+        sd = res.eval_uncertainty(d.signals, sigma=1.0)
+    except (CalibError, ValueError, np.linalg.LinAlgError):
+        return np.full(d.n_samples, np.nan)
+    return np.where(np.isfinite(sd), sd, np.nan)
 
 
 def source_labels(sources: Sequence[str]) -> dict[str, str]:

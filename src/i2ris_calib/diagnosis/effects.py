@@ -14,7 +14,7 @@ range); the diagnosis starts candidates there or on a small grid around it.
 
 The catalogue is not in the paper (Yue et al. list yaw-pitch coupling as future
 work); each entry is the standard form the literature gives the effect's name,
-with references in docs/diagnosis.md. Where a name covers two forms, both are
+with references in docs/design/diagnosis.md. Where a name covers two forms, both are
 entries (``dead_zone`` and ``backlash``; ``rate_dependent_thresholds`` and
 ``rate_dependent_weights``; ``creep`` and ``creep_log``).
 """

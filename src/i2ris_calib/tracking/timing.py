@@ -4,7 +4,7 @@ interpolation disagrees with the first view, the per-frame timing uncertainty of
 interpolation, and the grey level of the nearest frame (for the sync flash).
 
 Pure array functions (no files): ``io.track`` calls them while fusing a session; see
-docs/tracking.md ("Cameras not triggered together" under Known limits, and "Flagging what
+docs/design/tracking.md ("Cameras not triggered together" under Known limits, and "Flagging what
 the interpolation cannot place").
 """
 

@@ -50,6 +50,7 @@ _API = {
     "add_effect": "i2ris_calib.diagnosis.effects",
     "CATALOGUE": "i2ris_calib.diagnosis.effects",
     "compensate": "i2ris_calib.compensation",
+    "Compensator": "i2ris_calib.io.online",
     "PipelineConfig": "i2ris_calib.config",
     "RunConfig": "i2ris_calib.config",
     "ColumnsConfig": "i2ris_calib.config",

@@ -34,6 +34,7 @@ from i2ris_calib.hysteresis.models import gpi_model as gpi_model
 from i2ris_calib.hysteresis.models import i2ris_egpi_model as i2ris_egpi_model
 from i2ris_calib.hysteresis.registry import MODEL_KINDS as MODEL_KINDS
 from i2ris_calib.hysteresis.registry import model_for_kind as model_for_kind
+from i2ris_calib.io.online import Compensator as Compensator
 from i2ris_calib.report.config import ReportConfig as ReportConfig
 from i2ris_calib.simulation.config import SimulationConfig as SimulationConfig
 from i2ris_calib.sync.config import SyncConfig as SyncConfig
@@ -77,6 +78,7 @@ __all__ = [
     "add_effect",
     "CATALOGUE",
     "compensate",
+    "Compensator",
     "PipelineConfig",
     "RunConfig",
     "ColumnsConfig",

@@ -227,8 +227,23 @@ def _base_and_delay(model) -> tuple[object, float]:
 
 
 def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float, float, float]:
-    """(kind code, c (6,), r (m,), p (m,), kappa, v_f, dead band) of a base model."""
+    """(kind code, c, r, p, kappa, v_f, dead band) of a base model.
+
+    GPI / EGPI kinds: ``c`` (6,) = a1..a6, ``r``, ``p`` (m,). The two-tendon GPI
+    (``agpi``, and the own tendons of ``agpi_coupled``): ``c`` (9,) = the sides' a1..a4
+    (``_p`` then ``_n``) and ``theta0``, ``r``, ``p`` (2 m,) = side p's then side n's
+    (:data:`~.kernel.KIND_AGPI`)."""
     family = getattr(kind_of(model), "inverse", None)  # the registry's inverse
+    if family in ("agpi", "agpi_coupled"):
+        v = model.value_dict()
+        cs, rs, ps = [], [], []
+        for side in ("p", "n"):
+            r_s = thresholds(v[f"r1_{side}"], v[f"rn_{side}"], int(model.n))
+            rs.append(r_s)
+            ps.append(density(r_s, v[f"lam_{side}"], v[f"sigma_{side}"]))
+            cs += [v[f"{k}_{side}"] for k in ("a1", "a2", "a3", "a4")]
+        c = np.array([*cs, v["theta0"]], dtype=float)
+        return K.KIND_AGPI, c, np.concatenate(rs), np.concatenate(ps), 1.0, np.inf, 0.0
     if family is not None:
         v = model.value_dict()
         r = thresholds(v["r1"], v["rn"], int(model.n))
@@ -245,6 +260,45 @@ def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float
         f"compensate inverts {', '.join(names)} and {last} models (optionally with a time delay), "
         f"not '{getattr(model, 'name', type(model).__name__)}'"
     )
+
+
+def default_tol(code: int, c: np.ndarray, p: np.ndarray, quantum: float) -> float:
+    """Half the angle (deg) of one ``quantum`` on the steepest envelope:
+    ``0.5 quantum max(a1, a3) sum p`` (for the two-tendon GPI the steeper side's)."""
+    if code == K.KIND_AGPI:
+        m = p.size // 2
+        return (
+            0.5
+            * quantum
+            * max(
+                max(abs(c[0]), abs(c[2])) * float(np.sum(p[:m])),
+                max(abs(c[4]), abs(c[6])) * float(np.sum(p[m:])),
+            )
+        )
+    return 0.5 * quantum * max(abs(c[0]), abs(c[2])) * float(np.sum(p))
+
+
+def is_coupled(model) -> bool:
+    """True for a model that reads the other motor's input (``agpi_coupled``)."""
+    return getattr(kind_of(base_of(model)), "inverse", None) == "agpi_coupled"
+
+
+def coupling_deg(
+    model, v_other: np.ndarray, v_other_initial: float | None = None, t_s: np.ndarray | None = None
+) -> np.ndarray:
+    """The part of a coupled model's output (deg), shape (n,), that the other motor's
+    signed input ``v_other`` (shape (n,); preceded by ``v_other_initial`` when given)
+    contributes: additive and independent of this axis's own input, so a coupled model
+    is inverted as its two-tendon GPI on ``target - coupling_deg``."""
+    vo = np.asarray(v_other, dtype=float)
+    if v_other_initial is not None:
+        vo = np.concatenate(([float(v_other_initial)], vo))
+    zero = np.zeros(vo.size)
+    values = model_values(model)
+    with_c = model.evaluate(Signals(v=zero, v_other=vo), values)
+    without = model.evaluate(Signals(v=zero), values)
+    out = with_c - without
+    return out[1:] if v_other_initial is not None else out
 
 
 def _check(target: np.ndarray, t: np.ndarray | None) -> None:
@@ -281,13 +335,17 @@ def compensate(
     tol_deg: float | None = None,
     entry: bool = True,
     repair_spikes: bool = True,
+    v_other: np.ndarray | None = None,
+    v_other_initial: float | None = None,
 ) -> CompensationResult:
     """Commands that make ``model`` follow ``target_deg``: exact inversion, sample by sample.
 
     Parameters
     ----------
-    model : GPIModel, I2RISEGPIModel, ContinuousEGPIModel or EffectModel
-        Fitted model (its current parameter values); an extended model may carry
+    model : GPIModel, I2RISEGPIModel, ContinuousEGPIModel, TwoTendonGPIModel,
+            CoupledTwoTendonModel or EffectModel
+        Fitted model (its current parameter values; the two-tendon kinds take the
+        signed input of the axis); an extended model may carry
         ``time_delay`` effects (the target is then inverted ``tau`` ahead).
     target_deg : ndarray, shape (n,)
         Desired output angle (deg, the model's convention), finite.
@@ -320,6 +378,13 @@ def compensate(
         (:func:`~i2ris_calib.compensation.safety.find_spikes`; a branch switch of the
         model that the next sample undoes) by holding the previous command, re-inverting
         from there (flag ``spike_removed``).
+    v_other : ndarray, shape (n,), optional
+        The other motor's signed commands (counts) at the target's samples: needed by a
+        coupled model (``agpi_coupled``), whose coupling term they fix; its own tendons
+        are then inverted on the target less that term (exact: the term does not depend
+        on this axis's input).
+    v_other_initial : float, optional
+        The other motor's signed counts before the first sample (its start state).
 
     Returns
     -------
@@ -349,10 +414,27 @@ def compensate(
         raise CalibError("a model with a time delay needs the target's times (time_s)")
     code, c, r, p, kappa, vf, db = kernel_params(base)
     if tol_deg is None:
-        tol_deg = 0.5 * quantum * max(abs(c[0]), abs(c[2])) * float(np.sum(p))
+        tol_deg = default_tol(code, c, p, float(quantum))
     if not (tol_deg >= 0 and np.isfinite(tol_deg)):
         raise CalibError(f"tol_deg must be >= 0, got {tol_deg:g}")
     goal = np.interp(t + delay, t, target) if delay > 0 else target
+    coupled = is_coupled(base)
+    if coupled:
+        if v_other is None:
+            raise CalibError(
+                f"compensate: the {base.name} model needs the other motor's commands "
+                "(v_other, signed counts per target sample): compensate both axes together"
+            )
+        vo = np.asarray(v_other, dtype=float)
+        if vo.shape != target.shape or not np.all(np.isfinite(vo)):
+            raise CalibError(
+                f"compensate: v_other must be {target.size} finite signed counts (one per "
+                f"target sample), got shape {vo.shape}"
+            )
+        if delay > 0:
+            raise CalibError("compensate: a coupled model with a time delay is not inverted")
+        with deferred():
+            goal = goal - coupling_deg(base, vo, v_other_initial)
     tt = np.zeros_like(target) if t is None else t
     v0 = 0.0 if v_initial is None else float(v_initial)
     if quantum > 0 and v_initial is not None:
@@ -383,11 +465,17 @@ def compensate(
         j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
         status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
     with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
+        vo_all = None
+        if coupled:
+            vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
+            vo_all = np.concatenate((np.full(ramp.size, vo_first), vo))
         both = forward(
             model,
             np.concatenate((ramp, u)),
             None if t is None else np.concatenate((ramp_t, t)),
             None if v_initial is None else v0,
+            v_other=vo_all,
+            v_other_initial=v_other_initial,
         )
     predicted = both[ramp.size :]
     kind = base.name + ("+time_delay" if delay > 0 else "")
@@ -412,15 +500,28 @@ def compensate(
     )
 
 
-def forward(model, v: np.ndarray, t_s: np.ndarray | None = None, v_initial: float | None = None):
+def forward(
+    model,
+    v: np.ndarray,
+    t_s: np.ndarray | None = None,
+    v_initial: float | None = None,
+    v_other: np.ndarray | None = None,
+    v_other_initial: float | None = None,
+):
     """The model's output (deg), shape (n,), for input ``v`` (shape (n,)), preceded by
-    ``v_initial`` when given (that sample is dropped from the result)."""
+    ``v_initial`` when given (that sample is dropped from the result). ``v_other``
+    (shape (n,)): the other motor's signed input, for a coupled model (preceded by
+    ``v_other_initial``, else by its first value, when ``v_initial`` is given)."""
 
     v = np.asarray(v, dtype=float)
     t = None if t_s is None else np.asarray(t_s, dtype=float)
+    vo = None if v_other is None else np.asarray(v_other, dtype=float)
     if v_initial is not None:
         dt = float(t[1] - t[0]) if t is not None and t.size > 1 else 1.0
         v = np.concatenate(([float(v_initial)], v))
         t = None if t is None else np.concatenate(([t[0] - dt], t))
-    y = model.evaluate(Signals(v=v, t_s=t), model_values(model))
+        if vo is not None:
+            first = vo[0] if v_other_initial is None else float(v_other_initial)
+            vo = np.concatenate(([first], vo))
+    y = model.evaluate(Signals(v=v, t_s=t, v_other=vo), model_values(model))
     return y[1:] if v_initial is not None else y

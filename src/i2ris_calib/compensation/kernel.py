@@ -41,6 +41,11 @@ from numba import njit
 KIND_GPI = 0
 KIND_EGPI = 1
 KIND_EGPI_C = 2
+#: The two-tendon GPI (``agpi``): ``c`` = (a1_p, a2_p, a3_p, a4_p, a1_n, a2_n, a3_n, a4_n,
+#: theta0), ``r`` / ``p`` = the two sides' thresholds and weights one after the other
+#: (shape (2 m,)), one family whose state row holds ``w_p`` then ``w_n``; the input is
+#: the signed command (side p sees ``max(u, 0)``, side n ``max(-u, 0)``)
+KIND_AGPI = 3
 
 STATUS_OK = 0
 STATUS_ABOVE = 1
@@ -56,8 +61,61 @@ SIDE_DOWN = -1
 
 
 @njit(cache=True)
+def _play_side(w, wout, off, m, al, bl, ar, br, r, p, side, u):  # pragma: no cover
+    """One GPI's weighted operator sum after one step to ``u`` (operators ``off ..
+    off + m - 1`` of ``w`` -> ``wout``; initial state ``min(max(0, gl - r), gr + r)``,
+    as :func:`i2ris_calib.hysteresis.kernel.play_operators`)."""
+    acc = 0.0
+    if side == SIDE_INIT:
+        gl = al * u + bl
+        g = ar * u + br
+        for i in range(off, off + m):
+            wi = min(max(0.0, gl - r[i]), g + r[i])
+            wout[i] = wi
+            acc += p[i] * wi
+    elif side == SIDE_UP:
+        g = al * u + bl
+        for i in range(off, off + m):
+            wi = max(g - r[i], w[i])
+            wout[i] = wi
+            acc += p[i] * wi
+    elif side == SIDE_DOWN:
+        g = ar * u + br
+        for i in range(off, off + m):
+            wi = min(g + r[i], w[i])
+            wout[i] = wi
+            acc += p[i] * wi
+    else:
+        for i in range(off, off + m):
+            wout[i] = w[i]
+            acc += p[i] * w[i]
+    return acc
+
+
+@njit(cache=True)
+def _agpi(w, wout, c, r, p, v_prev, u, side):  # pragma: no cover
+    """Two-tendon GPI output ``theta0 + Y_p[max(u, 0)] - Y_n[max(-u, 0)]`` after one
+    step to the signed input ``u`` (each side steps from its own previous input; the
+    side on the other side of zero steps to 0, i.e. holds once it is there)."""
+    m = p.size // 2
+    up = max(u, 0.0)
+    un = max(-u, 0.0)
+    if side == SIDE_INIT:
+        sp = SIDE_INIT
+        sn = SIDE_INIT
+    else:
+        sp = _side(max(v_prev, 0.0), up, False)
+        sn = _side(max(-v_prev, 0.0), un, False)
+    yp = _play_side(w, wout, 0, m, c[0], c[1], c[2], c[3], r, p, sp, up)
+    yn = _play_side(w, wout, m, m, c[4], c[5], c[6], c[7], r, p, sn, un)
+    return c[8] + yp - yn
+
+
+@njit(cache=True)
 def _family(kind, fam, w, wout, c, r, p, kappa, vf, v_prev, u, side):  # pragma: no cover
     """Output of operator family ``fam`` after one step to ``u`` (state -> ``wout``)."""
+    if kind == KIND_AGPI:
+        return _agpi(w, wout, c, r, p, v_prev, u, side)
     m = p.size
     acc = 0.0
     if side == SIDE_INIT:
@@ -133,6 +191,24 @@ def _select(kind, dstate, anchor, u, db, vf, init):  # pragma: no cover
     if d > 0:
         return 0
     return 1 if u <= vf else 0
+
+
+@njit(cache=True)
+def _shown(kind, w, fam, c, p):  # pragma: no cover
+    """The model output (deg) of the state ``w`` (2, m): family ``fam``'s weighted sum
+    (``theta0 + Y_p - Y_n`` for the two-tendon GPI)."""
+    if kind == KIND_AGPI:
+        m = p.size // 2
+        acc = c[8]
+        for i in range(m):
+            acc += p[i] * w[0, i]
+        for i in range(m, 2 * m):
+            acc -= p[i] * w[0, i]
+        return acc
+    acc = 0.0
+    for i in range(p.size):
+        acc += p[i] * w[fam, i]
+    return acc
 
 
 @njit(cache=True)
@@ -340,7 +416,6 @@ def _invert_start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # 
     """The state before the first sample: operator states ``w`` (2, m) and ``state``
     (``v'`` direction and anchor, previous input and output, whether the first command
     sets the initial state), as :func:`invert` describes."""
-    m = p.size
     state[_DSTATE] = 1.0
     state[_ANCHOR] = 0.0
     state[_V_PREV] = 0.0
@@ -352,13 +427,10 @@ def _invert_start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # 
             _family(kind, f, w[f], w[f], c, r, p, kappa, vf, 0.0, v_init, SIDE_INIT)
         dstate, anchor = _direction(1, 0.0, v_init, db, True)
         fam = _select(kind, 1, 0.0, v_init, db, vf, True)
-        y_prev = 0.0
-        for i in range(m):
-            y_prev += p[i] * w[fam, i]
         state[_DSTATE] = dstate
         state[_ANCHOR] = anchor
         state[_V_PREV] = v_init
-        state[_Y_PREV] = y_prev
+        state[_Y_PREV] = _shown(kind, w, fam, c, p)
         state[_INIT] = 0.0
 
 
@@ -369,11 +441,93 @@ def _invert_chunk(
 ):  # pragma: no cover - compiled  # fmt: skip
     """Invert samples ``k0 .. k1 - 1`` from the state in ``w`` and ``state`` (updated in
     place), writing ``u_out``, ``u_real``, ``y_out`` and ``status`` there; returns
-    nothing (see :func:`invert`)."""
+    nothing (see :func:`invert`). Each sample is one :func:`_step`, the step the online
+    compensator (:func:`step_one`) takes too."""
     n = target.size
     m = p.size
     w_new = np.zeros((2, m))
     scratch = np.empty(m)
+    buf = np.empty(40)
+    keep = np.empty(16, dtype=np.bool_)
+    dt0 = t[1] - t[0] if n > 1 else 1.0
+    for k in range(k0, k1):
+        dt = t[k] - t[k - 1] if k > 0 else dt0
+        free = k == 0 and first_free
+        u, ur, y, st = _step(
+            kind, c, r, p, kappa, vf, db, target[k], t[k], dt, lo, hi, max_rate, quantum,
+            tol_deg, hold[k], free, w, w_new, scratch, buf, keep, state,
+        )  # fmt: skip
+        u_out[k] = u
+        u_real[k] = ur
+        y_out[k] = y
+        status[k] = st
+
+
+@njit(cache=True)
+def step_one(kind, prm, mem, target, dt):  # pragma: no cover - compiled
+    """One online step (:class:`~i2ris_calib.compensation.online.Compensator`): the
+    batch's :func:`_step` on one target sample (deg), ``dt`` seconds after the previous
+    one. Two packed arrays keep the call cheap (:func:`pack`):
+
+    ``prm`` = (len(c), M, kappa, v_f, dead band, lo, hi, max_rate, quantum, tol_deg,
+    c, r, p), ``M`` = len(p); ``mem`` = (operator states ``w`` (2 M, row-major), the
+    batch's state (:data:`STATE_SIZE`), time of the previous command (s), command, best
+    real-valued input, model output, status), updated in place.
+    """
+    nc = int(prm[0])
+    m = int(prm[1])
+    c = prm[10 : 10 + nc]
+    r = prm[10 + nc : 10 + nc + m]
+    p = prm[10 + nc + m : 10 + nc + 2 * m]
+    w = mem[: 2 * m].reshape((2, m))
+    state = mem[2 * m : 2 * m + STATE_SIZE + 1]
+    w_new = np.empty((2, m))
+    scratch = np.empty(m)
+    buf = np.empty(40)
+    keep = np.empty(16, dtype=np.bool_)
+    t_k = state[STATE_SIZE] + dt
+    u, ur, y, st = _step(
+        kind, c, r, p, prm[2], prm[3], prm[4], target, t_k, dt, prm[5], prm[6], prm[7],
+        prm[8], prm[9], False, False, w, w_new, scratch, buf, keep, state,
+    )  # fmt: skip
+    state[STATE_SIZE] = t_k
+    o = 2 * m + STATE_SIZE + 1
+    mem[o] = u
+    mem[o + 1] = ur
+    mem[o + 2] = y
+    mem[o + 3] = st
+
+
+def pack(c, r, p, cfg):
+    """(``prm``, ``mem``) of :func:`step_one` for kernel arrays ``c``, ``r``, ``p`` and
+    ``cfg`` = (kappa, v_f, dead band, lo, hi, max_rate, quantum, tol_deg); ``mem``
+    zeroed (shape (2 M + STATE_SIZE + 5,))."""
+    c, r, p, cfg = (np.asarray(a, dtype=float).ravel() for a in (c, r, p, cfg))
+    prm = np.concatenate(([c.size, p.size], cfg, c, r, p))
+    mem = np.zeros(2 * p.size + STATE_SIZE + 5)
+    return prm, mem
+
+
+@njit(cache=True)
+def start_state(kind, c, r, p, kappa, vf, db, v_init, w, state):  # pragma: no cover
+    """The online compensator's start: :func:`_invert_start` from rest at ``v_init``
+    (``state`` shape (:data:`STATE_SIZE` + 1,), time 0 and the last move at 0)."""
+    _invert_start(kind, c, r, p, kappa, vf, db, v_init, True, w, state)
+    state[_T_MOVE] = 0.0
+    state[STATE_SIZE] = 0.0
+
+
+@njit(cache=True)
+def _step(
+    kind, c, r, p, kappa, vf, db, tk, t_k, dt, lo, hi, max_rate, quantum, tol_deg,
+    hold_k, free, w, w_new, scratch, buf, cand_keep, state,
+):  # pragma: no cover - compiled  # fmt: skip
+    """Invert one target sample ``tk`` (deg) at time ``t_k`` (s), ``dt`` after the
+    previous one, from the state ``w`` / ``state`` (updated in place): returns
+    (command, best real-valued input, model output, status). ``hold_k``: hold the
+    previous command; ``free``: no rate limit on this step. ``w_new``, ``scratch``,
+    ``buf`` (40,), ``cand_keep`` (16,): work space."""
+    m = p.size
     n_fam = 2 if kind == KIND_EGPI else 1
     dstate = int(state[_DSTATE])
     anchor = state[_ANCHOR]
@@ -381,186 +535,170 @@ def _invert_chunk(
     y_prev = state[_Y_PREV]
     init = state[_INIT] != 0.0
     t_move = state[_T_MOVE]
-    dt0 = t[1] - t[0] if n > 1 else 1.0
-    bps = np.empty(3)
-    edges = np.empty(6)
-    cand_x = np.empty(16)
-    cand_e = np.empty(16)
-    cand_keep = np.empty(16, dtype=np.bool_)
-    for k in range(k0, k1):
-        tk = target[k]
+    bps = buf[0:3]
+    edges = buf[3:8]
+    cand_x = buf[8:24]
+    cand_e = buf[24:40]
+    stat = STATUS_OK
+    if init:
+        a_lim, b_lim = lo, hi
+    else:
+        step = max_rate * dt
+        if free:
+            step = np.inf
+        if not np.isfinite(step):
+            step = np.inf
+        elif 0 < quantum and step < quantum:
+            # less than a count per sample: one count once the time since the last
+            # move allows it
+            if max_rate * (t_k - t_move) >= quantum * (1.0 - 1e-9):
+                step = quantum
+        a_lim = max(lo, v_prev - step)
+        b_lim = min(hi, v_prev + step)
+        a_lim = min(a_lim, v_prev)
+        b_lim = max(b_lim, v_prev)
+    # the search spans the whole input range; a rate limit then slews the command
+    # toward the unconstrained inverse (through dead zones and output switches that
+    # a myopic choice inside the rate window would never cross)
+    if quantum > 0:
+        qa = np.ceil(a_lim / quantum - 1e-9) * quantum
+        qb = np.floor(b_lim / quantum + 1e-9) * quantum
+        qlo = np.ceil(lo / quantum - 1e-9) * quantum
+        qhi = np.floor(hi / quantum + 1e-9) * quantum
+    else:
+        qa, qb, qlo, qhi = a_lim, b_lim, lo, hi
+    nc = 0
+    if not init:
+        cand_x[0] = v_prev
+        cand_e[0] = abs(y_prev - tk)
+        cand_keep[0] = True
+        nc = 1
+    # breakpoints where the shown family (or the initial boundary) changes; for the
+    # two-tendon GPI the kink at zero input, where the other tendon takes over
+    nb = 0
+    if kind == KIND_EGPI and not init:
+        bps[0] = vf
+        bps[1] = anchor + db
+        bps[2] = anchor - db
+        nb = 3
+    elif kind == KIND_EGPI_C:
+        bps[0] = vf
+        nb = 1
+    elif kind == KIND_AGPI:
+        bps[0] = 0.0
+        nb = 1
+    for side_i in range(2):
         if init:
-            a_lim, b_lim = lo, hi
+            if side_i == 1:
+                break
+            s_lo, s_hi, side = lo, hi, SIDE_INIT
+        elif side_i == 0:
+            if hi <= v_prev:
+                continue
+            if kind != KIND_EGPI and tk <= y_prev:
+                continue
+            s_lo, s_hi, side = v_prev, hi, SIDE_UP
         else:
-            step = max_rate * (t[k] - t[k - 1]) if k > 0 else max_rate * dt0
-            if k == 0 and first_free:
-                step = np.inf
-            if not np.isfinite(step):
-                step = np.inf
-            elif 0 < quantum and step < quantum:
-                # less than a count per sample: one count once the time since the last
-                # move allows it
-                if max_rate * (t[k] - t_move) >= quantum * (1.0 - 1e-9):
-                    step = quantum
-            a_lim = max(lo, v_prev - step)
-            b_lim = min(hi, v_prev + step)
-            a_lim = min(a_lim, v_prev)
-            b_lim = max(b_lim, v_prev)
-        # the search spans the whole input range; a rate limit then slews the command
-        # toward the unconstrained inverse (through dead zones and output switches that
-        # a myopic choice inside the rate window would never cross)
-        if quantum > 0:
-            qa = np.ceil(a_lim / quantum - 1e-9) * quantum
-            qb = np.floor(b_lim / quantum + 1e-9) * quantum
-            qlo = np.ceil(lo / quantum - 1e-9) * quantum
-            qhi = np.floor(hi / quantum + 1e-9) * quantum
-        else:
-            qa, qb, qlo, qhi = a_lim, b_lim, lo, hi
-        nc = 0
+            if lo >= v_prev:
+                continue
+            if kind != KIND_EGPI and tk >= y_prev:
+                continue
+            s_lo, s_hi, side = lo, v_prev, SIDE_DOWN
+        # region edges: side ends plus the breakpoints inside, sorted
+        ne = 0
+        edges[ne] = s_lo
+        ne += 1
+        for j in range(nb):
+            if s_lo < bps[j] < s_hi:
+                edges[ne] = bps[j]
+                ne += 1
+        edges[ne] = s_hi
+        ne += 1
+        edges[:ne].sort()
+        for j in range(ne - 1):
+            e0, e1 = edges[j], edges[j + 1]
+            if e1 <= e0:
+                continue
+            mid = 0.5 * (e0 + e1)
+            fam = _select(kind, dstate, anchor, mid, db, vf, init)
+            x = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
+            # an open end (the previous input, a breakpoint) -> just inside the region
+            eps = 1e-9 * max(1.0, abs(x))
+            if x == e0 and not (init or (side == SIDE_DOWN and j == 0)):
+                x = min(e0 + eps, mid)
+            elif x == e1 and not (init or (side == SIDE_UP and j == ne - 2)):
+                x = max(e1 - eps, mid)
+            y = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init)
+            cand_x[nc] = x
+            cand_e[nc] = abs(y - tk)
+            d_new, _ = _direction(dstate, anchor, x, db, init)
+            cand_keep[nc] = init or d_new == dstate
+            nc += 1
+    best_r, best_r_err = _choose(cand_x, cand_e, cand_keep, nc, v_prev, tk, y_prev, init, tol_deg)
+    best_q = best_r
+    if quantum > 0:
+        # the whole counts around the chosen input (and the hold)
+        nq = 0
         if not init:
             cand_x[0] = v_prev
             cand_e[0] = abs(y_prev - tk)
             cand_keep[0] = True
-            nc = 1
-        # breakpoints where the shown family (or the initial boundary) changes
-        nb = 0
-        if kind == KIND_EGPI and not init:
-            bps[0] = vf
-            bps[1] = anchor + db
-            bps[2] = anchor - db
-            nb = 3
-        elif kind == KIND_EGPI_C:
-            bps[0] = vf
-            nb = 1
-        for side_i in range(2):
-            if init:
-                if side_i == 1:
-                    break
-                s_lo, s_hi, side = lo, hi, SIDE_INIT
-            elif side_i == 0:
-                if hi <= v_prev:
-                    continue
-                if kind != KIND_EGPI and tk <= y_prev:
-                    continue
-                s_lo, s_hi, side = v_prev, hi, SIDE_UP
-            else:
-                if lo >= v_prev:
-                    continue
-                if kind != KIND_EGPI and tk >= y_prev:
-                    continue
-                s_lo, s_hi, side = lo, v_prev, SIDE_DOWN
-            # region edges: side ends plus the breakpoints inside, sorted
-            ne = 0
-            edges[ne] = s_lo
-            ne += 1
-            for j in range(nb):
-                if s_lo < bps[j] < s_hi:
-                    edges[ne] = bps[j]
-                    ne += 1
-            edges[ne] = s_hi
-            ne += 1
-            edges[:ne].sort()
-            for j in range(ne - 1):
-                e0, e1 = edges[j], edges[j + 1]
-                if e1 <= e0:
-                    continue
-                mid = 0.5 * (e0 + e1)
-                fam = _select(kind, dstate, anchor, mid, db, vf, init)
-                x = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
-                # an open end (the previous input, a breakpoint) -> just inside the region
-                eps = 1e-9 * max(1.0, abs(x))
-                if x == e0 and not (init or (side == SIDE_DOWN and j == 0)):
-                    x = min(e0 + eps, mid)
-                elif x == e1 and not (init or (side == SIDE_UP and j == ne - 2)):
-                    x = max(e1 - eps, mid)
-                y = _exact(
-                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init
-                )
-                cand_x[nc] = x
-                cand_e[nc] = abs(y - tk)
-                d_new, _ = _direction(dstate, anchor, x, db, init)
-                cand_keep[nc] = init or d_new == dstate
-                nc += 1
-        best_r, best_r_err = _choose(
-            cand_x, cand_e, cand_keep, nc, v_prev, tk, y_prev, init, tol_deg
+            nq = 1
+        for qi in range(2):
+            xq = (np.floor(best_r / quantum) if qi == 0 else np.ceil(best_r / quantum)) * quantum
+            xq = min(max(xq, qlo), qhi)
+            yq = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, xq, init)
+            cand_x[nq] = xq
+            cand_e[nq] = abs(yq - tk)
+            d_new, _ = _direction(dstate, anchor, xq, db, init)
+            cand_keep[nq] = init or d_new == dstate
+            nq += 1
+        best_q, _ = _choose(cand_x, cand_e, cand_keep, nq, v_prev, tk, y_prev, init, tol_deg)
+    # status of the real-valued best (unconstrained by the rate limit)
+    tol = max(tol_deg, 1e-10 * max(1.0, abs(tk)))
+    near = 1e-6 * max(1.0, abs(best_r))
+    if best_r_err > tol:
+        y_best = _exact(
+            kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_r, init
         )
-        best_q = best_r
-        if quantum > 0:
-            # the whole counts around the chosen input (and the hold)
-            nq = 0
-            if not init:
-                cand_x[0] = v_prev
-                cand_e[0] = abs(y_prev - tk)
-                cand_keep[0] = True
-                nq = 1
-            for qi in range(2):
-                xq = (
-                    np.floor(best_r / quantum) if qi == 0 else np.ceil(best_r / quantum)
-                ) * quantum
-                xq = min(max(xq, qlo), qhi)
-                yq = _exact(
-                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, xq, init
-                )
-                cand_x[nq] = xq
-                cand_e[nq] = abs(yq - tk)
-                d_new, _ = _direction(dstate, anchor, xq, db, init)
-                cand_keep[nq] = init or d_new == dstate
-                nq += 1
-            best_q, _ = _choose(cand_x, cand_e, cand_keep, nq, v_prev, tk, y_prev, init, tol_deg)
-        # status of the real-valued best (unconstrained by the rate limit)
-        tol = max(tol_deg, 1e-10 * max(1.0, abs(tk)))
-        near = 1e-6 * max(1.0, abs(best_r))
-        if best_r_err > tol:
-            y_best = _exact(
+        if tk > y_best and best_r >= hi - near:
+            stat = STATUS_ABOVE
+        elif tk < y_best and best_r <= lo + near:
+            stat = STATUS_BELOW
+        else:
+            stat = STATUS_GAP
+    if best_r > b_lim or best_r < a_lim:
+        best_r = min(max(best_r, a_lim), b_lim)
+        best_q = qb if best_q > qb else qa if best_q < qa else best_q
+        if stat == STATUS_OK:
+            y_c = _exact(
                 kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_r, init
             )
-            if tk > y_best and best_r >= hi - near:
-                status[k] = STATUS_ABOVE
-            elif tk < y_best and best_r <= lo + near:
-                status[k] = STATUS_BELOW
-            else:
-                status[k] = STATUS_GAP
-        if best_r > b_lim or best_r < a_lim:
-            best_r = min(max(best_r, a_lim), b_lim)
-            best_q = qb if best_q > qb else qa if best_q < qa else best_q
-            if status[k] == STATUS_OK:
-                y_c = _exact(
-                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_r, init
-                )
-                if abs(y_c - tk) > tol:
-                    status[k] = STATUS_RATE
-        elif best_q > qb or best_q < qa:
-            best_q = qb if best_q > qb else qa
-        if hold[k] and not init:
-            best_q = v_prev
-            y_f = _exact(
-                kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_q, init
-            )
-            if abs(y_f - tk) > tol and status[k] == STATUS_OK:
-                status[k] = STATUS_GAP
-        u_real[k] = best_r
-        # apply the chosen command to every family and to v'
-        u = best_q
-        side = _side(v_prev, u, init)
-        for f in range(n_fam):
-            _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
-            for i in range(m):
-                w[f, i] = w_new[f, i]
-        fam = _select(kind, dstate, anchor, u, db, vf, init)
-        dstate, anchor = _direction(dstate, anchor, u, db, init)
-        acc = 0.0
+            if abs(y_c - tk) > tol:
+                stat = STATUS_RATE
+    elif best_q > qb or best_q < qa:
+        best_q = qb if best_q > qb else qa
+    if hold_k and not init:
+        best_q = v_prev
+        y_f = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_q, init)
+        if abs(y_f - tk) > tol and stat == STATUS_OK:
+            stat = STATUS_GAP
+    # apply the chosen command to every family and to v'
+    u = best_q
+    side = _side(v_prev, u, init)
+    for f in range(n_fam):
+        _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
         for i in range(m):
-            acc += p[i] * w[fam, i]
-        y_prev = acc
-        if u != v_prev or init:
-            t_move = t[k]
-        v_prev = u
-        init = False
-        u_out[k] = u
-        y_out[k] = acc
+            w[f, i] = w_new[f, i]
+    fam = _select(kind, dstate, anchor, u, db, vf, init)
+    dstate, anchor = _direction(dstate, anchor, u, db, init)
+    y_new = _shown(kind, w, fam, c, p)
+    if u != v_prev or init:
+        t_move = t_k
     state[_DSTATE] = dstate
     state[_ANCHOR] = anchor
-    state[_V_PREV] = v_prev
-    state[_Y_PREV] = y_prev
-    state[_INIT] = 1.0 if init else 0.0
+    state[_V_PREV] = u
+    state[_Y_PREV] = y_new
+    state[_INIT] = 0.0
     state[_T_MOVE] = t_move
+    return u, best_r, y_new, stat

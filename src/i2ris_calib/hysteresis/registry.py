@@ -80,7 +80,8 @@ class ModelKind:
         Kind whose fit, mapped into this kind, is one more start (GPI in EGPI).
     inverse : str or None
         Model family the compensation kernel inverts (``"gpi"``, ``"egpi"``,
-        ``"egpi_c"``); None: no inverse.
+        ``"egpi_c"``, ``"agpi"``; ``"agpi_coupled"``: its own tendons as ``agpi``, given
+        the other motor's commands); None: no inverse.
     signed : bool
         Needs the whole signed input of an axis (dataset ``"±"``).
     paper : bool
@@ -137,13 +138,14 @@ KINDS: tuple[ModelKind, ...] = (
     ModelKind(
         "agpi", "two-tendon GPI", "two-tendon GPI", two_tendon_gpi_model, TwoTendonGPIModel,
         start=two_tendon_starts, fixed=two_tendon_fixed, n_starts="n_starts_gpi", signed=True,
-        on_signed=True, diagnosis_start=True,
+        on_signed=True, diagnosis_start=True, inverse="agpi",
     ),
     ModelKind(
         "agpi_coupled", "two-tendon GPI + coupling",
         "two-tendon GPI + hysteretic coupling to the other motor", coupled_two_tendon_model,
         CoupledTwoTendonModel, start=coupled_starts, fixed=coupled_fixed,
         n_starts="n_starts_gpi", nested="agpi", signed=True, coupled=True,
+        inverse="agpi_coupled",
     ),
     ModelKind("diagnosed", "DIAGNOSED", "EGPI + diagnosed effects", None, None),
 )  # fmt: skip

@@ -17,6 +17,7 @@ from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
+from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
 from i2ris_calib.interrupts import deferred
 from i2ris_calib.io.atomic import atomic_path, write_json
 from i2ris_calib.io.fit import read_fit_json, read_model_file
@@ -368,11 +369,37 @@ def _holdout(rec: dict) -> float | None:
     return None
 
 
-def _invert_axis(fitted, goal, t, lo, hi, rate, v0):
+def _invert_axis(fitted, goal, t, lo, hi, rate, v0, v_other=None, v_other_initial=None):
     return compensate(
         fitted, goal, t, v_limits=(lo, hi), max_rate=None if not np.isfinite(rate) else rate,
-        quantum=1.0, v_initial=v0,
+        quantum=1.0, v_initial=v0, v_other=v_other, v_other_initial=v_other_initial,
     )  # fmt: skip
+
+
+#: Kinds that read the other motor's input (inverted only when both axes are compensated)
+COUPLED_KINDS = tuple(k.kind for k in KIND_ROWS if k.coupled and k.inverse)
+#: Gauss-Seidel rounds of the joint two-motor solve (each coupled axis re-inverted with
+#: the other axis's latest commands)
+JOINT_ROUNDS = 3
+
+
+def _solve_coupled(setup: dict, current: dict) -> dict:
+    """Coupled candidates (axis -> CompensationResult) solved jointly: each coupled axis
+    is inverted given the other motor's latest commands (``current``: axis -> (signed
+    commands, signed start counts)), :data:`JOINT_ROUNDS` rounds, yaw first (its first
+    round given the other axis's best uncoupled commands)."""
+    out = {}
+    for _ in range(JOINT_ROUNDS):
+        for axis, a in setup.items():
+            if a["coupled"] is None:
+                continue
+            other = next(x for x in setup if x != axis)
+            vo, vo0 = current[other]
+            res = _invert_axis(a["coupled_model"], a["goal"], a["t"], a["lo"], a["hi"],
+                               a["rate"], a["v0"], vo, vo0)  # fmt: skip
+            out[axis] = res
+            current[axis] = (a["sign"] * res.commands, a["sign"] * a["v0"])
+    return out
 
 
 def rank_models(candidates: dict, record: dict) -> list[dict]:
@@ -482,7 +509,8 @@ def compensate_files(
     frame = read_target(target, axes, unit)
     t = frame["time_s"].to_numpy()
     configured = float(getattr(cc, "max_counts_per_s", 0.0) or 0.0)
-    results = {}
+    results: dict[str, Any] = {}
+    setup: dict[str, Any] = {}
     for name, axis in zip(datasets, axes, strict=True):
         found = [(p, d) for p, d in docs if d.get("axis") == axis]
         if not found:
@@ -512,35 +540,82 @@ def compensate_files(
                 )
         goal = sign * frame[f"{axis}_deg"].to_numpy()
         mf = None if model_file is None else Path(model_file)
+        other = next((x for x in axes if x != axis), None)
         if model is not None:
             kinds = [model]
+            if model in COUPLED_KINDS and other is None:
+                o = "pitch" if axis == "yaw" else "yaw"
+                raise CalibError(
+                    f"--model {model} for {name} needs the {o} motor's commands: give the {o} "
+                    f"fit.json and a {o}_deg target column too (or another --model)"
+                )
         else:
             kinds = [k for k in record.get("models", {}) if k in INVERSE_KINDS]
+            if other is None:  # no other motor's commands: coupled models left out
+                kinds = [k for k in kinds if k not in COUPLED_KINDS]
             if "diagnosed" in record.get("models", {}) and mf is not None:
                 kinds.append("diagnosed")
             if not kinds:
                 raise CalibError(
                     f"{path} [{name}]: none of its models ({', '.join(record.get('models', {}))}) "
                     f"can be inverted; compensate inverts {', '.join(INVERSE_KINDS)} and "
-                    "diagnosed models (not yet the two-tendon agpi: use its gpi)"
+                    "diagnosed models (coupled ones with both axes)"
                 )
         candidates, models = {}, {}
+        coupled_kind, coupled_model = None, None
         for kind in kinds:
             fitted = load_model(doc, record, kind, path, mf)
+            models[kind] = fitted
+            if kind in COUPLED_KINDS:  # solved jointly with the other axis, below
+                coupled_kind, coupled_model = kind, fitted
+                continue
             try:
                 candidates[kind] = _invert_axis(fitted, goal, t, lo, hi, rate, v0)
             except CalibError as exc:
                 raise CalibError(f"{target} [{name}] {kind}: {exc}") from None
-            models[kind] = fitted
-        ranking = rank_models(candidates, record)
+        setup[axis] = {
+            "name": name, "path": path, "record": record, "sign": sign, "lo": lo, "hi": hi,
+            "rate": rate, "rate_source": rate_source, "rate_warn": rate_warn, "v0": v0,
+            "start_source": start_source, "goal": goal, "t": t, "candidates": candidates,
+            "models": models, "coupled": coupled_kind, "coupled_model": coupled_model,
+        }  # fmt: skip
+    if any(a["coupled"] for a in setup.values()):
+        current = {}
+        for axis, a in setup.items():
+            best = (
+                rank_models(a["candidates"], a["record"])[0]["model"] if a["candidates"] else None
+            )
+            cmds = a["candidates"][best].commands if best else np.full(t.size, a["v0"])
+            current[axis] = (a["sign"] * cmds, a["sign"] * a["v0"])
+        try:
+            joint = _solve_coupled(setup, current)
+        except CalibError as exc:
+            raise CalibError(f"{target} (coupled, both axes): {exc}") from None
+        for axis, res in joint.items():
+            setup[axis]["candidates"][setup[axis]["coupled"]] = res
+    for a in setup.values():
+        ranking = rank_models(a["candidates"], a["record"])
         kind = model or ranking[0]["model"]
         for r in ranking:
             r["chosen"] = r["model"] == kind
+        a["kind"] = kind
+        a["ranking"] = ranking
+    for axis, a in setup.items():  # a coupled choice given the other axis's final commands
+        if a["kind"] in COUPLED_KINDS:
+            other = next(x for x in setup if x != axis)
+            o = setup[other]
+            vo = o["sign"] * o["candidates"][o["kind"]].commands
+            a["candidates"][a["kind"]] = _invert_axis(
+                a["models"][a["kind"]], a["goal"], t, a["lo"], a["hi"], a["rate"], a["v0"],
+                vo, o["sign"] * o["v0"],
+            )  # fmt: skip
+    for axis, a in setup.items():
         results[axis] = {
-            "name": name, "path": path, "record": record, "kind": kind, "sign": sign,
-            "res": candidates[kind], "model": models[kind], "lo": lo, "hi": hi, "rate": rate,
-            "rate_source": rate_source, "rate_warn": rate_warn, "v0": v0,
-            "start_source": start_source, "ranking": ranking,
+            "name": a["name"], "path": a["path"], "record": a["record"], "kind": a["kind"],
+            "sign": a["sign"], "res": a["candidates"][a["kind"]],
+            "model": a["models"][a["kind"]], "lo": a["lo"], "hi": a["hi"], "rate": a["rate"],
+            "rate_source": a["rate_source"], "rate_warn": a["rate_warn"], "v0": a["v0"],
+            "start_source": a["start_source"], "ranking": a["ranking"],
         }  # fmt: skip
     table, axes_doc = _outputs(results, frame, t, target, unit)
     inputs = [*(p for p, _ in docs), Path(target), *([Path(model_file)] if model_file else [])]
@@ -570,12 +645,23 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
     flags_by_axis: dict[str, list[list[str]]] = {}
     axes_doc: dict[str, Any] = {}
     preds, reach_cols = {}, {}
+    seqs = {}
+    for axis, a in results.items():
+        ramp = a["res"].entry_commands
+        seqs[axis] = np.concatenate(
+            (np.full(n_entry - ramp.size, a["v0"]), ramp, a["res"].commands)
+        )
     for axis, a in results.items():
         res, sign = a["res"], a["sign"]
         ramp = res.entry_commands
-        seq = np.concatenate((np.full(n_entry - ramp.size, a["v0"]), ramp, res.commands))
+        seq = seqs[axis]
+        other = next((x for x in results if x != axis), None)
+        vo = vo0 = None
+        if other is not None and a["kind"] in COUPLED_KINDS:
+            vo = results[other]["sign"] * seqs[other]
+            vo0 = results[other]["sign"] * results[other]["v0"]
         with deferred():
-            y = forward(a["model"], seq, t_all, a["v0"])
+            y = forward(a["model"], seq, t_all, a["v0"], v_other=vo, v_other_initial=vo0)
         cols[f"enc_{axis}"] = np.rint(sign * seq).astype(np.int64)
         preds[f"predicted_{axis}_deg"] = sign * y
         ok = np.concatenate((np.ones(n_entry, dtype=bool), res.reachable))

@@ -1,0 +1,122 @@
+"""Files of the online :class:`Compensator`: built from a fit.json, saved to and
+loaded from the self-contained JSON a controller reads (docs/compensate.md, "Online
+use"; schema :data:`~i2ris_calib.compensation.online.SCHEMA`)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from i2ris_calib.compensation import online
+from i2ris_calib.errors import CalibError
+from i2ris_calib.io.atomic import write_json
+from i2ris_calib.io.compensate import _dataset_record, _holdout, load_model, rate_limit
+from i2ris_calib.io.fit import read_fit_json
+
+#: Kinds the online compensator inverts
+ONLINE_KINDS = tuple(online.KIND_NAMES.values())
+
+
+class Compensator(online.Compensator):
+    """The online compensator (:class:`i2ris_calib.compensation.online.Compensator`)
+    with its files: :meth:`from_fit`, :meth:`to_json`, :meth:`from_json`.
+
+    Example (a control loop at 100 Hz)::
+
+        c = Compensator.from_fit("fit/fit.json", dataset="yaw±")
+        while running:
+            cmd = c.step(target_yaw_deg=read_target(), dt_s=0.01)["yaw"]
+            send_counts(int(cmd.counts))
+    """
+
+    @classmethod
+    def from_fit(
+        cls,
+        path: str | Path | Sequence[str | Path],
+        dataset: str | Sequence[str] | None = None,
+        model: str | None = None,
+        max_counts_per_s: float | None = None,
+        start_counts: float | dict[str, float] = 0.0,
+    ) -> Compensator:
+        """A compensator of the fitted model(s) in fit.json file(s) (one per axis).
+
+        Parameters
+        ----------
+        path : path or sequence of paths
+            fit.json written by ``fit`` (one per axis).
+        dataset : str or sequence of str, optional
+            ``yaw+``, ``yaw-``, ``yaw±``, ... per file; default: the signed dataset of the
+            file when it has one, else its first dataset.
+        model : str, optional
+            ``gpi``, ``egpi``, ``egpi_c`` or ``agpi``; default: the dataset's model among
+            those with the lowest held-out RMSE.
+        max_counts_per_s : float, optional
+            Rate limit (counts/s; ``inf``: none); default: the fit's fastest input move
+            (as ``compensate``).
+        start_counts : float or dict
+            Signed counts the motor(s) rest at (per axis with a dict).
+        """
+        paths = [path] if isinstance(path, (str, Path)) else list(path)
+        names = [dataset] if isinstance(dataset, str) or dataset is None else list(dataset)
+        if len(names) == 1 and len(paths) > 1:
+            names = names * len(paths) if names[0] is None else names
+        if len(names) != len(paths):
+            raise CalibError("Compensator.from_fit: give one dataset per fit.json (or none)")
+        models, limits, signs, rates, starts = {}, {}, {}, {}, {}
+        for p, name in zip(paths, names, strict=True):
+            p = Path(p)
+            doc = read_fit_json(p)
+            axis = str(doc.get("axis"))
+            have = [str(d.get("name")) for d in doc.get("datasets", [])]
+            if name is None:
+                name = f"{axis}±" if f"{axis}±" in have else (have[0] if have else f"{axis}+")
+            name = name.replace("+-", "±")
+            record = _dataset_record(doc, name, p)
+            fitted = [k for k in record.get("models", {}) if k in ONLINE_KINDS]
+            kind = model
+            if kind is None:
+                if not fitted:
+                    raise CalibError(
+                        f"{p} [{name}]: none of its models can be compensated online "
+                        f"({', '.join(ONLINE_KINDS)})"
+                    )
+                kind = min(fitted, key=lambda k: _holdout(record["models"][k]) or np.inf)
+            elif kind not in ONLINE_KINDS:
+                raise CalibError(
+                    f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "
+                    f"got '{kind}'"
+                )
+            ax = name[:-1]
+            if ax in models:
+                raise CalibError(f"Compensator.from_fit: two fits of the {ax} axis")
+            models[ax] = load_model(doc, record, kind, p)
+            lo, hi = (float(x) for x in record["input_range_counts"])
+            if not name.endswith("±"):
+                lo = min(lo, 0.0)
+            limits[ax] = (lo, hi)
+            signs[ax] = -1.0 if name.endswith("-") else 1.0
+            rates[ax] = rate_limit(record, max_counts_per_s, 0.0, hi - lo)[0]
+            s0 = start_counts.get(ax, 0.0) if isinstance(start_counts, dict) else start_counts
+            starts[ax] = float(s0)
+        return cls(models, limits, signs=signs, max_counts_per_s=rates, start_counts=starts)
+
+    def to_json(self, path: str | Path) -> None:
+        """Write :meth:`to_dict` (atomically) to ``path``."""
+        write_json(path, self.to_dict())
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> Compensator:
+        """The compensator saved by :meth:`to_json` (its state included)."""
+        p = Path(path)
+        try:
+            doc = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise CalibError(f"{p}: not a readable compensator JSON ({exc})") from None
+        try:
+            base = online.Compensator.from_dict(doc)
+        except CalibError as exc:
+            raise CalibError(f"{p}: {exc}") from None
+        return cls._from_axes(base._axes)

@@ -11,7 +11,3 @@ class CalibError(ValueError):
     is shown unless ``--debug`` is given. A ``ValueError``, so library users can
     catch it like any invalid-argument error.
     """
-
-
-class ConvergenceError(CalibError):
-    """A numerical procedure did not converge and no usable result exists."""

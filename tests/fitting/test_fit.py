@@ -11,11 +11,11 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.fit import _Counter, _refine_profiled, fit_model
 from i2ris_calib.fitting.pipeline import (
-    build_model,
     fit_all,
     fit_kind,
     model_from_params,
     split_masks,
+    unfitted_model,
 )
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.models import as_signals, gpi_model, i2ris_egpi_model
@@ -142,7 +142,7 @@ def test_not_converged_is_flagged(egpi_data):
 def test_config_fixes_parameters(egpi_data):
     _, v, theta = egpi_data
     cfg = FitConfig(fixed_egpi=("lam", "kappa"), fit_flag_point=False, n_starts=1)
-    m = build_model("egpi", v, cfg)
+    m = unfitted_model("egpi", v, cfg)
     assert {p.name for p in m.parameters if p.fixed} == {"lam", "kappa", "v_f"}
     res = fit_kind("egpi", v, theta, cfg)
     assert res.params["kappa"] == m.value_dict()["kappa"]

@@ -11,7 +11,7 @@ import pytest
 import i2ris_calib.fitting.fit as fit_module
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.fit import fit_model
-from i2ris_calib.fitting.pipeline import build_model, fit_all, nested_gpi_start
+from i2ris_calib.fitting.pipeline import fit_all, nested_gpi_start, unfitted_model
 from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import gpi_values, loading_trajectory, paper_like_params
 
@@ -30,7 +30,7 @@ def test_egpi_nests_gpi(rng):
     """a5 = a3, a6 = a4, kappa = 1 and any v_f: EGPI output == GPI output exactly."""
     _, v = loading_trajectory(rng, n_cycles=3, n_samples=1500)
     g = gpi_values(paper_like_params("pitch+"))
-    egpi = build_model("egpi", v)
+    egpi = unfitted_model("egpi", v)
     for v_f in (500.0, 3000.0, 5500.0):
         start = egpi.vector(egpi.value_dict() | {"v_f": v_f})
         x = nested_gpi_start(egpi, g, start)

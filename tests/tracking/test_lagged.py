@@ -17,7 +17,6 @@ from i2ris_calib.tracking.timing import (
     adopt_lagged_alternatives,
     interp_weight,
     lagged_check,
-    lagged_spread_deg,
     one_sided_corners,
     refit_lagged_frames,
     resample_corners,
@@ -82,7 +81,7 @@ def test_frame_next_to_a_step_seen_by_the_lagged_camera_only_is_flagged(seed):
     frames = np.flatnonzero(res.status == fz.MEASURED)
     alts = [_view(one_sided_corners(ts, cs, t, side, tc), cams[1], cfg, Xb)
             for side in ("before", "after")]  # fmt: skip
-    spread = lagged_spread_deg(res, va, alts, interp_weight(ts, t), M, frames, tc)
+    spread = lagged_check(res, va, alts, interp_weight(ts, t), M, frames, tc).spread_deg
     # the interpolated side corners put most of the step into the frame before it,
     # which the top camera cannot contradict: a wrong angle ...
     assert err[STEP_FRAME] > 0.3, err[STEP_FRAME]

@@ -7,7 +7,7 @@ import numpy as np
 from i2ris_calib.hysteresis.kernel import motion_direction
 
 
-def default_deadband(v: np.ndarray, fraction: float = 0.01) -> float:
+def cycle_deadband(v: np.ndarray, fraction: float = 0.01) -> float:
     """Dead band (input unit) for ``v'`` in cycle detection: ``fraction`` of the input
     range (unit free: the same cycles for counts and volts)."""
     v = np.asarray(v, dtype=float)
@@ -20,12 +20,13 @@ def cycle_index(v: np.ndarray, deadband: float | None = None) -> np.ndarray:
 
     A new cycle starts at the input minimum where the motion direction (``v'`` with
     a dead band, see :func:`~i2ris_calib.hysteresis.kernel.motion_direction`) turns
-    from unloading to loading. ``deadband`` defaults to 1 % of the input range.
+    from unloading to loading. ``deadband`` defaults to 1 % of the input range
+    (:func:`cycle_deadband`).
     """
     v = np.ascontiguousarray(v, dtype=float)
     if v.size == 0:
         return np.zeros(0, dtype=int)
-    db = default_deadband(v) if deadband is None else float(deadband)
+    db = cycle_deadband(v) if deadband is None else float(deadband)
     d = motion_direction(v, db).astype(int)
     turns_up = np.flatnonzero((d[1:] > 0) & (d[:-1] < 0)) + 1
     turns_down = np.flatnonzero((d[1:] < 0) & (d[:-1] > 0)) + 1

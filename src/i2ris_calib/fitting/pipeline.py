@@ -45,7 +45,7 @@ __all__ = [
     "MODEL_KINDS",
     "ModelChoice",
     "choose_model",
-    "build_model",
+    "unfitted_model",
     "deadband_for",
     "fit",
     "fit_all",
@@ -172,7 +172,7 @@ def deadband_for(v: np.ndarray, config: FitConfig) -> float:
     return default_deadband(v)
 
 
-def build_model(
+def unfitted_model(
     kind: str, v: np.ndarray, config: FitConfig = FitConfig(), deadband: float | None = None
 ) -> ParametricModel:
     """An unfitted model of ``kind`` set up from ``config`` (``deadband``: the ``v'``
@@ -254,8 +254,8 @@ def fit_kind(
             None if gpi_fit is None else _scaled_fit(gpi_fit, 1.0 / scale),
             deadband=db / scale, related=tuple(_scaled_fit(r, 1.0 / scale) for r in related),
         )  # fmt: skip
-        return _scaled_fit(res, scale, build_model(kind, v, config, db))
-    model = build_model(kind, v, config, db)
+        return _scaled_fit(res, scale, unfitted_model(kind, v, config, db))
+    model = unfitted_model(kind, v, config, db)
     info = kind_info(kind)
     n_starts = getattr(config, info.n_starts)
     rng = np.random.default_rng(config.seed)

@@ -420,12 +420,6 @@ def session_record(session: Path) -> dict[str, Any]:
     }
 
 
-def session_identity(session: Path) -> str:
-    """The session's identity (:func:`session_record`): SHA-256 of the session.toml values
-    the pipeline reads and the names and sizes of the files it names."""
-    return session_record(session)["identity"]
-
-
 def input_changes(old: dict[str, Any], new: dict[str, Any]) -> tuple[list[str], str]:
     """What changed between two :func:`session_record` s: the inputs (file names,
     ``session.toml [table]``) and the first stage that reads one (``""``: none)."""
@@ -453,9 +447,9 @@ def claim_run_dir(session: Path, run_dir: Path) -> str | None:
     ``run_dir/.session.json`` holds the session's record (:func:`session_record`), first
     written with exclusive creation (two runs at once cannot both claim it). The same
     session folder with changed inputs, or the same recording moved to another folder
-    (:func:`session_identity`), keeps its run folder: the record is updated and the
-    stages whose inputs changed re-run (their stamps). Only another folder with other
-    inputs is refused.
+    (the same ``identity`` in its record), keeps its run folder: the record is updated
+    and the stages whose inputs changed re-run (their stamps). Only another folder with
+    other inputs is refused.
 
     Returns
     -------

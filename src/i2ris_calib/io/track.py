@@ -389,47 +389,16 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
         raise CalibError("no frame time where both markers are measured: cannot fuse the two views")
     res = fz.fuse_views(va, vb, t, cfg)
     views = view_check(res, ca, cb, intr[a_name], intr[b_name], t, spec, cfg)
-    res_fused_status = res.status.copy()
-    tb_t = tb["time_s"].to_numpy()
     status = res.status.copy()
     status[~ta["valid"].to_numpy()] = fz.REJECTED
     ref = reference_mask(t, cfg)
-    try:
-        refit, res = fz.fit_reference(replace(res, status=status), va, vb, ref, t, cfg)
-        M = refit.M
-    except ValueError:
-        raise CalibError(
-            f"no measured frame in the reference window ({cfg.reference_start_s}-"
-            f"{cfg.reference_start_s + cfg.reference_duration_s} s after the first frame); move "
-            "[track] reference_start_s to a time where the tip is straight and both markers are visible"
-        ) from None
-    fused = np.isin(res_fused_status, (fz.MEASURED, fz.REJECTED)) & ta["valid"].to_numpy()
-    refit_frames = np.zeros(0, dtype=int)
-    lagged_flagged = np.zeros(0, dtype=int)
-    adopted = np.zeros(0, dtype=int)
-    spread = np.full(len(t), np.nan)
-    lagged = np.nanmax(np.abs(nearest_time(tb_t[keep_b], t) - t), initial=0.0)
-    if lagged > cfg.same_frame_tol_s and res.t_a is not None and res.t_b is not None:
-        sel = fused & (np.nan_to_num(res.rms_px) > REFIT_MIN_PX)  # every candidate is here
-        alts = []
-        for side in ("before", "after"):
-            c_alt = np.full_like(cb, np.nan)
-            c_alt[sel] = one_sided_corners(tb_t[keep_b], cb_src[keep_b], t[sel], side, cfg)
-            alts.append(_view(c_alt, intr[b_name], cams[b_name].view, spec))
-        res, refit_frames = refit_lagged_frames(res, va, alts, fused, cfg)
-        status = res.status.copy()
-        check = np.flatnonzero(status == fz.MEASURED)
-        check = np.setdiff1d(check, refit_frames)  # refitted: chosen by the first camera
-        alts = []
-        for side in ("before", "after"):
-            c_alt = np.full_like(cb, np.nan)
-            c_alt[check] = one_sided_corners(tb_t[keep_b], cb_src[keep_b], t[check], side, cfg)
-            alts.append(_view(c_alt, intr[b_name], cams[b_name].view, spec))
-        lag = lagged_check(res, va, alts, interp_weight(tb_t[keep_b], t), M, check, cfg)
-        res, adopted = adopt_lagged_alternatives(res, lag)
-        spread = lag.spread_deg
-        lagged_flagged = np.flatnonzero(np.nan_to_num(spread) > LAGGED_SPREAD_DEG)
-        status[lagged_flagged] = fz.AMBIGUOUS
+    refit, res_ref = _session_reference(replace(res, status=status), va, vb, ref, t, cfg)
+    fused = np.isin(res.status, (fz.MEASURED, fz.REJECTED)) & ta["valid"].to_numpy()
+    second = _SecondCamera(
+        tb["time_s"].to_numpy()[keep_b], cb_src[keep_b], intr[b_name], cams[b_name].view
+    )
+    lag = _lagged_camera_fit(res_ref, status, va, second, fused, t, refit.M, spec, cfg)
+    res, status, M = lag.res, lag.status, refit.M
     ang = fz.relative_angles(res.Q, M)
     ang[status != fz.MEASURED] = np.nan
     df = pd.DataFrame({"frame": ta["frame"].to_numpy(), "time_s": t, "yaw_deg": ang[:, 0],
@@ -449,20 +418,102 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             df[f"pitch_plain_{name}_deg"] = pa[:, 1]
     summary = _summary(df, res, streams, names, M, ref, cfg)
     summary["reference"].update(reference_record(refit))
-    summary["lagged_camera_refit_frames"] = [int(k) for k in ta["frame"].to_numpy()[refit_frames]]
-    summary["lagged_camera_one_side_frames"] = [int(k) for k in ta["frame"].to_numpy()[adopted]]
-    summary["lagged_camera_flagged_frames"] = [
-        int(k) for k in ta["frame"].to_numpy()[lagged_flagged]
-    ]
-    summary["lagged_camera_spread_deg"] = {
-        "median": _num(np.nanmedian(spread)) if np.isfinite(spread).any() else None,
-        "p99": _num(np.nanpercentile(spread, 99)) if np.isfinite(spread).any() else None,
-        "tolerance": LAGGED_SPREAD_DEG,
-    }
+    summary.update(_lagged_record(lag, ta["frame"].to_numpy()))
     for n in names:
         summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
     summary["view_check"] = views
     return {"angles": df, "summary": summary}
+
+
+def _session_reference(res: fz.FusionResult, va, vb, ref: np.ndarray, t: np.ndarray, cfg):
+    """:func:`~i2ris_calib.tracking.fuse.fit_reference`'s ``(ReferenceFit, FusionResult)``;
+    a CalibError saying how to move the reference window when it has no measured frame."""
+    try:
+        return fz.fit_reference(res, va, vb, ref, t, cfg)
+    except ValueError:
+        raise CalibError(
+            f"no measured frame in the reference window ({cfg.reference_start_s}-"
+            f"{cfg.reference_start_s + cfg.reference_duration_s} s after the first frame); move "
+            "[track] reference_start_s to a time where the tip is straight and both markers are visible"
+        ) from None
+
+
+@dataclass(frozen=True)
+class _SecondCamera:
+    """The second camera's usable detections at its own frame times."""
+
+    time_s: np.ndarray  # (m,)
+    corners: np.ndarray  # (m, 4, 2) px as detected
+    intr: CameraIntrinsics
+    view: str
+
+
+@dataclass(frozen=True)
+class _LaggedFit:
+    """The fusion after the frames of a second camera not triggered with the first were
+    refitted, checked and flagged (:func:`~i2ris_calib.tracking.timing.lagged_check`);
+    frame lists are indices into the fused frames, all empty when the cameras are
+    triggered together."""
+
+    res: fz.FusionResult
+    status: np.ndarray  # (n,) final status, the flagged frames ambiguous
+    refit_frames: np.ndarray
+    one_side_frames: np.ndarray
+    flagged_frames: np.ndarray
+    spread_deg: np.ndarray  # (n,) NaN where not checked
+
+
+def _one_sided_views(
+    b: _SecondCamera, frames: np.ndarray, t: np.ndarray, spec: SessionSpec, cfg
+) -> list[fz.ViewData]:
+    """The second camera's views at ``frames`` (mask or indices into ``t``) from its
+    corners extrapolated from the frames before and from the frames after."""
+    alts = []
+    for side in ("before", "after"):
+        c_alt = np.full((len(t), 4, 2), np.nan)
+        c_alt[frames] = one_sided_corners(b.time_s, b.corners, t[frames], side, cfg)
+        alts.append(_view(c_alt, b.intr, b.view, spec))
+    return alts
+
+
+def _lagged_camera_fit(
+    res: fz.FusionResult, status: np.ndarray, va: fz.ViewData, b: _SecondCamera,
+    fused: np.ndarray, t: np.ndarray, M: np.ndarray, spec: SessionSpec, cfg: TrackingConfig,
+) -> _LaggedFit:  # fmt: skip
+    """:class:`_LaggedFit` of the fusion ``res`` (``status``: its status with the invalid
+    first-camera frames rejected)."""
+    none = np.zeros(0, dtype=int)
+    lagged = np.nanmax(np.abs(nearest_time(b.time_s, t) - t), initial=0.0)
+    if not (lagged > cfg.same_frame_tol_s and res.t_a is not None and res.t_b is not None):
+        return _LaggedFit(res, status, none, none, none, np.full(len(t), np.nan))
+    sel = fused & (np.nan_to_num(res.rms_px) > REFIT_MIN_PX)  # every candidate is here
+    res, refit_frames = refit_lagged_frames(
+        res, va, _one_sided_views(b, sel, t, spec, cfg), fused, cfg
+    )
+    status = res.status.copy()
+    check = np.flatnonzero(status == fz.MEASURED)
+    check = np.setdiff1d(check, refit_frames)  # refitted: chosen by the first camera
+    alts = _one_sided_views(b, check, t, spec, cfg)
+    lag = lagged_check(res, va, alts, interp_weight(b.time_s, t), M, check, cfg)
+    res, adopted = adopt_lagged_alternatives(res, lag)
+    flagged = np.flatnonzero(np.nan_to_num(lag.spread_deg) > LAGGED_SPREAD_DEG)
+    status[flagged] = fz.AMBIGUOUS
+    return _LaggedFit(res, status, refit_frames, adopted, flagged, lag.spread_deg)
+
+
+def _lagged_record(lag: _LaggedFit, frame: np.ndarray) -> dict:
+    """The ``lagged_camera_*`` entries of track.json (``frame``: the fused frames' numbers)."""
+    spread = lag.spread_deg
+    return {
+        "lagged_camera_refit_frames": [int(k) for k in frame[lag.refit_frames]],
+        "lagged_camera_one_side_frames": [int(k) for k in frame[lag.one_side_frames]],
+        "lagged_camera_flagged_frames": [int(k) for k in frame[lag.flagged_frames]],
+        "lagged_camera_spread_deg": {
+            "median": _num(np.nanmedian(spread)) if np.isfinite(spread).any() else None,
+            "p99": _num(np.nanpercentile(spread, 99)) if np.isfinite(spread).any() else None,
+            "tolerance": LAGGED_SPREAD_DEG,
+        },
+    }
 
 
 def view_check(

@@ -468,37 +468,77 @@ def twist_free_fit(
     r = _twist_free_residuals(g, L, M0, R_ba, a, b)
     # prior weight in px^2 / rad^2: corner variance / prior variance
     wp = float(np.sum(r * r)) / max(n * 8 - 4, 1) / prior_sd_rad**2
-    cost = float(np.sum(r * r))
-    lam = 1e-3
     scale = np.maximum(np.abs(np.concatenate([ta[:, 2:3], tb[:, 2:3]], axis=1)), 1.0)
     hl = np.concatenate([np.full((n, 2), 1e-7), 1e-8 * np.repeat(scale, 3, axis=1)], axis=1)
+    g, L, cost, normal = _twist_free_solution(g, L, r, wp, hl, M0, R_ba, a, b, iterations)
+    sd = _roll_sd(normal, cost, n, times_s, L[:, :2], blocks)
+    return float(np.degrees(g[0])), float(np.degrees(sd)), rodrigues(g[1:4]) @ R_ba
+
+
+@dataclass(frozen=True)
+class _ReducedNormal:
+    """Normal equations of the global parameters ``g`` with the per-frame ones
+    eliminated (Schur complement), as :func:`_twist_free_solution` last formed them."""
+
+    S: np.ndarray  # (4, 4) over all frames, the prior's term included
+    rhs: np.ndarray  # (4,) gradient, the prior's term included
+    Sn: np.ndarray  # (n, 4, 4) per-frame terms of S
+    rn: np.ndarray  # (n, 4) per-frame terms of rhs
+
+
+def _twist_free_jacobians(g, L, r, hl, M0, R_ba, a: ViewData, b: ViewData):
+    """Forward-difference Jacobians of :func:`_twist_free_residuals` at ``r``: per-frame
+    parameters ``Jl`` (n, 16, 8) with steps ``hl`` (n, 8), global ones ``Jg`` (n, 16, 4)."""
+    n = len(L)
+    Jl = np.empty((n, 16, 8))
+    for k in range(8):
+        d = np.zeros((n, 8))
+        d[:, k] = hl[:, k]
+        Jl[:, :, k] = (_twist_free_residuals(g, L + d, M0, R_ba, a, b) - r) / hl[:, k : k + 1]
+    Jg = np.empty((n, 16, 4))
+    for k in range(4):
+        d = np.zeros(4)
+        d[k] = 1e-7
+        Jg[:, :, k] = (_twist_free_residuals(g + d, L, M0, R_ba, a, b) - r) / 1e-7
+    return Jl, Jg
+
+
+def _twist_free_step(Jl, Jg, r, g, wp, lam):
+    """One damped Gauss-Newton step ``(dg, dL)`` of the global (4,) and per-frame (n, 8)
+    parameters, and the reduced normal equations (:class:`_ReducedNormal`) it solved."""
+    All = np.einsum("nrk,nrl->nkl", Jl, Jl)
+    Alg = np.einsum("nrk,nrl->nkl", Jl, Jg)
+    bl = np.einsum("nrk,nr->nk", Jl, r)
+    Aggn = np.einsum("nrk,nrl->nkl", Jg, Jg)
+    bgn = np.einsum("nrk,nr->nk", Jg, r)
+    Ainv = np.linalg.inv(All + (lam * np.einsum("nkk->nk", All) + 1e-12)[:, :, None] * np.eye(8))
+    X = np.einsum("nlk,nlm->nkm", Alg, Ainv)  # Alg^T Ainv, (n, 4, 8)
+    Sn = Aggn - np.einsum("nkm,nmj->nkj", X, Alg)
+    rn = bgn - np.einsum("nkm,nm->nk", X, bl)
+    S, rhs = Sn.sum(0), rn.sum(0)
+    S[0, 0] += wp
+    rhs[0] += wp * g[0]
+    dg = -np.linalg.solve(S + lam * np.diag(np.diag(S)), rhs)
+    dL = -np.einsum("nkl,nl->nk", Ainv, bl + Alg @ dg)
+    return dg, dL, _ReducedNormal(S, rhs, Sn, rn)
+
+
+def _twist_free_solution(g, L, r, wp, hl, M0, R_ba, a: ViewData, b: ViewData, iterations):
+    """Levenberg-Marquardt from ``g`` (4,), ``L`` (n, 8) with residuals ``r``.
+
+    Returns
+    -------
+    g, L : the solution
+    cost : float
+        Sum of squared residuals (px^2), the prior's term not included.
+    normal : _ReducedNormal
+        From the last iteration.
+    """
+    cost = float(np.sum(r * r))
+    lam = 1e-3
     for _ in range(iterations):
-        Jl = np.empty((n, 16, 8))
-        for k in range(8):
-            d = np.zeros((n, 8))
-            d[:, k] = hl[:, k]
-            Jl[:, :, k] = (_twist_free_residuals(g, L + d, M0, R_ba, a, b) - r) / hl[:, k : k + 1]
-        Jg = np.empty((n, 16, 4))
-        for k in range(4):
-            d = np.zeros(4)
-            d[k] = 1e-7
-            Jg[:, :, k] = (_twist_free_residuals(g + d, L, M0, R_ba, a, b) - r) / 1e-7
-        All = np.einsum("nrk,nrl->nkl", Jl, Jl)
-        Alg = np.einsum("nrk,nrl->nkl", Jl, Jg)
-        bl = np.einsum("nrk,nr->nk", Jl, r)
-        Aggn = np.einsum("nrk,nrl->nkl", Jg, Jg)
-        bgn = np.einsum("nrk,nr->nk", Jg, r)
-        Ainv = np.linalg.inv(
-            All + (lam * np.einsum("nkk->nk", All) + 1e-12)[:, :, None] * np.eye(8)
-        )
-        X = np.einsum("nlk,nlm->nkm", Alg, Ainv)  # Alg^T Ainv, (n, 4, 8)
-        Sn = Aggn - np.einsum("nkm,nmj->nkj", X, Alg)
-        rn = bgn - np.einsum("nkm,nm->nk", X, bl)
-        S, rhs = Sn.sum(0), rn.sum(0)
-        S[0, 0] += wp
-        rhs[0] += wp * g[0]
-        dg = -np.linalg.solve(S + lam * np.diag(np.diag(S)), rhs)
-        dL = -np.einsum("nkl,nl->nk", Ainv, bl + Alg @ dg)
+        Jl, Jg = _twist_free_jacobians(g, L, r, hl, M0, R_ba, a, b)
+        dg, dL, normal = _twist_free_step(Jl, Jg, r, g, wp, lam)
         r_new = _twist_free_residuals(g + dg, L + dL, M0, R_ba, a, b)
         c_new = float(np.sum(r_new * r_new)) + wp * (g[0] + dg[0]) ** 2
         if c_new < cost + wp * g[0] ** 2:
@@ -510,7 +550,14 @@ def twist_free_fit(
                 break
         else:
             lam *= 10.0
-    # uncertainty of e at the solution: sigma^2 S^-1 and a block jackknife of one GN step
+    return g, L, cost, normal
+
+
+def _roll_sd(normal: _ReducedNormal, cost: float, n: int, times_s, yp, blocks: int) -> float:
+    """Standard uncertainty (rad) of the reference roll at the solution: the largest of
+    the least-squares figure ``sigma^2 S^-1``, a block jackknife of one Gauss-Newton step
+    over ``blocks`` time blocks, and :func:`_axis_split_sd` (``yp``: yaw, pitch (n, 2) rad)."""
+    S, rhs, Sn, rn = normal.S, normal.rhs, normal.Sn, normal.rn
     sigma2 = cost / max(n * 8 - 4, 1)
     sd_ls = float(np.sqrt(sigma2 * np.linalg.inv(S)[0, 0]))
     edges = np.quantile(times_s, np.linspace(0, 1, blocks + 1))
@@ -518,9 +565,8 @@ def twist_free_fit(
     est = np.array([-np.linalg.solve(S - Sn[blk == k].sum(0), rhs - rn[blk == k].sum(0))[0]
                     for k in range(blocks)])  # fmt: skip
     sd_jk = float(np.sqrt((blocks - 1) / blocks * np.sum((est - est.mean()) ** 2)))
-    sd_axes = _axis_split_sd(S, rhs, Sn, rn, L[:, :2])
-    sd = max(sd_ls, sd_jk, sd_axes)
-    return float(np.degrees(g[0])), float(np.degrees(sd)), rodrigues(g[1:4]) @ R_ba
+    sd_axes = _axis_split_sd(S, rhs, Sn, rn, yp)
+    return max(sd_ls, sd_jk, sd_axes)
 
 
 def _axis_split_sd(S, rhs, Sn, rn, yp, bent_rad=np.radians(10.0), min_frames=30) -> float:

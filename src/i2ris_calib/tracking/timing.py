@@ -312,14 +312,6 @@ def lagged_check(
     return LaggedCheck(out, side, Q, ta, tb, cov)
 
 
-def lagged_spread_deg(
-    res: fz.FusionResult, va: fz.ViewData, alternatives: list[fz.ViewData], w: np.ndarray,
-    M: np.ndarray, frames: np.ndarray, cfg: TrackingConfig,
-) -> np.ndarray:  # fmt: skip
-    """Timing uncertainty (deg, shape (n,)) of :func:`lagged_check`."""
-    return lagged_check(res, va, alternatives, w, M, frames, cfg).spread_deg
-
-
 def adopt_lagged_alternatives(
     res: fz.FusionResult, check: LaggedCheck
 ) -> tuple[fz.FusionResult, np.ndarray]:

@@ -144,7 +144,7 @@ def _one_line_error(args, capsys) -> str:
         (
             "fit/pitch/predictions.csv",
             "dataset,time_s,v,theta_deg,split\na,1,2,3,fit\n",
-            "neither gpi_deg nor egpi_deg",
+            "no model column (none of gpi_deg, egpi_deg",
         ),
         (
             "fit/pitch/predictions.csv",
@@ -292,6 +292,47 @@ def test_fit_output_folder_gives_the_model_sections_alone(tmp_path):
     write_report(fit_dir, tmp_path / "rep2", CFG)
     text = (tmp_path / "rep2" / "report.md").read_text()
     assert "predictions.csv: not found" in text
+
+
+def test_fit_folder_report_of_a_signed_two_motor_fit(tmp_path):
+    """`fit` on a two-motor recording through zero chooses the signed two-tendon models
+    (agpi, agpi_coupled); `report FIT_DIR` shows them in every part."""
+    import pandas as pd
+
+    from i2ris_calib.simulation.two_motor import simulate_two_motor
+
+    rec = simulate_two_motor(3, n_samples=900)
+    synced = tmp_path / "synced.csv"
+    pd.DataFrame(rec.columns()).to_csv(synced, index=False)
+    fit_dir = tmp_path / "f_pitch"
+    assert main(["fit", str(synced), "--axis", "pitch", "--out", str(fit_dir)]) == 0
+    fit = json.loads((fit_dir / "fit.json").read_text())
+    choice = fit["model_choice"]
+    assert choice["input"] == "signed" and "agpi" in choice["kinds"]
+    page = write_report(fit_dir, None, CFG)
+    html, md = page.read_text(), (fit_dir / "report" / "report.md").read_text()
+    # the overview: fit's model choice per axis, the recommendation among the signed models
+    assert f"pitch: {choice['line']}" in md
+    (rec_row,) = [ln for ln in md.splitlines() if ln.startswith("| pitch± | two-tendon GPI")]
+    assert "lowest held-out RMSE" in rec_row
+    # one Fig-6 figure of the signed dataset, drawing the two-tendon models
+    figs = sorted(p.name for p in (fit_dir / "report" / "figures").iterdir())
+    assert figs == ["fig6_pitch_pitch_signed.png"]
+    assert (
+        "GPI, two-tendon GPI" in md
+        and "EGPI_C" not in md.split("## Fitted parameters")[0].split("## Model vs")[1]
+    )
+    # parameters grouped per tendon (and per side of the other motor when coupled)
+    assert "tendon + (positive input)" in html and "tendon − (|negative input|)" in html
+    if "agpi_coupled" in choice["kinds"]:
+        assert "coupling: other motor +" in html
+    tables = re.findall(r"<tbody>(.*?)</tbody>", html, flags=re.S)
+    assert tables and max(t.count("<tr>") for t in tables) <= 40
+    # accuracy rows for each fitted model, no EGPI invented
+    for kind in choice["kinds"]:
+        label = {"gpi": "GPI", "agpi": "two-tendon GPI"}.get(kind)
+        if label:
+            assert f"| {label} | held-out |" in md
 
 
 @pytest.mark.parametrize(

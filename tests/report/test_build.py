@@ -10,7 +10,14 @@ from runfolder import STAGE_FILES
 from i2ris_calib.report.build import build_document, section_count
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.report.data import RunData
-from i2ris_calib.report.document import Figure, MarkdownFragment, Note, Paragraph, Table
+from i2ris_calib.report.document import (
+    Figure,
+    MarkdownFragment,
+    Note,
+    Paragraph,
+    Table,
+    Verdict,
+)
 
 CFG = ReportConfig(figure_dpi=40)
 REAL_FIGURE_TESTS = {"test_complete_run_has_every_section_and_figure"}
@@ -183,7 +190,8 @@ def test_diagnosis_fragment_is_embedded_with_unreferenced_plots_after_it(run_dat
     run, _ = run_data
     doc = build_document(run, CFG)
     sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
-    frag, fig = sec.blocks
+    assert isinstance(sec.blocks[0], Verdict)  # the section opens with its verdict
+    frag, fig = sec.blocks[-2:]
     assert isinstance(frag, MarkdownFragment) and frag.text == run.diagnoses[0].markdown
     assert list(frag.images) == ["plots/step1_before.png"]  # the one the fragment references
     assert isinstance(fig, Figure) and fig.name == "diagnose_yaw_plots_step1_after"
@@ -197,17 +205,11 @@ def test_diagnosis_summary_without_fragment(run_data):
     paras = [b.text for b in sec.blocks if isinstance(b, Paragraph)]
     assert paras == ["Named effects, in the order added: axis_coupling."]
     base_final, steps = [b for b in sec.blocks if isinstance(b, Table)]
-    assert dict((r[0], r[1:]) for r in base_final.rows)["holdout_rmse_deg"] == ("0.91", "0.31")
-    assert steps.header == (
-        "step",
-        "effect",
-        "params",
-        "delta_bic",
-        "evidence",
-        "holdout_rmse_after_deg",
-        "holdout_rmse_before_deg",
-    )
-    assert steps.rows[0][:3] == ("1", "axis_coupling", "c_deg_per_count=0.001")
+    rows = dict((r[0], r[1:]) for r in base_final.rows)
+    assert rows["held-out RMSE (deg)"] == ("0.91", "0.31")
+    assert steps.header[:4] == ("step", "named effect", "meaning", "fitted values")
+    assert steps.rows[0][:2] == ("1", "axis_coupling")
+    assert steps.rows[0][3:5] == ("c_deg_per_count = 0.001", "0.91 → 0.31")
     assert [f.name for f in sec.blocks if isinstance(f, Figure)] == [
         "diagnose_yaw_plots_step1_before",
         "diagnose_yaw_plots_step1_after",
@@ -224,7 +226,9 @@ def test_no_named_effect_is_said(run_data):
     )
     doc = build_document(replace(run, diagnoses=(dd,)), CFG)
     sec = next(s for s in _walk(doc.sections) if s.anchor == "diagnosis-yaw")
-    assert sec.blocks[0].text.startswith("Named effects, in the order added: none")
+    assert sec.blocks[0].text.startswith("nothing missing (held-out RMSE 0.31 deg)")
+    paras = [b.text for b in sec.blocks if isinstance(b, Paragraph)]
+    assert paras[0].startswith("Named effects, in the order added: none")
     assert any(isinstance(b, Note) and "plots/gone.png" in b.text for b in sec.blocks)
 
 

@@ -141,6 +141,9 @@ class _Predicts:
     def predict(self, signals):
         return self.gain * signals.v
 
+    def eval_uncertainty(self, signals, sigma=1.0):  # predictions.csv's <model>_sd_deg
+        return np.full(np.shape(signals.v), 0.01 * sigma)
+
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_rows_from_predictions_match_the_fit_stage_accounting(seed):

@@ -21,6 +21,7 @@ from rich.progress import Progress
 from i2ris_calib import __version__
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.registry import ALL_KINDS
 from i2ris_calib.io.config_io import load_config
 from i2ris_calib.io.fit_schema import check_fit_doc
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
@@ -49,7 +50,9 @@ PREDICTION_COLUMNS = {
     "theta_deg": True,
     "split": False,
 }
-MODEL_COLUMNS = ("gpi_deg", "egpi_deg", "egpi_c_deg", "diagnosed_deg")
+#: One column per model kind a fit.json may hold (the registry): gpi_deg, egpi_deg,
+#: egpi_c_deg, agpi_deg, agpi_coupled_deg, diagnosed_deg
+MODEL_COLUMNS = tuple(f"{k}_deg" for k in ALL_KINDS)
 OPTIONAL_NUMERIC = (
     "reproj_err_px",
     *MODEL_COLUMNS,
@@ -155,7 +158,7 @@ def check_predictions(pred: pd.DataFrame, path: Path) -> None:
     """A predictions.csv has a model column and only known ``split`` values; CalibError else."""
     if not set(MODEL_COLUMNS) & set(pred.columns):
         raise CalibError(
-            f"{path}: no model column (neither gpi_deg nor egpi_deg nor egpi_c_deg); re-run 'fit'"
+            f"{path}: no model column (none of {', '.join(MODEL_COLUMNS)}); re-run 'fit'"
         )
     split = pred["split"]
     bad = split[~split.isin(SPLITS)]

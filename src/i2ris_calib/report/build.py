@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from i2ris_calib.hysteresis.models import gpi_model, i2ris_egpi_model
+from i2ris_calib.hysteresis.registry import BUILT_KINDS, model_for_kind
 from i2ris_calib.report import figures, tables, verdicts
 from i2ris_calib.report.clock import angle_rate_p95, clock_view
 from i2ris_calib.report.config import ReportConfig
@@ -28,8 +28,12 @@ from i2ris_calib.report.document import (
     Paragraph,
     Section,
     Table,
+    Verdict,
 )
 from i2ris_calib.report.recommend import CONTINUOUS_MARGIN, recommend
+from i2ris_calib.report.tables import fmt_sig
+
+MODELS_SUBTITLE = "Hysteresis models (GPI / EGPI of Yue et al., two-tendon GPI)"
 
 STAGE_INPUTS = (
     ("track", "track/angles.csv"),
@@ -68,9 +72,9 @@ def build_document(
     ]
     if run.fit_only:
         builders.append(("provenance", lambda: provenance_section(run, provenance)))
-        return _assemble(run, builders, progress, "GPI / EGPI hysteresis models (Yue et al.)")
+        return _assemble(run, builders, progress, MODELS_SUBTITLE)
     if run.diagnoses:
-        builders.append(("diagnosis", lambda: diagnosis_section(run.diagnoses)))
+        builders.append(("diagnosis", lambda: diagnosis_section(run.diagnoses, cfg)))
     if run.compensation is not None:
         builders.append(("compensation", lambda: compensation_section(run.compensation, cfg)))
     builders += [
@@ -83,7 +87,7 @@ def build_document(
         run,
         builders,
         progress,
-        "GPI / EGPI hysteresis models (Yue et al.), tracking, clock sync and provenance",
+        MODELS_SUBTITLE + ", tracking, clock sync and provenance",
     )
 
 
@@ -144,7 +148,7 @@ def overview_section(run: RunData) -> Section:
         rows = [
             (stage, label.split("/")[-1], status) for stage, label, status in rows if stage == "fit"
         ]
-    blocks: list = []
+    blocks: list = model_choice_verdicts(run.fits)
     recs = recommendation_table(run.fits)
     if recs is not None:
         blocks.append(recs)
@@ -230,6 +234,7 @@ def _headline(fits: tuple[FitData, ...]) -> Table | None:
         for k, lab in tables.FIT_MODELS
         if any(k in d.get("models", {}) for _, d in records)
     ]
+    with_ratio = any("egpi" in d.get("models", {}) for _, d in records)
     rows = []
     starred = False
     for axis, d in records:
@@ -241,19 +246,37 @@ def _headline(fits: tuple[FitData, ...]) -> Table | None:
             starred |= star
             cells.append(tables.metric_cell(value, 3, star))
         ratio = tables.gpi_egpi_ratio(d)
-        rows.append(
-            (
-                str(d.get("name", axis)),
-                *cells,
-                tables.fmt(ratio, 2) if ratio is not None else tables.DASH,
-            )
-        )
+        ratio_cell = tables.fmt(ratio, 2) if ratio is not None else tables.DASH
+        rows.append((str(d.get("name", axis)), *cells, *((ratio_cell,) if with_ratio else ())))
     return Table(
-        ("dataset", *(f"{lab} held-out RMSE (deg)" for _, lab in models), "GPI / EGPI"),
+        (
+            "dataset",
+            *(f"{lab} held-out RMSE (deg)" for _, lab in models),
+            *(("GPI / EGPI",) if with_ratio else ()),
+        ),
         tuple(rows),
-        "Headline: held-out RMSE per dataset (the paper reports GPI 4-7x worse than EGPI)."
+        "Headline: held-out RMSE per dataset"
+        + (" (the paper reports GPI 4-7x worse than EGPI)." if with_ratio else ".")
         + (f" {tables.NOT_CONVERGED} = not converged." if starred else ""),
     )
+
+
+def model_choice_verdicts(fits: tuple[FitData, ...]) -> list[Verdict]:
+    """One line per fitted axis: the model ``fit`` chose for its input and why
+    (fit.json ``model_choice.line``; nothing for an older fit.json without it)."""
+    out = []
+    for fd in fits:
+        choice = fd.fit.get("model_choice")
+        if not isinstance(choice, Mapping):
+            continue
+        line = choice.get("line")
+        if not line:
+            kinds = ", ".join(map(str, choice.get("kinds") or ())) or "?"
+            line = f"models {kinds} over the {choice.get('input', '?')} input" + (
+                f" ({choice['why']})" if choice.get("why") else ""
+            )
+        out.append(Verdict(f"{fd.axis}: {line}", "info"))
+    return out
 
 
 def _no_fit_note(run: RunData) -> Note:
@@ -357,8 +380,9 @@ def fit_figures_section(run: RunData, cfg: ReportConfig) -> Section:
 
 def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
     c = tables.rows_from_predictions(rows)
-    models = [lab for col, lab, _ in figures.MODEL_CURVES if col in rows]
-    banded = [lab for col, lab, _ in figures.MODEL_CURVES if figures.band_column(col) in rows]
+    drawn = figures.drawn_models(rows[rows["split"].astype(str) != "other"])
+    models = [lab for _, lab, _ in drawn]
+    banded = [lab for col, lab, _ in drawn if figures.band_column(col) in rows]
     band = (
         f" Shaded about {', '.join(banded)} (middle): the ±{figures.BAND_SIGMA:g} sd prediction "
         "band from the parameter covariance (FitResult.eval_uncertainty)."
@@ -379,21 +403,33 @@ def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
         if c["other"]
         else ""
     )
+    coupled = (
+        " The coupled model's angle also follows the other motor, so against this "
+        "motor's input alone it is not a single loop."
+        if any(col == "agpi_coupled_deg" for col, _, _ in drawn)
+        else ""
+    )
     return (
         f"{name}: measured angle (grey dots) and {', '.join(models) or 'no model'} "
         "predictions on the dataset's own samples; left: angle vs input, middle: angle vs "
         "time, right: model minus measured vs time. Own samples: "
         f"{c['fitted']} fitted, {c['holdout']} held out (yellow: held-out cycles), "
         f"{c['angle_missing']} not measured.{other} Lines are broken wherever samples are missing "
-        "(other direction, unmeasured frames, time gaps): no line bridges a gap." + sign + band
+        "(other direction, unmeasured frames, time gaps): no line bridges a gap."
+        + sign
+        + coupled
+        + band
     )
 
 
 def parameter_info() -> dict[str, tuple[str, str]]:
-    """Parameter name -> (unit, meaning) from the GPI and I2RIS-EGPI model declarations."""
+    """Parameter name -> (unit, meaning) from the model declarations of every built
+    kind (the registry: GPI, EGPI, EGPI_C, two-tendon GPI, with coupling); the
+    I2RIS-EGPI's meaning first where kinds share a name."""
     info: dict[str, tuple[str, str]] = {}
-    for model in (i2ris_egpi_model(), gpi_model()):
-        for p in model.parameters:
+    kinds = ("egpi", *(k for k in BUILT_KINDS if k != "egpi"))
+    for kind in kinds:
+        for p in model_for_kind(kind).parameters:
             info.setdefault(p.name, (p.unit, p.doc))
     return info
 
@@ -408,9 +444,24 @@ def parameters_section(run: RunData, info: Mapping[str, tuple[str, str]] | None 
     for fd in run.fits:
         for d in tables.fit_datasets(fd.fit):
             name = str(d.get("name", fd.axis))
-            blocks = (tables.params_table(d, info), tables.fit_info_table(d))
-            subs.append(Section(f"parameters-{_slug(fd.axis)}-{_slug(name)}", name, blocks))
+            subs.append(
+                Section(f"parameters-{_slug(fd.axis)}-{_slug(name)}", name, dataset_params(d, info))
+            )
     return Section("parameters", title, (), tuple(subs))
+
+
+def dataset_params(d: Mapping[str, Any], info: Mapping[str, tuple[str, str]]) -> tuple:
+    """The parameter tables of one dataset: one compact table per many-parameter model
+    (per tendon / coupling side, :func:`~i2ris_calib.report.tables.grouped_params_table`),
+    one table of the others side by side, then the fit diagnostics."""
+    recs = {k: r for k, r in d.get("models", {}).items() if isinstance(r, Mapping)}
+    grouped = [k for k, _ in tables.FIT_MODELS if k in recs and tables.is_grouped(recs[k])]
+    flat = [k for k, _ in tables.FIT_MODELS if k in recs and k not in grouped]
+    blocks: list = [tables.grouped_params_table(d, k, info) for k in grouped]
+    if flat or not grouped:
+        blocks.append(tables.params_table(d, info, models=flat))
+    blocks.append(tables.fit_info_table(d))
+    return tuple(blocks)
 
 
 def tracking_section(run: RunData, cfg: ReportConfig) -> Section:
@@ -526,18 +577,31 @@ def appendix_section(run: RunData) -> Section:
     return Section("appendix", "Appendix: raw stage records", tuple(blocks))
 
 
-def diagnosis_section(diagnoses: tuple[DiagnosisData, ...]) -> Section:
-    """One subsection per diagnosed axis: named effects, metrics, steps, the stage's own fragment."""
+def diagnosis_section(
+    diagnoses: tuple[DiagnosisData, ...], cfg: ReportConfig | None = None
+) -> Section:
+    """One subsection per diagnosed axis and direction: verdicts, the before/after
+    residual figure, the named effects with their fitted values, the ties, then the
+    stage's own diagnosis.md."""
     return Section(
         "diagnosis",
         "Diagnosis (model discrepancy)",
         (),
-        tuple(_diagnosis_subsection(d) for d in diagnoses),
+        tuple(_diagnosis_subsection(d, cfg) for d in diagnoses),
     )
 
 
-def _diagnosis_subsection(dd: DiagnosisData) -> Section:
-    """The stage's own diagnosis.md when present (it is the complete account), else a summary."""
+def _diagnosis_subsection(dd: DiagnosisData, cfg: ReportConfig | None = None) -> Section:
+    """Verdict, before/after residual figure, named effects with their fitted values,
+    the alternatives left open (with the experiment that would separate them), then
+    the stage's own diagnosis.md (the complete account) and any plot it does not show."""
+    cfg = cfg or ReportConfig()
+    diag = dd.diagnosis
+    blocks: list = diagnosis_verdicts(diag)
+    before_after = _before_after(dd, cfg)
+    if before_after is not None:
+        blocks.append(before_after)
+    blocks += _diagnosis_summary(diag)
     fig_names = {
         rel: f"diagnose_{_slug(dd.axis)}_{_slug(rel.removesuffix('.png'))}" for rel in dd.images
     }
@@ -545,9 +609,8 @@ def _diagnosis_subsection(dd: DiagnosisData) -> Section:
     if dd.markdown:
         referenced = {rel for rel in dd.images if f"]({rel})" in dd.markdown}
         frag_images = {rel: (fig_names[rel], dd.images[rel]) for rel in referenced}
-        blocks: list = [MarkdownFragment(dd.markdown, frag_images)]
-    else:
-        blocks = _diagnosis_summary(dd.diagnosis)
+        blocks.append(Paragraph("The diagnosis stage's own account (diagnosis.md):"))
+        blocks.append(MarkdownFragment(dd.markdown, frag_images))
     for rel, png in dd.images.items():
         if rel not in referenced:
             blocks.append(Figure(fig_names[rel], png, f"{dd.axis}: {rel}"))
@@ -558,8 +621,240 @@ def _diagnosis_subsection(dd: DiagnosisData) -> Section:
     return Section(f"diagnosis-{_slug(dd.axis)}", dd.axis, tuple(blocks))
 
 
+def _rmse(block: Any) -> float | None:
+    """Held-out RMSE (deg) of a diagnosis.json ``baseline`` / ``final`` object."""
+    if not isinstance(block, Mapping):
+        return None
+    return tables._finite(block.get("holdout_rmse_deg"))
+
+
+def _open_alternatives(diag: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    """The final ``not_excluded`` alternatives (diagnosis.json), as mappings."""
+    alts = diag.get("not_excluded")
+    return [a for a in alts if isinstance(a, Mapping)] if isinstance(alts, list) else []
+
+
+def diagnosis_verdicts(diag: Mapping[str, Any]) -> list[Verdict]:
+    """One-line judgements of a diagnosis.json: what was named (held-out RMSE start ->
+    final), what the data cannot tell apart, whether the starting models agree."""
+    named = [str(x) for x in diag.get("named_effects") or []]
+    b, f = _rmse(diag.get("baseline")), _rmse(diag.get("final"))
+    start = diag.get("start_model") or diag.get("start")
+    who = f"{diag.get('dataset')}: " if diag.get("dataset") else ""
+    rmse = (
+        f" (held-out RMSE {fmt_sig(b, 3)} → {fmt_sig(f, 3)} deg)"
+        if b is not None and f is not None
+        else ""
+    )
+    if named:
+        text = f"{who}named {', then '.join(named)}{rmse}" + (
+            f", starting from {start}" if start else ""
+        )
+        out = [Verdict(text + ".", "ok")]
+    else:
+        held = f" (held-out RMSE {fmt_sig(f, 3)} deg)" if f is not None else ""
+        text = (
+            f"{who}nothing missing{held}: no candidate effect improved the held-out error "
+            "by more than noise explains" + (f" (start: {start})" if start else "")
+        )
+        out = [Verdict(text + ".", "ok")]
+    open_ = list(dict.fromkeys(str(a.get("effect")) for a in _open_alternatives(diag)))
+    if open_:
+        out.append(
+            Verdict(
+                f"Not told apart from the final model: {', '.join(open_)} (the held-out "
+                "cycles cannot exclude it; see the experiment that would separate it below).",
+                "warn",
+            )
+        )
+    paths = diag.get("paths")
+    if isinstance(paths, Mapping) and len(paths) > 1:
+        answers = {
+            tuple(p.get("named_effects") or ()) for p in paths.values() if isinstance(p, Mapping)
+        }
+        starts = " and ".join(map(str, paths))
+        agree = len(answers) == 1
+        out.append(
+            Verdict(
+                f"The {starts} starts "
+                + ("agree." if agree else f"disagree (answer from {start})."),
+                "ok" if agree else "warn",
+            )
+        )
+    if diag.get("reconciliation"):
+        out.append(Verdict(f"Starting models: {diag['reconciliation']}.", "info"))
+    return out
+
+
+def _before_after(dd: DiagnosisData, cfg: ReportConfig) -> Figure | None:
+    """The starting model's residual figure beside the final model's (diagnosis.json
+    ``figures``: the first and the last), from the stage's own PNGs."""
+    figs = dd.diagnosis.get("figures")
+    figs = [x for x in figs if isinstance(x, str)] if isinstance(figs, list) else []
+    if not figs or figs[0] not in dd.images:
+        return None
+    diag = dd.diagnosis
+    b, f = _rmse(diag.get("baseline")), _rmse(diag.get("final"))
+    named = [str(x) for x in diag.get("named_effects") or []]
+    start = str(diag.get("start_model") or "starting model")
+    b_txt = f", held-out RMSE {fmt_sig(b, 3)} deg" if b is not None else ""
+    f_txt = f", held-out RMSE {fmt_sig(f, 3)} deg" if f is not None else ""
+    after = figs[-1] if len(figs) > 1 and figs[-1] in dd.images else None
+    if after is None and dd.markdown and f"]({figs[0]})" in dd.markdown:
+        return None  # nothing added: diagnosis.md below shows the one residual figure
+    if after is None:
+        png = figures.before_after_png(
+            dd.images[figs[0]], None, (f"{start} (nothing added){b_txt}", ""), cfg.figure_dpi
+        )
+        caption = (
+            f"{dd.axis}: residual of the starting model {start}, which is also the final "
+            "model (nothing was added): residual vs time (held-out cycles shaded), vs "
+            "input per branch, vs input rate, and the angle vs input."
+        )
+    else:
+        png = figures.before_after_png(
+            dd.images[figs[0]],
+            dd.images[after],
+            (f"before: {start}{b_txt}", f"after: {' + '.join([start, *named])}{f_txt}"),
+            cfg.figure_dpi,
+        )
+        caption = (
+            f"{dd.axis}: residual before (left, the starting model {start}) and after "
+            f"(right, with {', '.join(named) or 'the effects'} added), each: residual vs time "
+            "(held-out cycles shaded), vs input per branch, vs input rate, and the angle vs "
+            f"input ({figs[0]}, {after})."
+        )
+    return Figure(f"diagnose_{_slug(dd.axis)}_before_after", png, caption)
+
+
+def _values(params: Any) -> str:
+    """``name = value`` pairs of fitted effect parameters (3 significant digits)."""
+    if not isinstance(params, Mapping) or not params:
+        return tables.DASH
+    return ", ".join(f"{k} = {fmt_sig(v, 3)}" for k, v in params.items())
+
+
+def named_effects_table(steps: list) -> Table | None:
+    """One row per named effect (diagnosis.json ``steps``): its meaning, fitted values,
+    held-out RMSE before -> after, the evidence (z, BIC change) and the step's verdict."""
+    rows = []
+    for i, st in enumerate(steps):
+        if not isinstance(st, Mapping) or "effect" not in st:
+            continue
+        ev = st.get("evidence") if isinstance(st.get("evidence"), Mapping) else {}
+        before = fmt_sig(st.get("holdout_rmse_before_deg"), 3)
+        after = fmt_sig(st.get("holdout_rmse_after_deg"), 3)
+        rows.append(
+            (
+                str(i + 1),
+                str(st["effect"]),
+                _clip(str(st.get("meaning") or tables.DASH), 120),
+                _values(st.get("params")),
+                f"{before} → {after}",
+                fmt_sig(ev.get("z"), 2),
+                fmt_sig(st.get("delta_bic"), 3),
+            )
+        )
+    if not rows:
+        return None
+    return Table(
+        (
+            "step",
+            "named effect",
+            "meaning",
+            "fitted values",
+            "held-out RMSE (deg)",
+            "z",
+            "BIC change",
+        ),
+        tuple(rows),
+        "Named effects in the order added, with their fitted values. z = held-out "
+        "sum-of-squares reduction over its standard deviation (large = the effect is "
+        "real); BIC change < 0 favours the effect.",
+        align=("r", "l", "l", "l", "r", "r", "r"),
+    )
+
+
+def ties_table(diag: Mapping[str, Any]) -> Table | None:
+    """The alternatives the held-out cycles could not exclude: at each step (against
+    the effect named there) and against the final model (``not_excluded``), with their
+    fitted values, how much they move the angle, z and the separating experiment."""
+    rows: list[tuple[str, ...]] = []
+    seen: set[tuple[str, str]] = set()
+
+    def add(where: str, a: Mapping[str, Any]) -> None:
+        key = (where, str(a.get("effect")))
+        if key in seen or a.get("excluded"):
+            return
+        seen.add(key)
+        rows.append(
+            (
+                where,
+                str(a.get("effect", "?")),
+                _values(a.get("params")),
+                fmt_sig(a.get("effect_rms_deg"), 2),
+                fmt_sig(a.get("z"), 2),
+                _clip(str(a.get("experiment") or "none known"), 240),
+            )
+        )
+
+    steps = diag.get("steps") if isinstance(diag.get("steps"), list) else []
+    for i, st in enumerate(steps):
+        if isinstance(st, Mapping):
+            for a in st.get("alternatives") or []:
+                if isinstance(a, Mapping):
+                    add(f"step {i + 1} (vs {st.get('effect', '?')})", a)
+    for a in _open_alternatives(diag):
+        where = "final model" + (f" ({a['start']} start)" if a.get("start") else "")
+        add(where, a)
+    if not rows:
+        return None
+    return Table(
+        (
+            "against",
+            "not excluded",
+            "its fitted values",
+            "moves the angle (deg RMS)",
+            "z",
+            "experiment that would separate them",
+        ),
+        tuple(rows[:40]),
+        "Ties: effects the held-out cycles could not tell from the named one (or from the "
+        "final model): z below the significance level. Their fitted values fit as well; "
+        "the last column is a recording that would separate them.",
+        align=("l", "l", "l", "r", "r", "l"),
+    )
+
+
+def paths_table(diag: Mapping[str, Any]) -> Table | None:
+    """Each starting model's answer (``diagnose --start auto`` with several starts)."""
+    paths = diag.get("paths")
+    if not isinstance(paths, Mapping) or len(paths) < 2:
+        return None
+    rows = []
+    for kind, p in paths.items():
+        if not isinstance(p, Mapping):
+            continue
+        mark = " (answer)" if kind == diag.get("start_model") else ""
+        rows.append(
+            (
+                f"{kind}{mark}",
+                ", ".join(map(str, p.get("named_effects") or [])) or "nothing",
+                f"{fmt_sig(_rmse(p.get('baseline')), 3)} → {fmt_sig(_rmse(p.get('final')), 3)}",
+                _clip(str(p.get("summary") or ""), 240),
+            )
+        )
+    return Table(
+        ("start", "named", "held-out RMSE (deg)", "verdict"),
+        tuple(rows),
+        "Every starting model's path (diagnose --start auto).",
+        align=("l", "l", "r", "l"),
+    )
+
+
 def _diagnosis_summary(diag: Mapping[str, Any]) -> list:
-    """Named effects, baseline vs final metrics and a compact steps table from diagnosis.json."""
+    """Named effects, start vs final metrics, the named effects' table (else the raw
+    steps), the ties and the starting models' paths, from diagnosis.json."""
     blocks: list = []
     named = diag.get("named_effects")
     if isinstance(named, list):
@@ -572,11 +867,19 @@ def _diagnosis_summary(diag: Mapping[str, Any]) -> list:
     metric_rows = _baseline_final_rows(diag)
     if metric_rows:
         blocks.append(
-            Table(("metric", "baseline", "final"), tuple(metric_rows), "Baseline vs final model.")
+            Table(
+                ("metric", "start", "final"),
+                tuple(metric_rows),
+                "Starting vs final model (RMSE in deg; BIC: lower is better; free parameters).",
+            )
         )
     steps = diag.get("steps")
     if isinstance(steps, list) and steps:
-        blocks.append(_steps_table(steps))
+        named_table = named_effects_table(steps)
+        blocks.append(named_table if named_table is not None else _steps_table(steps))
+    for table in (ties_table(diag), paths_table(diag)):
+        if table is not None:
+            blocks.append(table)
     return blocks
 
 
@@ -587,7 +890,24 @@ def _baseline_final_rows(diag: Mapping[str, Any]) -> list[tuple[str, str, str]]:
     b = dict(tables.flatten(base)) if isinstance(base, Mapping) else {}
     f = dict(tables.flatten(final)) if isinstance(final, Mapping) else {}
     keys = list(b) + [k for k in f if k not in b]
-    return [(k, tables.fmt(b.get(k)), tables.fmt(f.get(k))) for k in keys]
+    return [(METRIC_LABELS.get(k, k), _metric(b.get(k)), _metric(f.get(k))) for k in keys]
+
+
+METRIC_LABELS = {
+    "fit_rmse_deg": "fitted RMSE (deg)",
+    "holdout_rmse_deg": "held-out RMSE (deg)",
+    "bic": "BIC",
+    "n_free": "free parameters",
+}
+
+
+def _metric(value: Any) -> str:
+    """A diagnosis metric: whole numbers as they are, others to 4 significant digits."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return fmt_sig(value, 4)
+    return tables.fmt(value)
 
 
 def _step_row(step: Any) -> dict[str, str]:
@@ -662,48 +982,210 @@ def _slug(text: str) -> str:
     return re.sub(r"[^a-z0-9_]+", "_", text.lower()).strip("_") or "x"
 
 
+COMPENSATION_FLAGS = (
+    ("above_range", "target above the model's reach: clipped"),
+    ("below_range", "target below the model's reach: clipped"),
+    ("rate_limited", "command held back by the rate limit"),
+    ("output_step", "the model's output steps here (nearest side taken)"),
+    ("spike_removed", "an up-and-back spike removed"),
+    ("within_delay", "within the model's delay (cannot be reached yet)"),
+)
+"""compensate.json ``flags`` in table order, with what each means (docs/compensate.md)."""
+
+
+def _axes_doc(comp: CompensationData) -> dict[str, Mapping[str, Any]]:
+    axes = comp.doc.get("axes")
+    if not isinstance(axes, Mapping):
+        return {}
+    return {str(k): v for k, v in axes.items() if isinstance(v, Mapping)}
+
+
+def _model_name(kind: Any) -> str:
+    return dict(tables.FIT_MODELS).get(str(kind), str(kind))
+
+
+def compensation_verdicts(axes: Mapping[str, Mapping[str, Any]]) -> list[Verdict]:
+    """Per axis: the model and why, the predicted error, unreachable samples; the rate
+    limit and the fastest command; the entry ramp; spikes left; the stage's warnings."""
+    out = []
+    for axis, a in axes.items():
+        name = a.get("dataset", axis)
+        why = "forced by --model" if a.get("model_choice") == "--model" else "best of the ranking"
+        n_bad, n = a.get("n_unreachable"), a.get("n_samples")
+        main = (
+            f"{name}: {_model_name(a.get('model', '?'))} ({why}): predicted RMSE "
+            f"{fmt_sig(a.get('rmse_deg'), 2, pad=True)} deg, max "
+            f"{fmt_sig(a.get('max_abs_err_deg'), 2, pad=True)} deg"
+        )
+        if n is not None:
+            main += f"; {n_bad or 0} of {n} target samples unreachable"
+        out.append(Verdict(main + ".", "warn" if n_bad else "ok"))
+        rate, seen = tables._finite(a.get("max_counts_per_s")), a.get("max_command_rate_per_s")
+        if rate is None:
+            out.append(Verdict(f"{name}: no rate limit; the commands reach "
+                               f"{fmt_sig(seen, 3)} counts/s.", "warn"))  # fmt: skip
+        else:
+            over = tables._finite(seen) is not None and float(seen) > rate * (1 + 1e-6)
+            out.append(
+                Verdict(
+                    f"{name}: rate limit {fmt_sig(rate, 4)} counts/s "
+                    f"({a.get('max_counts_per_s_source', '?')}); the commands reach "
+                    f"{fmt_sig(seen, 4)} counts/s" + (" (above it)." if over else "."),
+                    "warn" if over else "ok",
+                )
+            )
+        if a.get("n_entry"):
+            out.append(
+                Verdict(
+                    f"{name}: entry ramp of {a['n_entry']} samples "
+                    f"({fmt_sig(a.get('entry_s'), 3)} s) from {fmt_sig(a.get('start_counts'), 6)} "
+                    f"counts ({a.get('start_counts_source', '?')}) before the target's first "
+                    "sample.",
+                    "info",
+                )
+            )
+        if a.get("spikes_left"):
+            out.append(
+                Verdict(f"{name}: {a['spikes_left']} output spike(s) left in the commands.", "warn")
+            )
+        for w in a.get("warnings") or []:
+            out.append(Verdict(str(w), "warn"))
+    return out
+
+
+def _flag_counts(comp: CompensationData, axis: str, two: bool) -> dict[str, int]:
+    """Flag counts of ``axis``: compensate.json ``flags``, else counted in COMMANDS.csv."""
+    a = _axes_doc(comp).get(axis, {})
+    if isinstance(a.get("flags"), Mapping):
+        counts = {str(k): int(v) for k, v in a["flags"].items() if tables._finite(v) is not None}
+    elif "flags" in comp.commands:
+        per = figures.axis_flags(comp.commands["flags"], axis, two)
+        counts = {f: sum(f in x for x in per) for f, _ in COMPENSATION_FLAGS}
+    else:
+        counts = {}
+    if a.get("n_entry") is not None:
+        counts["entry"] = int(a["n_entry"])
+    return counts
+
+
+def flag_table(comp: CompensationData, axes: list[str]) -> Table:
+    """Flag counts per axis (rows: every flag; ``entry`` = the ramp's rows)."""
+    counts = {a: _flag_counts(comp, a, len(axes) > 1) for a in axes}
+    known = [f for f, _ in COMPENSATION_FLAGS]
+    extra = sorted({f for c in counts.values() for f in c} - set(known) - {"entry"})
+    meaning = dict(COMPENSATION_FLAGS) | {"entry": "entry ramp before the target's first sample"}
+    rows = [
+        (f, meaning.get(f, ""), *(tables.fmt(counts[a].get(f)) for a in axes))
+        for f in (*known, *extra, "entry")
+        if any(f in counts[a] for a in axes)
+    ]
+    return Table(
+        ("flag", "meaning", *(str(_axes_doc(comp).get(a, {}).get("dataset", a)) for a in axes)),
+        tuple(rows),
+        "Samples per flag (COMMANDS.csv flags column, compensate.json flags); a sample may "
+        "carry several flags.",
+        align=("l", "l", *("r" * len(axes))),
+    )
+
+
+def ranking_table(axes: Mapping[str, Mapping[str, Any]]) -> Table | None:
+    """The models that could serve the target, best first (compensate.json ``ranking``)."""
+    rows = []
+    for axis, a in axes.items():
+        for r in (a.get("ranking") or [])[:10]:
+            if not isinstance(r, Mapping):
+                continue
+            rows.append(
+                (
+                    str(a.get("dataset", axis)),
+                    tables.fmt(r.get("rank")),
+                    _model_name(r.get("model")) + (" (chosen)" if r.get("chosen") else ""),
+                    fmt_sig(r.get("predicted_rmse_deg"), 2, pad=True),
+                    fmt_sig(r.get("holdout_rmse_deg"), 2, pad=True),
+                    fmt_sig(r.get("score_deg"), 2, pad=True),
+                    tables.fmt(r.get("output_steps")),
+                    tables.fmt(r.get("continuous")),
+                )
+            )
+    if not rows:
+        return None
+    return Table(
+        (
+            "dataset",
+            "rank",
+            "model",
+            "predicted RMSE on the target (deg)",
+            "held-out RMSE of the fit (deg)",
+            "score (deg)",
+            "output steps",
+            "continuous",
+        ),
+        tuple(rows[:10]),
+        "Model ranking: models whose output steps where the target passes (more than "
+        "0.5 % of the samples) after the continuous ones, then by the score (the model's "
+        "own error on this target and its held-out fit error in quadrature).",
+        align=("l", "r", "l", "r", "r", "r", "r", "l"),
+    )
+
+
 def compensation_section(comp: CompensationData, cfg: ReportConfig) -> Section:
-    """Feedforward compensation (``[compensate] target``): commands from the inverse of
-    the fitted model, the angle the model predicts for them, unreachable samples."""
-    axes_doc = comp.doc.get("axes", {})
+    """Feedforward compensation (``[compensate] target``): verdicts, target vs predicted
+    and the commands with the rate limit and every flag, flag counts, the ranking."""
+    axes_doc = _axes_doc(comp)
     rows = []
     for axis, a in axes_doc.items():
-        un = a.get("unreachable", {})
+        un = a.get("unreachable", {}) if isinstance(a.get("unreachable"), Mapping) else {}
         why = ", ".join(f"{k} {v}" for k, v in un.items() if v) or "-"
         rows.append(
             (
                 axis,
                 str(a.get("dataset", "?")),
-                str(a.get("model", "?")),
-                tables.fmt(a.get("rmse_deg"), 3),
-                tables.fmt(a.get("max_abs_err_deg"), 3),
+                _model_name(a.get("model", "?")),
+                fmt_sig(a.get("rmse_deg"), 3),
+                fmt_sig(a.get("max_abs_err_deg"), 3),
                 f"{a.get('n_unreachable', 0)} of {a.get('n_samples', 0)} ({why})",
             )
         )
-    blocks: list = [
-        Paragraph(
-            "Motor commands that make the fitted model follow the target angle (exact "
-            "inversion of the stateful model, sample by sample; docs/compensate.md). The "
-            "error is the model's, not a measurement: run the commands on the robot and "
-            "track the result to measure the achieved angle."
-        ),
-        Table(
-            ("axis", "dataset", "model", "RMSE (deg)", "max |error| (deg)", "unreachable"),
-            tuple(rows),
-            "Predicted angle vs target for the commands in compensate/commands.csv.",
-        ),
-    ]
+    blocks: list = compensation_verdicts(axes_doc)
     axes = [a for a in axes_doc if f"enc_{a}" in comp.commands]
     if axes:
         png = figures.compensation_figure_png(
-            comp.commands, comp.target, axes, dpi=cfg.figure_dpi, max_points=cfg.max_plot_points
+            comp.commands,
+            comp.target,
+            axes,
+            axes_doc,
+            dpi=cfg.figure_dpi,
+            max_points=cfg.max_plot_points,
         )
         blocks.append(
             Figure(
                 "compensation",
                 png,
-                "Target and predicted angle, their difference with unreachable samples "
-                "marked x, and the motor command over time.",
+                "Per axis, top to bottom: the target (grey) and the angle the model predicts "
+                "for the commands; their difference with every flagged sample marked (count "
+                "in the legend); the motor command within the fitted input range (dotted); "
+                "the command's rate (counts/s, step to step) with the rate limit (dashed). "
+                "Grey band: the entry ramp before the target's first sample.",
             )
         )
+    blocks.append(
+        Table(
+            ("axis", "dataset", "model", "RMSE (deg)", "max |error| (deg)", "unreachable"),
+            tuple(rows),
+            "Predicted angle vs target for the commands in compensate/commands.csv.",
+        )
+    )
+    if axes:
+        blocks.append(flag_table(comp, axes))
+    ranking = ranking_table(axes_doc)
+    if ranking is not None:
+        blocks.append(ranking)
+    blocks.append(
+        Paragraph(
+            "Motor commands that make the fitted model follow the target angle (exact "
+            "inversion of the stateful model, sample by sample; docs/compensate.md). The "
+            "error is the model's, not a measurement: run the commands on the robot and "
+            "track the result to measure the achieved angle."
+        )
+    )
     return Section("compensation", "Feedforward compensation", tuple(blocks))

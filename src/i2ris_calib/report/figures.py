@@ -20,6 +20,8 @@ GPI_COLOR = "#D55E00"  # vermillion (Okabe-Ito, colour-blind safe)
 EGPI_COLOR = "#0072B2"  # blue
 EGPI_C_COLOR = "#CC79A7"  # reddish purple
 DIAGNOSED_COLOR = "#009E73"  # bluish green
+AGPI_COLOR = "#56B4E9"  # sky blue
+AGPI_COUPLED_COLOR = "#E69F00"  # orange
 HOLDOUT_COLOR = "#F0E442"
 OTHER_COLOR = "0.6"
 GAP_FACTOR = 1.5
@@ -80,6 +82,8 @@ MODEL_CURVES = (
     ("gpi_deg", "GPI", GPI_COLOR),
     ("egpi_deg", "EGPI", EGPI_COLOR),
     ("egpi_c_deg", "EGPI_C", EGPI_C_COLOR),
+    ("agpi_deg", "two-tendon GPI", AGPI_COLOR),
+    ("agpi_coupled_deg", "two-tendon GPI + coupling", AGPI_COUPLED_COLOR),
     ("diagnosed_deg", "EGPI + effects", DIAGNOSED_COLOR),
 )
 """(predictions.csv column, legend label, colour) of every model curve, drawing order."""
@@ -87,6 +91,13 @@ MODEL_CURVES = (
 
 def _model_columns(pred: pd.DataFrame) -> list[tuple[str, str, str]]:
     """(column, label, colour) for each model column present with finite values."""
+    return drawn_models(pred)
+
+
+def drawn_models(pred: pd.DataFrame) -> list[tuple[str, str, str]]:
+    """(column, label, colour) of the model curves a Fig-6 panel draws for these rows:
+    every :data:`MODEL_CURVES` column present with a finite value (a signed fit's
+    predictions.csv has empty ``egpi_deg`` columns: not drawn, not named)."""
     return [
         (col, label, color)
         for col, label, color in MODEL_CURVES
@@ -502,51 +513,162 @@ def synced_figure_png(synced: pd.DataFrame, dpi: int = 100, max_points: int = 20
     return figure_png(fig, dpi)
 
 
+FLAG_STYLES = {
+    "above_range": ("^", "#D55E00"),
+    "below_range": ("v", "#D55E00"),
+    "rate_limited": ("|", "#E69F00"),
+    "output_step": ("D", "#CC79A7"),
+    "spike_removed": ("s", "#009E73"),
+    "within_delay": ("o", "0.5"),
+}
+"""Marker and colour of each compensation flag (COMMANDS.csv ``flags``; ``entry`` is shaded)."""
+
+
+def axis_flags(flags: pd.Series, axis: str, two_axes: bool) -> list[set[str]]:
+    """The flags of ``axis`` per row of COMMANDS.csv's ``flags`` column (``;``-joined;
+    ``axis:flag`` when both axes were compensated; empty or NaN: none)."""
+    out = []
+    for cell in flags.fillna("").astype(str):
+        names = set()
+        for f in filter(None, cell.split(";")):
+            a, sep, name = f.partition(":")
+            if not sep:
+                names.add(f)
+            elif a == axis or not two_axes:
+                names.add(name)
+        out.append(names)
+    return out
+
+
+def aligned_target(commands: pd.DataFrame, target: pd.DataFrame | None, axis: str) -> np.ndarray:
+    """The target angle of ``axis`` on COMMANDS.csv's rows (NaN on the entry rows
+    before the target's first sample): the target's rows are the commands' last rows."""
+    out = np.full(len(commands), np.nan)
+    col = f"{axis}_deg"
+    if target is None or col not in target or len(target) > len(commands):
+        return out
+    out[len(commands) - len(target) :] = target[col].to_numpy(dtype=float)
+    return out
+
+
 def compensation_figure_png(
     commands: pd.DataFrame,
     target: pd.DataFrame | None,
     axes: list[str],
+    axes_doc: dict | None = None,
     dpi: int = 100,
     max_points: int = 20000,
 ) -> bytes:
-    """Feedforward compensation per axis: target and predicted angle (top), error
-    (middle), motor command (bottom); unreachable samples marked.
+    """Feedforward compensation, one column per axis: target and predicted angle,
+    their difference with every flagged sample marked, the motor command within the
+    fitted input range, and the command's rate against the rate limit.
 
     Parameters
     ----------
     commands : DataFrame
         compensate/commands.csv: ``time_s`` (s), ``enc_<axis>`` (counts),
-        ``predicted_<axis>_deg`` (deg), ``reachable`` (0/1).
+        ``predicted_<axis>_deg`` (deg), ``reachable`` (0/1), ``flags`` (optional).
+        The entry ramp's rows (flag ``entry``) come before the target's first time.
     target : DataFrame or None
-        The target (``time_s``, ``<axis>_deg``), same times as ``commands``.
+        The target (``time_s``, ``<axis>_deg``): the commands' last rows.
     axes : list of str
         Axes to draw (``"yaw"``, ``"pitch"``).
+    axes_doc : mapping, optional
+        compensate.json ``axes``: ``max_counts_per_s`` (the rate limit drawn; None: no
+        limit), ``input_range_counts``, ``dataset`` (a ``-`` dataset's range is negated).
+
+    Returns
+    -------
+    bytes
+        PNG image, 6.5 in wide per axis x 8 in.
     """
-    fig = _new_figure(7.0 * len(axes), 6.0)
-    grid = fig.subplots(3, len(axes), sharex=True, squeeze=False)
+    axes_doc = axes_doc or {}
+    fig = _new_figure(max(6.5 * len(axes), 8.0), 8.0)
+    grid = fig.subplots(4, len(axes), sharex=True, squeeze=False)
     step = thinning_step(len(commands), max_points)
-    t = commands["time_s"].to_numpy()[::step]
-    bad = commands["reachable"].to_numpy()[::step] == 0
+    t_all = commands["time_s"].to_numpy(dtype=float)
+    t = t_all[::step]
+    flags_col = commands["flags"] if "flags" in commands else pd.Series([""] * len(commands))
     for j, axis in enumerate(axes):
-        ax_a, ax_e, ax_c = grid[0, j], grid[1, j], grid[2, j]
-        pred = commands[f"predicted_{axis}_deg"].to_numpy()[::step]
-        if target is not None and f"{axis}_deg" in target:
-            tgt = target[f"{axis}_deg"].to_numpy()[::step]
-            ax_a.plot(t, tgt, "-", lw=1.2, color=MEASURED_COLOR, label="target")
-            ax_e.plot(t, pred - tgt, "-", lw=0.8, color="0.2")
-            if bad.any():
-                ax_e.plot(
-                    t[bad], (pred - tgt)[bad], "x", ms=3, color="tab:red", label="unreachable"
-                )
-                ax_e.legend(loc="upper right", fontsize=7)
-        ax_a.plot(t, pred, "-", lw=0.9, color="tab:blue", label="predicted (model)")
+        doc = axes_doc.get(axis, {}) if isinstance(axes_doc.get(axis), dict) else {}
+        ax_a, ax_e, ax_c, ax_r = grid[:, j]
+        flags = axis_flags(flags_col, axis, len(axes) > 1)
+        entry = np.array(["entry" in f for f in flags])
+        spans = holdout_spans(t_all, entry)
+        pred_all = commands[f"predicted_{axis}_deg"].to_numpy(dtype=float)
+        tgt_all = aligned_target(commands, target, axis)
+        ax_a.plot(t, tgt_all[::step], "-", lw=2.0, color=MEASURED_COLOR, alpha=0.7, label="target")
+        ax_a.plot(t, pred_all[::step], "-", lw=0.9, color=EGPI_COLOR, label="predicted (model)")
+        err = pred_all - tgt_all
+        ax_e.plot(t, err[::step], "-", lw=0.8, color="0.2")
+        enc = commands[f"enc_{axis}"].to_numpy(dtype=float)
+        ax_c.plot(t, enc[::step], "-", lw=0.9, color="0.1", label="command")
+        dt = np.diff(t_all)
+        step_rate = np.r_[0.0, np.abs(np.diff(enc)) / np.where(dt > 0, dt, np.nan)][: enc.size]
+        ax_r.plot(t, step_rate[::step], "-", lw=0.8, color="0.2", label="|Δcommand| / Δt")
+        for name, (marker, color) in FLAG_STYLES.items():
+            on = np.flatnonzero([name in f for f in flags])[::step]
+            if not on.size:
+                continue
+            label = f"{name} ({int(sum(name in f for f in flags))})"
+            y = err if np.isfinite(err[on]).any() else pred_all
+            ax_e.plot(t_all[on], y[on], marker, ms=4, color=color, label=label, ls="none")
+            if name == "rate_limited":
+                ax_r.plot(t_all[on], step_rate[on], marker, ms=4, color=color, label=label,
+                          ls="none")  # fmt: skip
+        limit = doc.get("max_counts_per_s")
+        if limit is not None and np.isfinite(float(limit)):
+            ax_r.axhline(float(limit), color="#D55E00", ls="--", lw=1.2,
+                         label=f"rate limit {float(limit):.5g} counts/s")  # fmt: skip
+        else:
+            ax_r.text(0.5, 0.85, "no rate limit", ha="center", transform=ax_r.transAxes)
+        rng = doc.get("input_range_counts")
+        if isinstance(rng, list) and len(rng) == 2:
+            sign = -1.0 if str(doc.get("dataset", "")).endswith("-") else 1.0
+            for k, v in enumerate(sorted(sign * float(x) for x in rng)):
+                ax_c.axhline(v, color="0.5", ls=":", lw=1.0,
+                             label="fitted input range" if k == 0 else None)  # fmt: skip
+        for ax in (ax_a, ax_e, ax_c, ax_r):
+            _shade(ax, spans, OTHER_COLOR, 0.25, "entry ramp")
+            ax.grid(True, lw=0.4, alpha=0.5)
+        ax_e.axhline(0.0, color="0.2", lw=0.5)
+        label = doc.get("dataset", axis)
+        model = doc.get("model")
+        ax_a.set_title(f"{label}: target and predicted" + (f" ({model})" if model else ""))
         ax_a.set_ylabel(f"{axis} angle (deg)")
-        ax_a.legend(loc="upper right", fontsize=7)
-        ax_a.set_title(f"{axis}: feedforward compensation")
-        ax_e.set_ylabel("predicted - target (deg)")
-        ax_c.plot(t, commands[f"enc_{axis}"].to_numpy()[::step], "-", lw=0.9, color="0.1")
-        ax_c.set_ylabel(f"command enc_{axis} (counts)")
-        ax_c.set_xlabel("time (s)")
+        ax_e.set_ylabel("predicted − target (deg)")
+        ax_e.set_title("difference; flagged samples marked")
+        ax_c.set_ylabel(f"enc_{axis} (counts)")
+        ax_c.set_title("motor command")
+        ax_r.set_ylabel("command rate (counts/s)")
+        ax_r.set_title("command rate and the rate limit")
+        ax_r.set_xlabel("time (s)")
+        for ax in (ax_a, ax_e, ax_c, ax_r):
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(loc="upper right", fontsize=7, ncol=2)
+    return figure_png(fig, dpi)
+
+
+def before_after_png(
+    before: bytes, after: bytes | None, titles: tuple[str, str], dpi: int = 100
+) -> bytes:
+    """Two residual figures of ``diagnose`` side by side (before: the starting model,
+    after: the final one), or the one when nothing was added (``after`` None).
+
+    Returns
+    -------
+    bytes
+        PNG image, 13 x 4.8 in (7 x 5 in for one).
+    """
+    import matplotlib.image as mpimg
+
+    pngs = [before] if after is None else [before, after]
+    fig = _new_figure(7.0, 5.0) if after is None else _new_figure(13.0, 4.8)
+    axs = fig.subplots(1, len(pngs), squeeze=False)[0]
+    for ax, png, title in zip(axs, pngs, titles, strict=False):
+        ax.imshow(mpimg.imread(io.BytesIO(png), format="png"), interpolation="antialiased")
+        ax.set_title(title, fontsize=10)
+        ax.set_axis_off()
     return figure_png(fig, dpi)
 
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info
 from i2ris_calib.report.tables import (
     FIT_MODELS,
     PROFILED_PARAMS,
@@ -138,6 +139,11 @@ def recommend(d: Mapping[str, Any], pred: pd.DataFrame | None = None) -> Recomme
         why.append(
             f"all {n_free} fitted parameters identified"
             + (f" ({', '.join(profiled)} profiled)" if profiled else "")
+        )
+    info = kind_info(best) if best in ALL_KINDS else None
+    if info is not None and info.coupled:
+        why.append(
+            "it also reads the other motor's input: predict and compensate both axes together"
         )
     if "gpi" in cands and best != "gpi":
         ratio = cands["gpi"] / cands[best] if cands[best] > 0 else float("nan")

@@ -440,7 +440,9 @@ PROFILED_PARAMS = ("v_f",)
 
 
 def params_table(
-    dataset: Mapping[str, Any], info: Mapping[str, tuple[str, str]] | None = None
+    dataset: Mapping[str, Any],
+    info: Mapping[str, tuple[str, str]] | None = None,
+    models: Iterable[str] | None = None,
 ) -> Table:
     """Fitted parameters as ``value ± stderr``, one column per model.
 
@@ -454,11 +456,15 @@ def params_table(
 
     Each cell is :func:`param_cell`: digits set by the standard error, "not
     identified" when the standard error exceeds the value or is missing, "fixed" for
-    a parameter held fixed, "profiled" for the flag point.
+    a parameter held fixed, "profiled" for the flag point. ``models``: the fit.json
+    model keys to show (default: every model of the dataset).
     """
     info = info or {}
+    keep = None if models is None else set(models)
     models = [
-        (k, lab) for k, lab in FIT_MODELS if isinstance(dataset.get("models", {}).get(k), dict)
+        (k, lab)
+        for k, lab in FIT_MODELS
+        if isinstance(dataset.get("models", {}).get(k), dict) and (keep is None or k in keep)
     ]
     names: list[str] = []
     for k, _ in models:
@@ -482,6 +488,109 @@ def params_table(
         "same decimal place. not identified = the standard error exceeds the value or the "
         "data do not determine it; fixed = held at its value; profiled = fitted by a grid "
         "search (no standard error); — = not a parameter of that model.",
+        footnotes=tuple(f"[{i + 1}] {t}" for i, t in enumerate(notes)),
+    )
+
+
+PARAM_GROUPS = (
+    ("_cp", "coupling: other motor +"),
+    ("_cn", "coupling: other motor −"),
+    ("_p", "tendon + (positive input)"),
+    ("_n", "tendon − (|negative input|)"),
+)
+"""Name suffix -> column of a many-parameter model's table (the two-tendon GPI: one
+GPI per tendon; with coupling, one per side of the other motor), longest suffix first."""
+GROUP_ORDER = ("_p", "_n", "_cp", "_cn")
+"""Column order of :func:`grouped_params_table`."""
+SHARED_COLUMN = "whole axis"
+
+
+def param_group(name: str) -> tuple[str, str | None]:
+    """(base name, group suffix or None): ``"a1_cp"`` -> ``("a1", "_cp")``,
+    ``"theta0"`` -> ``("theta0", None)``."""
+    for suffix, _ in PARAM_GROUPS:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return name[: -len(suffix)], suffix
+    return name, None
+
+
+def is_grouped(rec: Mapping[str, Any]) -> bool:
+    """True for a model record whose parameters come per tendon / coupling side
+    (:data:`PARAM_GROUPS`), shown by :func:`grouped_params_table`."""
+    return any(param_group(n)[1] for n in (rec.get("params") or {}))
+
+
+def _base_meaning(doc: str) -> str:
+    """A grouped parameter's meaning without its group prefix (``"positive-input
+    tendon: loading envelope slope"`` -> ``"loading envelope slope"``)."""
+    head, sep, rest = str(doc).partition(": ")
+    return rest if sep and ("tendon" in head or "coupling" in head) else str(doc)
+
+
+def grouped_params_table(
+    dataset: Mapping[str, Any], key: str, info: Mapping[str, tuple[str, str]] | None = None
+) -> Table:
+    """One many-parameter model (the two-tendon GPI, 17 parameters; with coupling, 35)
+    as a compact table: one row per GPI parameter (``a1`` ... ``rn``, ``sign``), one
+    column per tendon and coupling side (:data:`PARAM_GROUPS`), a ``whole axis``
+    column for the parameters shared by all (``theta0``). Cells as :func:`param_cell`.
+    """
+    info = info or {}
+    rec = dataset["models"][key]
+    names = list(rec.get("params") or {})
+    units = rec.get("units") if isinstance(rec.get("units"), Mapping) else {}
+    labels = dict(PARAM_GROUPS)
+    groups = [g for g in GROUP_ORDER if any(param_group(n)[1] == g for n in names)]
+    shared = [n for n in names if param_group(n)[1] is None]
+    bases: list[str] = []
+    members: dict[str, list[str]] = {}
+    for n in names:
+        base, g = param_group(n)
+        if g is not None:
+            if base not in members:
+                bases.append(base)
+                members[base] = []
+            members[base].append(n)
+    rows, notes = [], []
+
+    def meaning(name: str, grouped: bool) -> str:
+        doc = info.get(name, ("", ""))[1]
+        cell, note = short_meaning(_base_meaning(doc) if grouped else doc)
+        if note:
+            notes.append(f"{param_group(name)[0]}: {note}")
+            cell = f"{cell} [{len(notes)}]"
+        return cell
+
+    def unit(name: str) -> str:
+        return str(units.get(name) or info.get(name, ("", ""))[0])
+
+    for n in shared:
+        cells = [param_cell(rec, n)] + [DASH] * len(groups)
+        rows.append((n, unit(n), *cells, meaning(n, False)))
+    for b in bases:
+        first = members[b][0]
+        cells = [DASH] if shared else []
+        cells += [param_cell(rec, b + g) if b + g in names else DASH for g in groups]
+        rows.append((b, unit(first), *cells, meaning(first, True)))
+    value_cols = ([SHARED_COLUMN] if shared else []) + [labels[g] for g in groups]
+    label = kind_info(key).report_name if key in ALL_KINDS else key
+    return Table(
+        header=("parameter", "unit", *value_cols, "meaning"),
+        rows=tuple(rows),
+        group_header=(("", 2), (f"{label} (value ± stderr)", len(value_cols)), ("", 1)),
+        align=("l", "l", *("r" * len(value_cols)), "l"),
+        caption=f"{_dataset_label(dataset)}: {label}, {len(names)} parameters: one GPI "
+        "per tendon"
+        + (
+            " and per side of the other motor (coupling)"
+            if any(g in groups for g in ("_cp", "_cn"))
+            else ""
+        )
+        + ": a row per GPI parameter, a column per part (fit.json names them <row>_p, "
+        f"<row>_n, <row>_cp, <row>_cn); {SHARED_COLUMN} = shared by every part. Value ± "
+        "one standard error from the Jacobian; not identified = the standard error "
+        "exceeds the value or the data do not determine it; fixed = held at its value; "
+        "— = not in that part.",
         footnotes=tuple(f"[{i + 1}] {t}" for i, t in enumerate(notes)),
     )
 

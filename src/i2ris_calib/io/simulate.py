@@ -27,6 +27,7 @@ from i2ris_calib.io.video import open_writer
 from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.simulation import trajectory as tj
 from i2ris_calib.simulation.config import SimulationConfig
+from i2ris_calib.simulation.lab import reference_window as lab_reference_window
 from i2ris_calib.simulation.render import FrameRenderer
 from i2ris_calib.simulation.scene import CameraModel, make_cameras, make_cube, true_marker_corners
 from i2ris_calib.simulation.truth import Truth, session_truth, truth_at
@@ -43,6 +44,7 @@ class CameraPlan:
     flash: np.ndarray  # (n_kept,)
     occluded: np.ndarray  # (n_kept,) bool
     seed: int
+
 
 #: The names ``simulate`` writes (older, unmarked session folders are recognised by them).
 OUTPUTS = ("session.toml", "encoders.csv", "truth", "*_timestamps.csv", "*.mp4", "*.avi",
@@ -268,6 +270,8 @@ def _write_truth(folder: Path, cfg, cams, truth: Truth, t0_ctrl: float, tables: 
             for b in blocks
         ],
         "effects": cfg.effects,
+        "protocol": cfg.protocol,
+        **({"lab": _lab_summary(cfg, truth, t0_ctrl)} if cfg.protocol == "lab" else {}),
         "cameras": {
             c.name: {"view": c.view, "marker_id": c.marker_id, "K": c.K, "R_cam_from_base": c.R_cb,
                      "t_cam_from_base_mm": c.t_cb, "frames": len(tables[c.name]),
@@ -280,6 +284,21 @@ def _write_truth(folder: Path, cfg, cams, truth: Truth, t0_ctrl: float, tables: 
     }  # fmt: skip
     write_json(folder / "truth" / "truth.json", summary)
     return summary
+
+
+def _lab_summary(cfg, truth: Truth, t0_ctrl: float) -> dict:
+    """truth.json ``lab``: the two-motor truth and where the tip is held straight."""
+    s0, s1 = truth.params["straight_motion_s"]
+    start, duration = lab_reference_window(cfg)
+    return {
+        "model": "agpi", "yaw": truth.params["yaw"], "pitch": truth.params["pitch"],
+        "pitch_per_yaw_deg": truth.params["c"], "coupling": truth.params["coupling"],
+        "angle_at_zero_input_deg": {"yaw": truth.params["yaw"]["theta0"],
+                                    "pitch": truth.params["pitch"]["theta0"]},
+        "driving_before_first_frame_s": cfg.lab_burn_in_s,
+        "straight_ctrl_s": [t0_ctrl + s0, t0_ctrl + s1],
+        "track_reference": {"reference_start_s": start, "reference_duration_s": duration},
+    }  # fmt: skip
 
 
 def session_toml(cfg: SimulationConfig, cams: list[CameraModel], name: str) -> str:

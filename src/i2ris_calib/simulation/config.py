@@ -65,6 +65,16 @@ class SimulationConfig:
     hold_s: tuple[float, float] = (0.3, 1.5)  # hold at zero between excursions (range)
     compound_fraction: float = 0.3  # chance an excursion runs together with the next one
     minor_loop_fraction: float = 0.25  # chance an excursion turns back up on its way down
+    # --- protocol: "paper" (the motions above) or "lab" (simulation/lab.py) -------
+    protocol: Literal["paper", "lab"] = "paper"
+    lab_duration_s: float = 30.0  # lab: seconds of video (the driving began lab_burn_in_s before)
+    lab_burn_in_s: float = 20.0  # lab: driving before the first frame (a mid-loop start)
+    lab_period_s: tuple[float, float] = (4.0, 12.0)  # lab: range of a loop's period (s)
+    lab_hold_fraction: float = 0.15  # lab: chance that a segment is a hold (0.5-2 s)
+    lab_offset_deg: tuple[float, float] = (-9.0, 4.0)  # lab: (yaw, pitch) angle at zero input
+    lab_coupling: float = 0.6  # lab: pitch's gain on the yaw motor / its own gain
+    lab_reference_s: float = 2.0  # lab: video time the tip is driven straight (reference)
+    lab_reference_hold_s: float = 1.5  # lab: how long it is held straight there
     # --- truth ------------------------------------------------------------------
     # blocks = per dataset block, faded in/out (the Fig-5 sample); whole_history = the data
     # layer's assumption exactly: per axis and direction one EGPI over the whole history
@@ -136,8 +146,35 @@ class SimulationConfig:
             )
         if not (0 <= self.compound_fraction <= 1 and 0 <= self.minor_loop_fraction <= 1):
             raise ValueError("compound_fraction and minor_loop_fraction must be in [0, 1]")
+        if self.protocol not in ("paper", "lab"):
+            raise ValueError(f"protocol must be 'paper' or 'lab', got {self.protocol!r}")
+        if self.protocol == "lab":
+            self._validate_lab()
         if not -0.99 < self.illumination_falloff < 0.99:
             raise ValueError("illumination_falloff must be in (-0.99, 0.99)")
+
+    def _validate_lab(self) -> None:
+        """The lab protocol's settings (docs/simulation.md, "Lab protocol")."""
+        p_lo, p_hi = self.lab_period_s
+        if not (math.isfinite(p_hi) and 1.0 <= p_lo <= p_hi):
+            raise ValueError("lab_period_s must be two finite periods with 1 <= [0] <= [1]")
+        if not 0 <= self.lab_hold_fraction < 1:
+            raise ValueError("lab_hold_fraction must be in [0, 1)")
+        if not all(math.isfinite(o) and abs(o) <= 20 for o in self.lab_offset_deg):
+            raise ValueError("lab_offset_deg must be two angles within +-20 deg")
+        if not (math.isfinite(self.lab_coupling) and 0 <= self.lab_coupling <= 1.5):
+            raise ValueError("lab_coupling must be in [0, 1.5] (a fraction of pitch's own gain)")
+        if not (math.isfinite(self.lab_burn_in_s) and 0 <= self.lab_burn_in_s <= 600):
+            raise ValueError("lab_burn_in_s must be in [0, 600] s")
+        if not (math.isfinite(self.lab_duration_s) and 8 <= self.lab_duration_s <= 3600):
+            raise ValueError("lab_duration_s must be in [8, 3600] s")
+        ref_end = self.lab_reference_s + 0.6 + self.lab_reference_hold_s
+        if not (0 <= self.lab_reference_s and 1.0 <= self.lab_reference_hold_s
+                and ref_end <= self.lab_duration_s - 1.0):  # fmt: skip
+            raise ValueError(
+                "lab_reference_s >= 0 and lab_reference_hold_s >= 1 s, ending (after a 0.6 s "
+                "ramp) at least 1 s before the end of lab_duration_s"
+            )
 
     def _validate_numbers(self) -> None:
         """Finite, in-range numbers (NaN/inf and negative sizes or times are refused)."""

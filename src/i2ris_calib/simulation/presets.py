@@ -37,6 +37,17 @@ PRESETS: dict[str, dict] = {
                      blur_sigma_px=1.0, amplitude_counts=(4500.0, 4500.0), pivot_mm=0.8,
                      motion="excursions", truth="whole_history", excursions=3, ramp_s=1.5,
                      pause_s=0.4, rest_s=1.5, settle_s=0.6, hold_s=(0.3, 1.0)),
+    # Robots as labs drive them (protocol = "lab", simulation/lab.py): both motors at once
+    # in circles and figure-eights through zero with holds, two-tendon truth with offsets
+    # at zero input, pitch coupled to the yaw joint, the recording starting mid-loop, the
+    # encoder logged at the video's 30 Hz; 640x512 mp4, 50 s. [track] reference window:
+    # simulation.lab.reference_window (2.8 s, 1.1 s).
+    "lab": dict(protocol="lab", width_px=640, height_px=512, marker_size_px=110.0,
+                video_format="mp4", lab_duration_s=50.0, encoder_rate_hz=30.0),
+    # The same at CI size (320x256, 30 s, smaller range so the marker stays in view).
+    "lab_ci": dict(protocol="lab", width_px=320, height_px=256, marker_size_px=80.0,
+                   focal_px=20000.0, blur_sigma_px=1.0, amplitude_counts=(4000.0, 4000.0),
+                   pivot_mm=0.8, lab_duration_s=30.0, encoder_rate_hz=30.0),
 }  # fmt: skip
 
 

@@ -5,6 +5,8 @@ Two motions (config ``motion``):
 * ``"fig5"`` (default): the datasets run one after another; in each, one motor ramps
   out and back (with pauses at the peaks and after each return) while the other motor
   holds zero.
+* ``protocol = "lab"`` (any ``motion``): both motors at once through zero, the
+  recording starting mid-loop (:mod:`i2ris_calib.simulation.lab`); no datasets.
 * ``"excursions"``: random excursions of every axis and direction of ``datasets`` in a
   shuffled order, each out to its own peak at its own speeds (up and down differ),
   a pause at every turning point, some with a minor loop on the way down, holds at
@@ -21,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2ris_calib.simulation import lab
 from i2ris_calib.simulation.config import SimulationConfig
 
 #: Seconds of video before the motion starts and after it ends.
@@ -63,8 +66,11 @@ def session_blocks(cfg: SimulationConfig) -> list[Block]:
     """The datasets laid end to end (controller seconds from the motion start).
 
     With ``motion = "excursions"``: one block per excursion (sorted by start; the
-    blocks of a compound move overlap in time; ``settle_start_s = t1_s``).
+    blocks of a compound move overlap in time; ``settle_start_s = t1_s``). With
+    ``protocol = "lab"``: none (both motors move all the time).
     """
+    if cfg.protocol == "lab":
+        return []
     if cfg.motion == "excursions":
         return [e.block for e in excursion_schedule(cfg)]
     blocks, t = [], 0.0
@@ -80,6 +86,10 @@ def session_blocks(cfg: SimulationConfig) -> list[Block]:
 def session_inputs(cfg: SimulationConfig, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Integer encoder counts (yaw, pitch), each shape (n,), at motion times ``t_s``."""
     t_s = np.asarray(t_s, dtype=float)
+    if cfg.protocol == "lab":
+        d = lab.lab_drive(cfg)
+        ey, ep = np.interp(t_s, d.t_s, d.enc_yaw), np.interp(t_s, d.t_s, d.enc_pitch)
+        return np.rint(ey).astype(np.int64), np.rint(ep).astype(np.int64)
     if cfg.motion == "excursions":
         out = {}
         for axis in ("yaw", "pitch"):
@@ -97,6 +107,8 @@ def session_inputs(cfg: SimulationConfig, t_s: np.ndarray) -> tuple[np.ndarray, 
 
 def motion_duration_s(cfg: SimulationConfig) -> float:
     """Controller seconds from motion start to motion end."""
+    if cfg.protocol == "lab":
+        return lab.motion_duration(cfg)
     if cfg.motion == "excursions":
         return max(b.t1_s for b in session_blocks(cfg)) + cfg.settle_s
     return session_blocks(cfg)[-1].t1_s

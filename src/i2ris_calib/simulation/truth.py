@@ -47,12 +47,14 @@ from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import paper_like_params
 from i2ris_calib.simulation.config import SimulationConfig
+from i2ris_calib.simulation.lab import lab_drive
 from i2ris_calib.simulation.trajectory import (
     Block,
     motion_duration_s,
     session_blocks,
     session_inputs,
 )
+from i2ris_calib.simulation.two_motor import two_motor_angles
 
 #: Controller-clock sampling of the truth (Hz); frames interpolate from it.
 TRUTH_RATE_HZ = 1000.0
@@ -69,7 +71,8 @@ class Truth:
     yaw_deg, pitch_deg : true bending angles (deg)
     block : dataset index per sample (-1 outside every dataset)
     params : parameter values per dataset name (incl. effect parameters)
-    mode : the truth mode (``"blocks"`` or ``"whole_history"``)
+    mode : the truth mode (``"blocks"``, ``"whole_history"`` or ``"lab"``: the two-motor
+        truth of :mod:`i2ris_calib.simulation.lab`, the grid starting with its burn-in)
     bands : whole_history: per axis ``{"zero_band", "deadband"}`` (counts) used
     """
 
@@ -111,6 +114,8 @@ def session_truth(cfg: SimulationConfig, t_s: np.ndarray | None = None) -> Truth
         Motion times (controller s); default a ``TRUTH_RATE_HZ`` grid over the motion
         plus one second either side.
     """
+    if cfg.protocol == "lab":
+        return _lab_truth(cfg, t_s)
     blocks = session_blocks(cfg)
     if t_s is None:
         t_s = np.arange(-2.0, motion_duration_s(cfg) + 2.0, 1.0 / TRUTH_RATE_HZ)
@@ -295,17 +300,34 @@ def _whole_history_truth(cfg: SimulationConfig, t_s: np.ndarray, blocks: list[Bl
     return Truth(t_s, ey, ep, ang["yaw"], ang["pitch"], blk, params, "whole_history", bands)
 
 
+def _lab_truth(cfg: SimulationConfig, t_s: np.ndarray | None) -> Truth:
+    """The lab protocol's truth: its whole driving grid (burn-in included), or ``t_s``."""
+    d = lab_drive(cfg)
+    params = {"yaw": d.params["yaw"], "pitch": d.params["pitch"], "c": d.params["c"],
+              "coupling": d.params["coupling"], "model": "agpi",
+              "straight_motion_s": list(d.straight_s)}  # fmt: skip
+    full = Truth(d.t_s, d.enc_yaw.astype(np.int64), d.enc_pitch.astype(np.int64), d.yaw_deg,
+                 d.pitch_deg, np.full(d.t_s.shape, -1), params, "lab")  # fmt: skip
+    if t_s is None:
+        return full
+    tq = np.asarray(t_s, dtype=float)
+    ey = np.rint(np.interp(tq, d.t_s, d.enc_yaw)).astype(np.int64)
+    ep = np.rint(np.interp(tq, d.t_s, d.enc_pitch)).astype(np.int64)
+    yaw, pitch = truth_at(cfg, full, tq)
+    return Truth(tq, ey, ep, yaw, pitch, np.full(tq.shape, -1), params, "lab")
+
+
 def truth_at(cfg: SimulationConfig, truth: Truth, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """True (yaw, pitch) angles (deg) at motion times ``t_s`` (any shape), each like ``t_s``.
 
-    ``blocks``: linear interpolation of the fine grid. ``whole_history``: exact - the
-    models run over the fine grid merged with ``t_s`` (inputs linearly interpolated
+    ``blocks``: linear interpolation of the fine grid. ``whole_history`` and ``lab``:
+    exact - the models run over the fine grid merged with ``t_s`` (inputs linearly interpolated
     there, as a synced table interpolates the encoder log), so a sample next to one of
     the model's steps (flag point, direction change) is on one side of it, never a
     blend of both.
     """
     tq = np.asarray(t_s, dtype=float)
-    if truth.mode != "whole_history":
+    if truth.mode not in ("whole_history", "lab"):
         return np.interp(tq, truth.t_s, truth.yaw_deg), np.interp(tq, truth.t_s, truth.pitch_deg)
     flat = tq.ravel()
     allt = np.concatenate([truth.t_s, flat])
@@ -315,7 +337,11 @@ def truth_at(cfg: SimulationConfig, truth: Truth, t_s: np.ndarray) -> tuple[np.n
         "yaw": np.interp(tm, truth.t_s, truth.enc_yaw.astype(float)),
         "pitch": np.interp(tm, truth.t_s, truth.enc_pitch.astype(float)),
     }
-    ang, _ = _whole_history_angles(cfg, tm, enc, truth.bands)
+    if truth.mode == "lab":
+        ang = dict(zip(("yaw", "pitch"), two_motor_angles(truth.params, enc["yaw"], enc["pitch"]),
+                       strict=True))  # fmt: skip
+    else:
+        ang, _ = _whole_history_angles(cfg, tm, enc, truth.bands)
     pos = np.empty(order.size, dtype=int)
     pos[order] = np.arange(order.size)
     q = pos[truth.t_s.size :]

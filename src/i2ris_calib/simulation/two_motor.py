@@ -31,7 +31,13 @@ import numpy as np
 from i2ris_calib.hysteresis.presets import V_MAX_COUNTS, random_two_tendon_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 
-__all__ = ["TwoMotorRecording", "simulate_two_motor", "two_motor_trajectory"]
+__all__ = [
+    "TwoMotorRecording",
+    "coupling_factor",
+    "simulate_two_motor",
+    "two_motor_angles",
+    "two_motor_trajectory",
+]
 
 
 @dataclass(frozen=True)
@@ -86,11 +92,39 @@ def _gain(values: dict[str, float], v_max: float) -> float:
     return float(abs(y[199] - y[-1]) / (2.0 * v_max))
 
 
+def coupling_factor(
+    truth: dict, coupling: float, v_max_counts: float | tuple[float, float] = V_MAX_COUNTS
+) -> float:
+    """``c`` (deg of pitch per deg of yaw bend) that makes the coupling's gain (deg of
+    pitch per yaw count) ``coupling`` x pitch's own gain (deg per pitch count).
+
+    ``truth``: ``{"yaw": agpi values, "pitch": agpi values}``; ``v_max_counts``: full
+    scale of each motor (counts), or (yaw, pitch).
+    """
+    vy, vp = np.broadcast_to(np.asarray(v_max_counts, dtype=float), (2,))
+    return float(coupling * _gain(truth["pitch"], vp) / _gain(truth["yaw"], vy))
+
+
+def two_motor_angles(
+    truth: dict, enc_yaw: np.ndarray, enc_pitch: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """True (yaw, pitch) angles (deg), shape (n,) each, of the inputs (counts, (n,),
+    the whole history in time order): ``yaw = Y_yaw[enc_yaw]``, ``pitch =
+    Y_pitch[enc_pitch] + c (yaw - theta0_yaw)`` (module docstring).
+
+    ``truth``: ``{"yaw": agpi values, "pitch": agpi values, "c": float}``.
+    """
+    agpi = model_for_kind("agpi")
+    yaw = np.asarray(agpi.with_values(truth["yaw"])(np.asarray(enc_yaw, float)), dtype=float)
+    own = np.asarray(agpi.with_values(truth["pitch"])(np.asarray(enc_pitch, float)), dtype=float)
+    return yaw, own + truth["c"] * (yaw - truth["yaw"]["theta0"])
+
+
 def two_motor_trajectory(
     rng: np.random.Generator,
     n_samples: int,
     rate_hz: float = 30.0,
-    v_max_counts: float = V_MAX_COUNTS,
+    v_max_counts: float | tuple[float, float] = V_MAX_COUNTS,
     period_s: tuple[float, float] = (4.0, 12.0),
     hold_fraction: float = 0.15,
     burn_in_s: float = 20.0,
@@ -105,8 +139,8 @@ def two_motor_trajectory(
         Samples of the recording (after the burn-in).
     rate_hz : float
         Sampling rate (Hz).
-    v_max_counts : float
-        Full scale of each motor (counts).
+    v_max_counts : float or (float, float)
+        Full scale of each motor (counts), or (yaw, pitch).
     period_s : (float, float)
         Range of a loop's period (s).
     hold_fraction : float
@@ -136,7 +170,7 @@ def two_motor_trajectory(
             v[:, k : k + n_hold] = v[:, k - 1 : k] if k > 0 else 0.0
             k += n_hold
             continue
-        amp = rng.uniform(0.2, 1.0, 2) * v_max_counts
+        amp = rng.uniform(0.2, 1.0, 2) * np.asarray(v_max_counts, dtype=float)
         n_loop = max(int(rng.uniform(*period_s) * rate_hz), 8)
         ph = phase + 2.0 * np.pi * np.arange(1, n_loop + 1) / n_loop
         if rng.uniform() < 0.5:  # circle (an ellipse: each motor its own amplitude)
@@ -187,11 +221,8 @@ def simulate_two_motor(
     sd = float(rng.uniform(0.15, 0.5)) if noise_deg is None else float(noise_deg)
     t, ey, ep, start = two_motor_trajectory(rng, n_samples, rate_hz, v_max_counts,
                                             lockstep=lockstep)  # fmt: skip
-    agpi = model_for_kind("agpi")
-    yaw = agpi.with_values(truth["yaw"])(ey)
-    own = agpi.with_values(truth["pitch"])(ep)
-    c = k * _gain(truth["pitch"], v_max_counts) / _gain(truth["yaw"], v_max_counts)
-    pitch = own + c * (yaw - truth["yaw"]["theta0"])
+    c = coupling_factor(truth, k, v_max_counts)
+    yaw, pitch = two_motor_angles({**truth, "c": c}, ey, ep)
     cut = slice(start, None)
     n = yaw[cut].size
     return TwoMotorRecording(

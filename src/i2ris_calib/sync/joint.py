@@ -2,16 +2,27 @@
 
 Without a sync event the only link between the clocks is the motion itself. Plain
 cross-correlation mistakes the hysteresis lag for clock offset; here the offset is
-the one at which the hysteresis model (EGPI or GPI, fitted anew at each candidate)
-explains the measured angle best:
+the one at which the hysteresis model (fitted anew at each candidate) explains the
+measured angle best:
 
+0. the model of each axis is the one ``fit`` would choose for it
+   (:func:`i2ris_calib.fitting.pipeline.choose_model` on the axis's excursions and
+   how the other motor moves with it, at the starting offset): on a recording shaped
+   like the paper's protocol (excursions from rest, one side at a time) the paper's
+   per-direction model ``[sync] model`` (EGPI or GPI); on one whose input crosses
+   zero or does not start at rest, one model over the axis's whole signed input (the
+   two-tendon GPI, with coupling to the other motor's input when that motor moves
+   with this one and the recording can separate it). A per-direction model on such a
+   recording leaves degrees of misfit at every zero crossing (the loop memory the
+   split throws away), and its offset profile then has no usable minimum;
 1. frames are mapped to the controller clock with a candidate clock, the encoder is
    interpolated there, and the model is fitted per axis and motion direction
    (``i2ris_calib.fitting``) over the axis's **whole frame history**: one sequence of
-   every frame in time order, the direction's input ``max(+-enc, 0)`` on all of them,
-   the loss restricted to the direction's measured samples (exactly the attribution
-   of ``i2ris_calib.data.dataset``); the objective is the total (trimmed) residual
-   sum of squares;
+   every frame in time order, the direction's input ``max(+-enc, 0)`` on all of them
+   (the signed input, and the other motor's, for the signed kinds), the loss
+   restricted to the direction's measured samples (exactly the attribution of
+   ``i2ris_calib.data.dataset``); the objective is the total (trimmed) residual sum
+   of squares;
 2. the offset profile is scanned on a grid around the cross-correlation offset and
    refined by golden-section search; its curvature, inflated for model misfit and
    residual autocorrelation (:func:`offset_stderr`), gives the standard error;
@@ -32,12 +43,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from i2ris_calib.data.coupling import motors_together
 from i2ris_calib.data.cycles import cycle_index
 from i2ris_calib.data.dataset import Bands, direction_datasets, direction_input, input_bands
+from i2ris_calib.data.excursions import excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.fit import PROFILE_PARAMS, fit_model
-from i2ris_calib.fitting.pipeline import build_model, fit_kind
+from i2ris_calib.fitting.pipeline import choose_model, fit_kind, unfitted_model
+from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.hysteresis.registry import kind_info
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
 from i2ris_calib.sync.config import SyncConfig
 from i2ris_calib.sync.log import EncoderLog
@@ -70,6 +85,12 @@ class Block:
         Frames attributed to this direction (``data.dataset.direction_of_samples``).
     bands : Bands
         Zero band and ``v'`` dead band of the axis (encoder counts), fixed for the profile.
+    kind : str
+        Model kind fitted to the block (registry name); "" = the profile's ``[sync] model``.
+    other_channel : str or None
+        Encoder channel of the other motor, the coupled kinds' second input.
+    why : str
+        Why this model (:attr:`i2ris_calib.fitting.pipeline.ModelChoice.line`).
     """
 
     name: str
@@ -79,6 +100,9 @@ class Block:
     theta_deg: np.ndarray
     in_direction: np.ndarray
     bands: Bands
+    kind: str = ""
+    other_channel: str | None = None
+    why: str = ""
 
     @property
     def sign(self) -> float:
@@ -118,6 +142,11 @@ def model_blocks(
     ``min_range_counts`` is skipped, and so is a direction with fewer than
     ``fit_config.min_block_samples`` frames outside the zero band.
 
+    The model of an axis is the one ``fit`` would choose (:func:`axis_choice`): on a
+    signed choice the axis is ONE block ``"<axis>±"`` fitted with the chosen kind
+    (the two-tendon GPI, coupled to the other motor's channel when it moves with this
+    one); else the per-direction blocks, fitted with ``[sync] model`` (``kind`` "").
+
     Parameters
     ----------
     series : list of AxisSeries
@@ -147,17 +176,36 @@ def model_blocks(
         if not np.isfinite(enc).all() or np.ptp(enc) < min_range_counts:
             continue
         bands = input_bands(enc, fit_config.zero_band_counts, fit_config.deadband_counts)
+        other = next((o.channel for o in series if o.channel != s.channel), None)
+        enc_other = None if other is None else log.interpolate(other, tc[run])
+        if enc_other is not None and not np.isfinite(enc_other).all():
+            enc_other = None
+        choice = axis_choice(s.axis, t, enc, enc_other, bands, fit_config)
+        kind = choice.main if choice.signed else ""
+        coupled = bool(kind) and kind_info(kind).coupled
         datasets = direction_datasets(
             s.axis, t, enc, th, bands=bands, holdout_fraction=0.0,
-            min_samples=fit_config.min_block_samples, signed=fit_config.signed,
+            min_samples=fit_config.min_block_samples, signed=choice.signed,
         )  # fmt: skip
         quiet = long_rest(t, enc, bands.zero_band)
         for ds in datasets:
             theta = np.where(quiet, np.nan, ds.theta_deg)
             if np.isfinite(theta).sum() < 16:
                 continue
-            blocks.append(Block(ds.name, s.channel, ds.direction, t, theta, ds.in_direction, bands))
+            other_ch = other if coupled else None
+            block = Block(ds.name, s.channel, ds.direction, t, theta, ds.in_direction, bands)
+            blocks.append(replace(block, kind=kind, other_channel=other_ch, why=choice.line))
     return blocks
+
+
+def axis_choice(axis: str, t_s, enc, enc_other, bands: Bands, fit_config):
+    """The model ``fit`` would choose for an axis (:func:`~i2ris_calib.fitting.pipeline.
+    choose_model`) from its signed input ``enc`` and the other motor's ``enc_other``
+    (counts, shape (m,), or None) at frame times ``t_s`` (s)."""
+    recording = excursions(enc, bands.zero_band, np.asarray(t_s, dtype=float))
+    other = "pitch" if axis == "yaw" else "yaw"
+    together = motors_together(enc, enc_other, other)
+    return choose_model(None if fit_config.signed else recording, fit_config, "all", together)
 
 
 def long_rest(t_s: np.ndarray, enc: np.ndarray, zero_band: float) -> np.ndarray:
@@ -200,11 +248,19 @@ class OffsetProfile:
         self.cold = seeds is None
         self.seeds = seeds or {}
 
-    def inputs(self, block: Block, offset_c_s: float, drift_ppm: float | None = None) -> np.ndarray:
-        """The direction's input (counts), shape (m,), of ``block`` at a candidate clock."""
+    def inputs(self, block: Block, offset_c_s: float, drift_ppm: float | None = None):
+        """The direction's input (counts), shape (m,), of ``block`` at a candidate clock;
+        for a coupled block the :class:`Signals` with the other motor's input too."""
         d = self.drift if drift_ppm is None else drift_ppm
         tc = map_times(block.t_cam_s, offset_c_s, d, self.t_c)
-        return direction_input(self.log.interpolate(block.channel, tc), block.direction)
+        v = direction_input(self.log.interpolate(block.channel, tc), block.direction)
+        if block.other_channel is None:
+            return v
+        return Signals(v=v, v_other=self.log.interpolate(block.other_channel, tc))
+
+    def kind_of(self, block: Block) -> str:
+        """The model kind fitted to ``block``."""
+        return block.kind or self.kind
 
     def __call__(self, offset_c_s: float) -> float:
         key = round(float(offset_c_s), 9)
@@ -237,11 +293,12 @@ class OffsetProfile:
         cfg = self.fit_config
         for i, b in enumerate(self.blocks):
             v = self.inputs(b, offset_c_s)
+            kind = self.kind_of(b)
             db = b.bands.deadband
             candidates = []
             starts = self._starts(i, offset_c_s)
             if starts:
-                model = build_model(self.kind, v, cfg, db)
+                model = unfitted_model(kind, input_values(v), cfg, db)
                 candidates.append(
                     fit_model(
                         model,
@@ -253,10 +310,10 @@ class OffsetProfile:
                     )  # fmt: skip
                 )
             if self.cold or not starts:
-                hold = np.zeros(v.size, bool)
-                candidates.append(fit_kind(self.kind, v, b.theta_deg, cfg, hold, deadband=db))
+                hold = np.zeros(input_values(v).size, bool)
+                candidates.append(fit_kind(kind, v, b.theta_deg, cfg, hold, deadband=db))
             # never worse than the warm starts themselves (a refit can wander off)
-            candidates += [start_as_fit(self.kind, v, b.theta_deg, x, cfg, db) for x in starts]
+            candidates += [start_as_fit(kind, v, b.theta_deg, x, cfg, db) for x in starts]
             res = min(candidates, key=lambda r: trimmed_ss(r.residuals))
             total += trimmed_ss(res.residuals)
             results.append(res)
@@ -311,11 +368,15 @@ class StartEval:
         return self.model.evaluate(v, self.model.values)
 
 
-def start_as_fit(
-    kind: str, v: np.ndarray, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None
-):
-    """:class:`StartEval` of ``values`` on (v, theta): the fallback when a refit is worse."""
-    model = build_model(kind, v, fit_config, deadband).with_values(values)
+def input_values(v) -> np.ndarray:
+    """The model's own input (counts), shape (m,), of an array or :class:`Signals`."""
+    return np.asarray(v.v if isinstance(v, Signals) else v, dtype=float)
+
+
+def start_as_fit(kind: str, v, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None):
+    """:class:`StartEval` of ``values`` on (v, theta): the fallback when a refit is worse
+    (``v``: the input, shape (m,), or :class:`Signals` for a coupled kind)."""
+    model = unfitted_model(kind, input_values(v), fit_config, deadband).with_values(values)
     free = tuple(p.name for p in model.parameters if not p.fixed)
     return StartEval(model, model.evaluate(v, model.values) - theta, free)
 
@@ -442,7 +503,7 @@ def _param_jacobian(model, v: np.ndarray, x: np.ndarray) -> np.ndarray:
         xp[i] += h
         xm[i] -= h
         cols.append((model.evaluate(v, xp) - model.evaluate(v, xm)) / (2 * h))
-    return np.column_stack(cols) if cols else np.zeros((v.size, 0))
+    return np.column_stack(cols) if cols else np.zeros((input_values(v).size, 0))
 
 
 def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3):
@@ -485,7 +546,7 @@ def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3
                 proj = proj - jt @ coef
             jp[use] = proj
             rr[use] = r[use]
-        out.append((jp, rr, cycle_index(v)))
+        out.append((jp, rr, cycle_index(input_values(v))))
     return out
 
 
@@ -622,7 +683,7 @@ def drift_gauss_newton(
 
     theta = np.concatenate([b.theta_deg for b in profile.blocks])
     ok = np.isfinite(theta)
-    cycles = [cycle_index(profile.inputs(b, o, d)) for b in profile.blocks]
+    cycles = [cycle_index(input_values(profile.inputs(b, o, d))) for b in profile.blocks]
     cov = np.full((2, 2), np.nan)
     for _ in range(iters):
         y = predict(o, d)
@@ -694,7 +755,7 @@ def cycle_offsets(
             continue
         use &= np.abs(jo) <= np.quantile(np.abs(jo[use]), 1 - TRIM_FRACTION)
         sigma = float(np.sqrt(np.mean(r[use] ** 2)))
-        cyc = cycle_index(v)
+        cyc = cycle_index(input_values(v))
         for g in np.unique(cyc[use]):
             sel = use & (cyc == g)
             jj = float(jo[sel] @ jo[sel])
@@ -984,6 +1045,8 @@ def clock_from_model(
     x, y = profile.points()
     evidence = {
         "model": cfg.model,
+        "models": {b.name: profile.kind_of(b) for b in blocks},
+        "model_choice": {b.name: b.why for b in blocks},
         "xcorr_offset_s" if prior is None else "prior_offset_at_t_ref_s": o_x,
         "search_halfwidth_s": halfwidth,
         "t_ref_cam_s": t_c,

@@ -5,7 +5,7 @@ branch, and the check that a dataset holds enough for the workflow.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -101,6 +101,11 @@ def search_data(data: Dataset, cfg: DiagnosisConfig) -> tuple[SearchData, np.nda
     step = decimation_step(data.n_samples, cfg)
     idx = np.arange(0, data.n_samples, step)
     sig = data.signals.take(idx)
+    # a read-only input owning its data cannot change during the search: the models
+    # keep what they derive from it (runs of held samples, each tendon's input)
+    v = np.array(sig.v, dtype=float)
+    v.flags.writeable = False
+    sig = replace(sig, v=v)
     th = theta_full[idx]
     ok = ok_full[idx]
     hold = hold_full[idx]

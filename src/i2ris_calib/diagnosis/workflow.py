@@ -474,8 +474,8 @@ def diagnose_from_starts(
 ) -> AutoDiagnosis:
     """``--start auto``: diagnose from each starting model, reconcile one answer.
 
-    Each start is fitted by the fitting stage (:func:`fit_start_model`) and
-    diagnosed (:func:`diagnose`). The answer is the path whose final model has the
+    Each start is fitted by the fitting stage (:func:`fit_start_model`; the GPI fit,
+    EGPI's nested start, only once) and diagnosed (:func:`diagnose`). The answer is the path whose final model has the
     lower held-out RMSE; the held-out z-test of it over the other path's final
     model says whether the other answer is excluded (p < ``alpha``) or not.
 
@@ -506,10 +506,13 @@ def diagnose_from_starts(
         )
     check_callable(func, "progress", progress)
     paths = {}
+    fitted: dict = {}  # start fits so far: GPI's is the nested start of EGPI's (fitted once)
     for kind in starts:
         if progress:
             progress(f"fitting {kind}")
-        base = fit_start_model(kind, data, fit_config)
+        with single_threaded_blas():
+            fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
+        base = fitted[kind].model
         paths[kind] = diagnose(
             base,
             data,

@@ -631,9 +631,11 @@ class _Counter:
         model's exact Jacobian; counted as one evaluation); ``cols``: only those
         columns (the free ones, in that order), shape (n_used, len(cols))."""
         self.n += 1
-        if cols is not None and isinstance(self.model, _FromLevel) and (
-            np.asarray(cols) < len(self.model.parameters) - 1
-        ).all():
+        if (
+            cols is not None
+            and isinstance(self.model, _FromLevel)
+            and (np.asarray(cols) < len(self.model.parameters) - 1).all()
+        ):
             # the profiled level's zero column is never asked for: not built
             jac = self.model.inner_jacobian(self.signals, full, rows=self.used_idx)
         else:

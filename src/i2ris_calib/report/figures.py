@@ -528,7 +528,7 @@ def axis_flags(flags: pd.Series, axis: str, two_axes: bool) -> list[set[str]]:
     """The flags of ``axis`` per row of COMMANDS.csv's ``flags`` column (``;``-joined;
     ``axis:flag`` when both axes were compensated; empty or NaN: none)."""
     out = []
-    for cell in flags.fillna("").astype(str):
+    for cell in flags.astype(object).where(flags.notna(), "").astype(str):
         names = set()
         for f in filter(None, cell.split(";")):
             a, sep, name = f.partition(":")

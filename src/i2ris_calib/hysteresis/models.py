@@ -179,17 +179,25 @@ class ParametricModel(NamedParameters):
         scale gauge). ``deadband``: the ``v'`` dead band (input unit), default derived
         from the input as the fit does.
         """
-        func = f"{self.name}.guess"
-        v = as_1d_float(func, "v", v, min_size=2)
-        theta = as_1d_float(
-            func, "theta_deg", theta_deg, nan_ok=True,
-            hint="mark an unmeasured angle with NaN, never inf",
-        )  # fmt: skip
-        same_length(func, v=v, theta_deg=theta)
-        deadband = as_real(func, "deadband", deadband, none_ok=True, lo=0.0)
-        db = default_deadband(v) if deadband is None else float(deadband)
+        v, theta, db = guess_arguments(f"{self.name}.guess", v, theta_deg, deadband)
         x = initial_values(self, v, theta, db)
         return self.with_values(keep_fixed(self, x))
+
+
+def guess_arguments(
+    func: str, v: np.ndarray, theta_deg: np.ndarray, deadband: float | None
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The checked arguments of a model's ``guess``: (v, theta_deg, dead band), the
+    input and angle as float arrays of one length (NaN angles allowed: unmeasured),
+    the ``v'`` dead band derived from the input when None."""
+    v = as_1d_float(func, "v", v, min_size=2)
+    theta = as_1d_float(
+        func, "theta_deg", theta_deg, nan_ok=True,
+        hint="mark an unmeasured angle with NaN, never inf",
+    )  # fmt: skip
+    same_length(func, v=v, theta_deg=theta)
+    deadband = as_real(func, "deadband", deadband, none_ok=True, lo=0.0)
+    return v, theta, default_deadband(v) if deadband is None else float(deadband)
 
 
 def check_settings(func: str, n: object, deadband_counts: object = None) -> None:

@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from i2ris_calib._validate import as_1d_float, as_real, same_length
 from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
     ParametricModel,
@@ -42,8 +41,9 @@ from i2ris_calib.hysteresis.models import (
     checked_values,
     gpi_model,
     gpi_output,
+    guess_arguments,
 )
-from i2ris_calib.hysteresis.start import default_deadband, keep_fixed, start_values
+from i2ris_calib.hysteresis.start import keep_fixed, start_values
 
 __all__ = [
     "SIDES",
@@ -138,15 +138,7 @@ class TwoTendonGPIModel(ParametricModel):
     ) -> TwoTendonGPIModel:
         """A new model whose values are the data-driven start for (v, theta)
         (:func:`two_tendon_starts`); fixed parameters keep their values."""
-        func = f"{self.name}.guess"
-        v = as_1d_float(func, "v", v, min_size=2)
-        theta = as_1d_float(
-            func, "theta_deg", theta_deg, nan_ok=True,
-            hint="mark an unmeasured angle with NaN, never inf",
-        )  # fmt: skip
-        same_length(func, v=v, theta_deg=theta)
-        deadband = as_real(func, "deadband", deadband, none_ok=True, lo=0.0)
-        db = default_deadband(v) if deadband is None else float(deadband)
+        v, theta, db = guess_arguments(f"{self.name}.guess", v, theta_deg, deadband)
         x = two_tendon_starts(self, v, theta, 1, np.random.default_rng(0), db)[0]
         return self.with_values(keep_fixed(self, x))
 

@@ -631,3 +631,60 @@ def test_signed_fit_compensated_and_dataset_chosen(tmp_path):
     assert (df["enc_yaw"] < 0).any() and (df["enc_yaw"] > 0).any()
     achieved = forward(truth, df["enc_yaw"].to_numpy(float), df["time_s"].to_numpy())
     assert np.sqrt(np.mean((achieved - target) ** 2)) < 0.3
+
+
+def test_stepping_model_flagged_in_summary_and_warnings(tmp_path, capsys):
+    # the paper EGPI on a target that falls through v_f again and again (the continuous
+    # EGPI's output), under a rate limit: each reversal below v_f switches its shown
+    # family and its output steps (the kernel's status says rate_limit there)
+    P = _fit_json(tmp_path / "fit.json", rate=5000.0)
+    t = np.arange(0, 10, 0.01)
+    v = 3500 + 2000 * np.sin(2 * np.pi * 0.3 * t)
+    y = forward(model_from_params("egpi_c", P, 30, 2.0), v)
+    pd.DataFrame({"time_s": t, "yaw_deg": y}).to_csv(tmp_path / "t.csv", index=False)
+    code = main(["compensate", str(tmp_path / "fit.json"), "--dataset", "yaw+", "--model",
+                 "egpi", "--target", str(tmp_path / "t.csv"), "--out",
+                 str(tmp_path / "c.csv")])  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    doc = json.loads((tmp_path / "compensate.json").read_text())["axes"]["yaw"]
+    n = doc["flags"]["output_step"]
+    assert n > 0
+    (warn,) = [w for w in doc["warnings"] if "steps at v_f" in w]
+    assert warn == (  # the forced model steps: the others ranked to name the continuous ones
+        f"egpi steps at v_f where the target passes ({n} samples flagged output_step); "
+        "gpi or egpi_c track it without steps: --model gpi"
+    )
+    assert doc["model"] == "egpi" and doc["model_choice"] == "--model"
+    assert warn in text
+    df = pd.read_csv(tmp_path / "c.csv", keep_default_na=False)
+    assert df["flags"].str.contains("output_step").sum() == n
+    # ranked: the stepping EGPI after the continuous models, named in the warning
+    doc = compensate_files([tmp_path / "fit.json"], ["yaw+"], tmp_path / "t.csv",
+                           tmp_path / "c.csv")  # fmt: skip
+    rows = {r["model"]: r for r in doc["axes"]["yaw"]["ranking"]}
+    assert not rows["egpi"]["continuous"] and rows["egpi"]["output_steps"] == n
+    assert rows["egpi"]["rank"] == 3 and doc["axes"]["yaw"]["model"] != "egpi"
+
+
+def test_ranking_steps_double_the_score_not_last_whatever_the_error():
+    from i2ris_calib.io.compensate import rank_models
+
+    class Res:  # a CompensationResult's summary and flags: n samples, `steps` output steps
+        def __init__(self, rmse, steps, n=600):
+            self.rmse, self.n = rmse, n
+            self.flags = {"output_step": np.arange(n) < steps, "spike_removed": np.zeros(n, bool)}
+
+        def summary(self):
+            flags = {k: int(v.sum()) for k, v in self.flags.items()}
+            return {"rmse_deg": self.rmse, "n_samples": self.n, "flags": flags}
+
+    record = {"models": {"gpi": {"holdout_metrics": {"rmse_deg": 5.75}},
+                         "agpi_coupled": {"holdout_metrics": {"rmse_deg": 0.41}},
+                         "egpi": {"holdout_metrics": {"rmse_deg": 5.0}}}}  # fmt: skip
+    rows = rank_models(
+        {"gpi": Res(0.003, 0), "agpi_coupled": Res(0.004, 15), "egpi": Res(0.003, 30)}, record
+    )
+    assert [r["model"] for r in rows] == ["agpi_coupled", "gpi", "egpi"]
+    assert rows[0]["rank_score_deg"] == pytest.approx(2 * rows[0]["score_deg"])
+    assert not rows[0]["continuous"] and rows[1]["continuous"]

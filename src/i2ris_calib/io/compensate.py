@@ -14,8 +14,10 @@ import pandas as pd
 
 from i2ris_calib.compensation import STATUS_NAMES, compensate
 from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
+from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
 from i2ris_calib.interrupts import deferred
@@ -349,9 +351,45 @@ def _flag_column(per_axis: dict[str, list[list[str]]], prefix: bool) -> list[str
     return out
 
 
+#: Smallest output jump (deg) at a switch of the shown operator family that counts as an
+#: output step: ``max(STEP_MIN_DEG, 10 tol_deg)`` (as the spike repair's output test)
+STEP_MIN_DEG = 0.05
+
+
+def family_switch_steps(model, res, v0: float) -> np.ndarray:
+    """Samples (shape (n,), bool) where the commands sent make the paper EGPI's shown
+    output change family (Eq20: ``y2`` while unloading at ``v <= v_f``, else ``y1``) with
+    a jump of more than ``max(STEP_MIN_DEG, 10 tol_deg)`` that the predicted output
+    shows against the target's change: an output step the kernel's
+    status leaves as ``rate_limit`` (or ``reached``) when the rate-limited command crosses
+    the switch. All False for models without such a switch."""
+    n = res.commands.size
+    fam = getattr(model, "flag_point_families", None)
+    if fam is None or n == 0:
+        return np.zeros(n, dtype=bool)
+    v = np.concatenate(([float(v0)], res.entry_commands, res.commands))
+    vals = model_values(model)
+    with deferred():
+        y1, y2, unloading = fam(Signals(v=v), vals)
+    v_f = float(model.named(vals)["v_f"])
+    shown2 = unloading & (v <= v_f)
+    switch = np.concatenate(([False], shown2[1:] != shown2[:-1]))
+    thr = max(STEP_MIN_DEG, 10.0 * res.tol_deg)
+    jump = (switch & (np.abs(y1 - y2) > thr))[-n:]
+    # ... where the predicted output leaves the target's change by more than thr (the
+    # inverse often jumps the input across the switch so that the output does not step)
+    dy = np.diff(np.concatenate(([res.predicted_deg[0]], res.predicted_deg)))
+    dt = np.diff(np.concatenate(([res.target_deg[0]], res.target_deg)))
+    return jump & (np.abs(dy - dt) > thr)
+
+
 #: Share of the target's samples with an output step (or a removed spike) above which a
-#: model counts as stepping where the target passes (ranked after the continuous ones)
+#: model counts as stepping where the target passes (ranked down: :data:`STEP_PENALTY`)
 STEP_SHARE = 0.005
+#: Factor on a stepping model's score in the ranking: it ranks after a continuous model
+#: unless its predicted tracking error is below 1/STEP_PENALTY of that model's (an
+#: uncoupled model 14x worse held out must not beat the coupled one for a few steps)
+STEP_PENALTY = 2.0
 
 
 #: Predicted tracking error that ranks a model: its error on the target (its own
@@ -402,16 +440,23 @@ def _solve_coupled(setup: dict, current: dict) -> dict:
     return out
 
 
-def rank_models(candidates: dict, record: dict) -> list[dict]:
-    """Ranking of the models that can serve this target (best first): models whose
-    output steps where the target passes (more than :data:`STEP_SHARE` of the samples
-    flagged ``output_step`` or ``spike_removed``) after those that stay continuous, then by the predicted tracking
-    error (:func:`_score`: the model's own error on this target and its held-out fit
-    error in quadrature). ``candidates``: kind -> CompensationResult."""
+def rank_models(
+    candidates: dict, record: dict, models: dict | None = None, v0: float = 0.0
+) -> list[dict]:
+    """Ranking of the models that can serve this target (best first), by the predicted
+    tracking error (:func:`_score`: the model's own error on this target and its
+    held-out fit error in quadrature), multiplied by :data:`STEP_PENALTY` for models
+    whose output steps where the target passes (more than :data:`STEP_SHARE` of the
+    samples flagged ``output_step`` or ``spike_removed``): ``rank_score_deg``. ``candidates``: kind -> CompensationResult; ``models`` (kind ->
+    model) and ``v0`` (start input): the paper EGPI's stage switches that step the
+    predicted output (:func:`family_switch_steps`) count as output steps too."""
     rows = []
     for kind, res in candidates.items():
         s = res.summary()
-        steps = s["flags"]["output_step"] + s["flags"]["spike_removed"]
+        stepped = res.flags["output_step"] | res.flags["spike_removed"]
+        if models is not None and kind in models:
+            stepped = stepped | family_switch_steps(models[kind], res, v0)
+        steps = int(stepped.sum())
         hold = _holdout(record["models"][kind])
         rows.append({
             "model": kind,
@@ -421,10 +466,29 @@ def rank_models(candidates: dict, record: dict) -> list[dict]:
             "output_steps": int(steps),
             "continuous": steps <= STEP_SHARE * s["n_samples"],
         })  # fmt: skip
-    rows.sort(key=lambda r: (not r["continuous"], r["score_deg"]))
+    for r in rows:
+        r["rank_score_deg"] = r["score_deg"] * (1.0 if r["continuous"] else STEP_PENALTY)
+    rows.sort(key=lambda r: r["rank_score_deg"])
     for i, r in enumerate(rows):
         r["rank"] = i + 1
     return rows
+
+
+def _rank_alternatives(a: dict, forced: str) -> None:
+    """Add the dataset's other (uncoupled, fitted) invertible models to ``a``'s candidates
+    when the ``--model``-forced one steps, so the warning can name those that do not; a
+    model that cannot be loaded or inverted is left out."""
+    for kind in a["record"].get("models", {}):
+        if kind == forced or kind not in INVERSE_KINDS or kind in COUPLED_KINDS:
+            continue
+        try:
+            fitted = load_model(a["doc"], a["record"], kind, a["path"], None)
+            a["candidates"][kind] = _invert_axis(
+                fitted, a["goal"], a["t"], a["lo"], a["hi"], a["rate"], a["v0"]
+            )
+        except CalibError:
+            continue
+        a["models"][kind] = fitted
 
 
 def compensate_files(
@@ -574,7 +638,7 @@ def compensate_files(
             except CalibError as exc:
                 raise CalibError(f"{target} [{name}] {kind}: {exc}") from None
         setup[axis] = {
-            "name": name, "path": path, "record": record, "sign": sign, "lo": lo, "hi": hi,
+            "name": name, "path": path, "doc": doc, "record": record, "sign": sign, "lo": lo, "hi": hi,
             "rate": rate, "rate_source": rate_source, "rate_warn": rate_warn, "v0": v0,
             "start_source": start_source, "goal": goal, "t": t, "candidates": candidates,
             "models": models, "coupled": coupled_kind, "coupled_model": coupled_model,
@@ -583,7 +647,9 @@ def compensate_files(
         current = {}
         for axis, a in setup.items():
             best = (
-                rank_models(a["candidates"], a["record"])[0]["model"] if a["candidates"] else None
+                rank_models(a["candidates"], a["record"], a["models"], a["v0"])[0]["model"]
+                if a["candidates"]
+                else None
             )
             cmds = a["candidates"][best].commands if best else np.full(t.size, a["v0"])
             current[axis] = (a["sign"] * cmds, a["sign"] * a["v0"])
@@ -594,7 +660,10 @@ def compensate_files(
         for axis, res in joint.items():
             setup[axis]["candidates"][setup[axis]["coupled"]] = res
     for a in setup.values():
-        ranking = rank_models(a["candidates"], a["record"])
+        ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
+        if model is not None and not ranking[0]["continuous"] and model not in COUPLED_KINDS:
+            _rank_alternatives(a, model)  # the forced model steps: name the others
+            ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
         kind = model or ranking[0]["model"]
         for r in ranking:
             r["chosen"] = r["model"] == kind
@@ -616,6 +685,7 @@ def compensate_files(
             "model": a["models"][a["kind"]], "lo": a["lo"], "hi": a["hi"], "rate": a["rate"],
             "rate_source": a["rate_source"], "rate_warn": a["rate_warn"], "v0": a["v0"],
             "start_source": a["start_source"], "ranking": a["ranking"],
+            "forced": model is not None,
         }  # fmt: skip
     table, axes_doc = _outputs(results, frame, t, target, unit)
     inputs = [*(p for p, _ in docs), Path(target), *([Path(model_file)] if model_file else [])]
@@ -632,6 +702,28 @@ def compensate_files(
         with atomic_path(out) as tmp_csv:
             table.to_csv(tmp_csv, index=False, float_format="%.10g")
     return doc_out
+
+
+def output_step_warning(a: dict, summ: dict) -> str | None:
+    """The line saying the chosen model's predicted output steps where the target passes
+    (more than :data:`STEP_SHARE` of the samples flagged ``output_step`` or
+    ``spike_removed``), naming the continuous models of the ranking; None otherwise."""
+    n = summ["flags"]["output_step"] + summ["flags"]["spike_removed"]
+    if n <= STEP_SHARE * summ["n_samples"]:
+        return None
+    kind = a["kind"]
+    where = " at v_f" if kind == "egpi" else ""
+    smooth = [r["model"] for r in a["ranking"] if r["continuous"] and r["model"] != kind]
+    if smooth:
+        alt = f"{' or '.join(smooth)} track it without steps: --model {smooth[0]}"
+    elif a.get("forced"):
+        alt = "leave out --model to rank the other models on this target"
+    else:
+        alt = "no other model of the fit tracks it without steps"
+    return (
+        f"{kind} steps{where} where the target passes ({n} samples flagged output_step"
+        f"{' or spike_removed' if summ['flags']['spike_removed'] else ''}); {alt}"
+    )
 
 
 def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: float):
@@ -668,11 +760,14 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
         reach_all &= ok
         reach_cols[f"reachable_{axis}"] = ok.astype(int)
         per = [["entry"] for _ in range(n_entry)]
-        fl = res.flags
+        fl = dict(res.flags)
+        fl["output_step"] = fl["output_step"] | family_switch_steps(a["model"], res, a["v0"])
         for i in range(t.size):
             per.append([f for f in FLAG_NAMES if fl[f][i]])
         flags_by_axis[axis] = per
         summ = res.summary()
+        summ["flags"] = {name: int(f.sum()) for name, f in fl.items()}
+        step_warn = output_step_warning(a, summ)
         bad = np.flatnonzero(~res.reachable)
         reach = reachable_angles(a["model"], (a["lo"], a["hi"]), sign)
         warn = range_warning(
@@ -684,7 +779,7 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
             "dataset": a["name"],
             "fit_json": str(a["path"]),
             "model": a["kind"],
-            "model_choice": "--model" if len(a["ranking"]) == 1 else "ranking",
+            "model_choice": "--model" if a.get("forced") else "ranking",
             "ranking": a["ranking"],
             "params": rec["models"][a["kind"]]["params"],
             "input_range_counts": [a["lo"], a["hi"]],
@@ -702,7 +797,7 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
             "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
             "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
             "reachable_deg": list(reach),
-            "warnings": [w for w in (a["rate_warn"], warn) if w is not None],
+            "warnings": [w for w in (a["rate_warn"], warn, step_warn) if w is not None],
         }
     cols.update(preds)
     if len(results) > 1:
@@ -730,5 +825,6 @@ def summary_lines(doc: dict) -> list[str]:
             f"deg, max {rec['max_abs_err_deg']:.4f} deg, {rec['n_unreachable']} of "
             f"{rec['n_samples']} samples unreachable; flags: {fl}; {rate_txt}; entry "
             f"{rec['n_entry']} samples from {rec['start_counts']:g} counts"
+            + "".join(f"; {w}" for w in rec.get("warnings", []) if "where the target passes (" in w)
         )
     return lines

@@ -34,7 +34,7 @@ from i2ris_calib.data.dataset import direction_datasets  # noqa: E402
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
-from i2ris_calib.fitting.pipeline import choose_model, fit_dataset  # noqa: E402
+from i2ris_calib.fitting.pipeline import choose_model, fit_dataset, pick_after_fit  # noqa: E402
 from i2ris_calib.io.fit import recording_summary  # noqa: E402
 
 RATE_HZ = 200.0
@@ -91,7 +91,8 @@ def draw(seed: int):
 
 
 def default_fit(t, u, theta, config: FitConfig):
-    """(dataset, model choice, {kind: FitResult}): the default path, as ``fit`` decides."""
+    """(dataset, model choice, {kind: FitResult}): the default path, as ``fit`` decides
+    (the kinds from the recording, the default model after fitting)."""
     whole = direction_datasets("yaw", t, u, theta, signed=True)
     recording, together = recording_summary(whole)
     choice = choose_model(recording, config, "all", together)
@@ -103,7 +104,7 @@ def default_fit(t, u, theta, config: FitConfig):
     out = {}
     for k in choice.kinds:
         out[k] = fit_dataset(k, d, config, out)
-    return d, choice, out
+    return d, pick_after_fit(choice, [(d, out)]), out
 
 
 def one_seed(seed: int, config: FitConfig, diagnose: bool) -> tuple[bool, bool | None]:
@@ -122,6 +123,7 @@ def one_seed(seed: int, config: FitConfig, diagnose: bool) -> tuple[bool, bool |
         f"{excess / sd:+8.2f} {dt:6.1f}s  {'ok' if good else 'MISSED'}",
         flush=True,
     )
+    print(f"     {choice.why[choice.why.find('picked after') :]}", flush=True)
     listed = None
     if diagnose:
         t0 = time.perf_counter()

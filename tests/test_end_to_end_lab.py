@@ -74,9 +74,14 @@ def test_default_fit_is_the_coupled_two_tendon_model_at_the_noise(lab_run):
     for axis in ("yaw", "pitch"):
         fit = json.loads((run_dir / "fit" / axis / "fit.json").read_text())
         assert fit["model_choice"]["input"] == "signed"
-        assert fit["model_choice"]["main"] == "agpi_coupled", fit["model_choice"]["line"]
+        choice = fit["model_choice"]
+        # fitted: the coupled model (both motors move); picked after fitting by held-out
+        # error: pitch follows the yaw motor in the truth, yaw does not (agpi may win)
+        assert choice["prefit_main"] == "agpi_coupled", choice["line"]
+        expected = {"agpi_coupled"} if axis == "pitch" else {"agpi", "agpi_coupled"}
+        assert choice["main"] in expected, choice["line"]
         (ds,) = fit["datasets"]
-        best = ds["models"]["agpi_coupled"]
+        best = ds["models"][choice["main"]]
         # measured held-out 0.06 (yaw) / 0.19 (pitch) deg; the paper's GPI 1-10 deg
         assert best["holdout_metrics"]["rmse_deg"] < 0.3, axis
         assert ds["models"]["gpi"]["holdout_metrics"]["rmse_deg"] > 3 * 0.3

@@ -54,6 +54,10 @@ def test_default_fit_through_zero_is_the_two_tendon_model_at_the_noise(tmp_path,
     assert "crosses zero" in doc["model_choice"]["why"]
     (d,) = doc["datasets"]
     assert d["direction"] == "±" and set(d["models"]) == {"gpi", "agpi"}
+    held = {k: rec["holdout_metrics"]["rmse_deg"] for k, rec in d["models"].items()}
+    assert doc["model_choice"]["main"] == "agpi" and doc["model_choice"]["picked_after_fit"]
+    picked = f"picked after fitting: agpi: held-out {held['agpi']:.3g} deg vs gpi {held['gpi']:.3g}"
+    assert picked in doc["model_choice"]["why"]
     assert d["models"]["agpi"]["holdout_metrics"]["rmse_deg"] <= 1.2 * NOISE
     pred = pd.read_csv(tmp_path / "o" / "predictions.csv")["agpi_deg"].to_numpy()
     assert np.abs(np.diff(pred)).max() <= np.abs(np.diff(truth)).max() + 3 * NOISE

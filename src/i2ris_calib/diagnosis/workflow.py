@@ -75,9 +75,20 @@ from i2ris_calib.diagnosis.stats import (
 )
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.pipeline import checked_fit_config, fit_dataset
+from i2ris_calib.fitting.pipeline import (
+    ModelChoice,
+    checked_fit_config,
+    fit_dataset,
+    pick_after_fit,
+)
 from i2ris_calib.hysteresis.model import Model
-from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts
+from i2ris_calib.hysteresis.registry import (
+    DIAGNOSIS_STARTS,
+    SIGNED_DEFAULT,
+    SIGNED_KINDS,
+    diagnosis_starts,
+    fit_order,
+)
 
 __all__ = [
     "AutoDiagnosis",
@@ -486,9 +497,12 @@ def diagnose_from_starts(
     fit_config : FitConfig, optional
         Settings of the starting fits.
     starts : tuple of str, optional
-        Starting models (``"gpi"``, ``"egpi"``, ``"agpi"``); default
-        :func:`~i2ris_calib.hysteresis.registry.diagnosis_starts` of the dataset (the
-        two-tendon GPI on a signed dataset, GPI and EGPI on a direction's).
+        Starting models (``"gpi"``, ``"egpi"``, ``"agpi"``); default: on a signed
+        dataset the one model ``fit`` picks after fitting its default kinds
+        (:func:`~i2ris_calib.fitting.pipeline.pick_after_fit`: GPI or the two-tendon
+        GPI, both fitted, the pick said in ``sentence``; the two-tendon GPI, the base of
+        the coupled model, when the other motor moves with this one and coupling can be
+        separated), GPI and EGPI on a direction's.
     progress : callable, optional
         ``progress(text)`` before each fit.
     """
@@ -496,8 +510,28 @@ def diagnose_from_starts(
     checked_dataset(func, "data", data)
     cfg = _diagnosis_config(func, config)
     fit_config = checked_fit_config(func, fit_config, "fit_config")
-    if starts is None:
-        starts = diagnosis_starts(data.direction == "±")
+    fitted: dict = {}  # start fits so far: GPI's is the nested start of EGPI's (fitted once)
+    picked = ""
+    other = other_axis(data.axis) if data.axis in ("yaw", "pitch") else "other"
+    together = motors_together(data.enc, data.signals.v_other, other)
+    coupled = together is not None and together.moves_together and together.coupled
+    if starts is None and data.direction == "±" and coupled:
+        # fit's candidates include the coupled two-tendon GPI: start from its base, the
+        # diagnosis tries the coupling (axis_coupling) as an effect
+        starts = (SIGNED_DEFAULT,)
+        picked = "the other motor moves with this one: the coupled model's base"
+    elif starts is None and data.direction == "±":  # the default model fit picks there
+        for kind in fit_order(SIGNED_KINDS):
+            if progress:
+                progress(f"fitting {kind}")
+            with single_threaded_blas():
+                fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
+        choice = ModelChoice(True, tuple(fit_order(SIGNED_KINDS)), "the signed input")
+        choice = pick_after_fit(choice, [(data, fitted)])
+        starts = (choice.main,)
+        picked = choice.why[choice.why.find("picked after fitting") :] if choice.picked else ""
+    elif starts is None:
+        starts = diagnosis_starts(False)
     starts = check_choices(func, "starts", starts, DIAGNOSIS_STARTS, repr(DIAGNOSIS_STARTS))
     if not starts:
         raise CalibError(
@@ -506,12 +540,12 @@ def diagnose_from_starts(
         )
     check_callable(func, "progress", progress)
     paths = {}
-    fitted: dict = {}  # start fits so far: GPI's is the nested start of EGPI's (fitted once)
     for kind in starts:
-        if progress:
-            progress(f"fitting {kind}")
-        with single_threaded_blas():
-            fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
+        if kind not in fitted:
+            if progress:
+                progress(f"fitting {kind}")
+            with single_threaded_blas():
+                fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
         base = fitted[kind].model
         paths[kind] = diagnose(
             base,
@@ -529,7 +563,8 @@ def diagnose_from_starts(
         return ", ".join(named[k]) or "nothing missing"
 
     if len(order) == 1:
-        return AutoDiagnosis(best, diag, paths, True, float("nan"), f"from {best}: {said(best)}")
+        how = f"from {best} ({picked})" if picked else f"from {best}"
+        return AutoDiagnosis(best, diag, paths, True, float("nan"), f"{how}: {said(best)}")
     other = order[1]
     with single_threaded_blas():
         d, _, _ = search_data(data, cfg)

@@ -6,6 +6,7 @@ direction's input and a loss mask: every model runs over every sample in time or
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -45,6 +46,8 @@ __all__ = [
     "MODEL_KINDS",
     "ModelChoice",
     "choose_model",
+    "output_jump",
+    "pick_after_fit",
     "unfitted_model",
     "deadband_for",
     "fit",
@@ -62,6 +65,10 @@ __all__ = [
 class ModelChoice:
     """Which models ``fit`` fits, on which input, and why (docs/fit.md, "Which model").
 
+    The kinds and the input are chosen from the recording before fitting
+    (:func:`choose_model`); on the signed input the default model among them is picked
+    after fitting from the held-out errors (:func:`pick_after_fit`).
+
     Attributes
     ----------
     signed : bool
@@ -71,25 +78,40 @@ class ModelChoice:
         Model kinds to fit (registry names), in fitting order.
     why : str
         The reason, in a few words (the recording's zero crossings and rests, or the
-        option that forced it; whether the other motor moves with this one).
+        option that forced it; whether the other motor moves with this one; after
+        fitting, the held-out figures that decided the default model).
     coupling : MotorsTogether or None
         How the other motor moves with this one (:mod:`i2ris_calib.data.coupling`);
         None when the recording has no other motor's input.
+    picked : str or None
+        The default model picked after fitting (:func:`pick_after_fit`); None before
+        fitting (then :attr:`main` is :attr:`prefit_main`).
+    held_out : tuple of (str, float)
+        Held-out RMSE (deg) per candidate kind that decided :attr:`picked`.
     """
 
     signed: bool
     kinds: tuple[str, ...]
     why: str
     coupling: MotorsTogether | None = None
+    picked: str | None = None
+    held_out: tuple[tuple[str, float], ...] = ()
 
     @property
-    def main(self) -> str:
-        """The default model of this choice: the coupled two-tendon GPI when fitted,
-        else the two-tendon GPI on a signed input, else the last kind."""
+    def prefit_main(self) -> str:
+        """The default model known before fitting: the coupled two-tendon GPI when
+        fitted, else the two-tendon GPI on a signed input, else the last kind (what the
+        model clock-sync method fits: :mod:`i2ris_calib.sync.joint`)."""
         for kind in (COUPLED_DEFAULT, SIGNED_DEFAULT):
             if self.signed and kind in self.kinds:
                 return kind
         return self.kinds[-1]
+
+    @property
+    def main(self) -> str:
+        """The default model: picked after fitting (:func:`pick_after_fit`), else
+        :attr:`prefit_main`."""
+        return self.picked if self.picked is not None else self.prefit_main
 
     @property
     def line(self) -> str:
@@ -103,10 +125,102 @@ class ModelChoice:
         return f"model: {what} ({self.why})"
 
     def as_dict(self) -> dict:
-        """The fit.json ``model_choice`` record."""
+        """The fit.json ``model_choice`` record (``main``: the default model, picked
+        after fitting on the signed input; ``prefit_main``: the one known before;
+        ``held_out_rmse_deg``: the figures that decided, by kind)."""
         return {"input": "signed" if self.signed else "split", "kinds": list(self.kinds),
-                "main": self.main, "why": self.why, "line": self.line,
+                "main": self.main, "prefit_main": self.prefit_main,
+                "picked_after_fit": self.picked is not None,
+                "held_out_rmse_deg": dict(self.held_out),
+                "why": self.why, "line": self.line,
                 "coupling": None if self.coupling is None else self.coupling.as_dict()}  # fmt: skip
+
+
+#: A model with fewer free parameters is picked when its held-out RMSE is within this
+#: share of the lowest one (:func:`pick_after_fit`).
+SIMPLER_WITHIN = 0.05
+
+#: A model's output "jumps" when its largest sample-to-sample change exceeds the data's
+#: own largest change by more than this many noise sd (:func:`output_jump`).
+JUMP_NOISE_SD = 3.0
+
+
+def output_jump(pred: np.ndarray, theta: np.ndarray) -> float:
+    """How far a model's largest output change between consecutive measured samples
+    exceeds the measured angle's own largest change there (deg; negative: within it).
+
+    ``pred``, ``theta``: shape (n,), the model output and the measured angle (NaN where
+    not measured); only pairs of consecutive samples both measured count."""
+    y, th = np.asarray(pred, dtype=float), np.asarray(theta, dtype=float)
+    both = np.isfinite(th[1:]) & np.isfinite(th[:-1]) & np.isfinite(y[1:]) & np.isfinite(y[:-1])
+    if not both.any():
+        return float("nan")
+    return float(np.abs(np.diff(y))[both].max() - np.abs(np.diff(th))[both].max())
+
+
+def pick_after_fit(
+    choice: ModelChoice, fitted: Sequence[tuple[Dataset, dict[str, FitResult]]]
+) -> ModelChoice:
+    """The choice with its default model picked from the fits (signed input only).
+
+    Among the converged fits of ``choice.kinds`` (all of them when none converged) the
+    lowest held-out RMSE (pooled over the datasets, by their held-out samples) wins,
+    unless its output jumps (:func:`output_jump` beyond :data:`JUMP_NOISE_SD` noise sd
+    on some dataset; the noise sd is bounded by the lowest fitted RMSE there): then the
+    best model that does not. A model with fewer free parameters within
+    :data:`SIMPLER_WITHIN` of the winner's held-out RMSE is preferred. ``why`` gets the
+    figures that decided, e.g. ``picked after fitting: agpi held-out 0.21 deg vs gpi
+    1.4 deg``. The paper's split (and one kind) is returned unchanged.
+
+    ``fitted``: (dataset, {kind: FitResult}) per dataset, as :func:`fit_dataset` gives.
+    """
+    kinds = [k for k in choice.kinds if all(k in res for _, res in fitted)]
+    if not choice.signed or len(kinds) < 2 or not fitted:
+        return choice
+    rmse, jumps, n_free, converged = {}, {}, {}, {}
+    for k in kinds:
+        num = den = 0.0
+        for _, res in fitted:
+            m = res[k].holdout_metrics
+            w = max(int(m.n_samples), 1)
+            num, den = num + w * float(m.rmse_deg) ** 2, den + w
+        rmse[k] = float(np.sqrt(num / den)) if den else float("nan")
+        converged[k] = all(res[k].converged for _, res in fitted)
+        n_free[k] = max(len(res[k].free) for _, res in fitted)
+        jumps[k] = 0.0
+    for d, res in fitted:
+        sd = min(float(res[k].metrics.rmse_deg) for k in kinds)
+        for k in kinds:
+            excess = output_jump(res[k].predict(d.signals), d.theta_measured_deg)
+            if np.isfinite(excess) and sd > 0:
+                jumps[k] = max(jumps[k], excess / sd)
+    cands = [k for k in kinds if np.isfinite(rmse[k]) and converged[k]]
+    cands = cands or [k for k in kinds if np.isfinite(rmse[k])]
+    if not cands:
+        return choice
+    smooth = [k for k in cands if jumps[k] <= JUMP_NOISE_SD] or cands
+    best = min(smooth, key=lambda k: (rmse[k], n_free[k]))
+    simpler = [k for k in smooth if n_free[k] < n_free[best]]
+    simpler = [k for k in simpler if rmse[k] <= (1 + SIMPLER_WITHIN) * rmse[best]]
+    pick = min(simpler, key=lambda k: (n_free[k], rmse[k])) if simpler else best
+
+    def fig(k: str) -> str:
+        return f"{k} {rmse[k]:.3g} deg"
+
+    others = sorted((k for k in cands if k != pick), key=rmse.__getitem__)
+    text = f"picked after fitting: {pick}: held-out {rmse[pick]:.3g} deg"
+    if others:
+        text += " vs " + ", ".join(map(fig, others))
+    if pick != best:
+        text += f" (fewer parameters, within {100 * SIMPLER_WITHIN:.0f} % of {fig(best)})"
+    jumped = [k for k in cands if jumps[k] > JUMP_NOISE_SD]
+    if jumped:
+        text += "; output jumps: " + ", ".join(f"{k} by {jumps[k]:.1f} noise sd" for k in jumped)
+    unconverged = [k for k in kinds if not converged[k]]
+    if unconverged:
+        text += "; not converged: " + ", ".join(unconverged)
+    held = tuple((k, rmse[k]) for k in kinds)
+    return replace(choice, why=f"{choice.why}; {text}", picked=pick, held_out=held)
 
 
 def choose_model(

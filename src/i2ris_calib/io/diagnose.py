@@ -25,7 +25,7 @@ from i2ris_calib.diagnosis.serialize import model_to_dict
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
-from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts
+from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
 from i2ris_calib.io.fit import datasets_for_fit
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
@@ -167,7 +167,8 @@ def diagnose_dataset(
     out = claim_output_dir(
         Path(out) if out is not None else Path("diagnose_out"), "diagnose", sources, OUTPUTS
     )
-    starts = diagnosis_starts(dset.direction == "±") if start == "auto" else (start,)
+    # auto: on the signed input the model fit picks after fitting (diagnose_from_starts)
+    starts = None if start == "auto" else (start,)
     with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {dset.name}", total=None)
         auto = diagnose_from_starts(

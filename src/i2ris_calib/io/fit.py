@@ -31,6 +31,7 @@ from i2ris_calib.fitting.pipeline import (
     choose_model,
     fit_dataset,
     fit_warnings,
+    pick_after_fit,
 )
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
@@ -296,6 +297,7 @@ def fit_files(
             bar.update(task, description=f"fitting {label}", advance=1)
 
         fitted = fit_datasets(datasets, kinds, fit_config, progress=step, saved=saved)
+    choice = pick_after_fit(choice, fitted)  # the default model: from the held-out errors
     doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice)
     with output_dir(out, "fit", inputs, OUTPUTS) as tmp:
         write_json(tmp / "fit.json", doc)

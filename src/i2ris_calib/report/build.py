@@ -187,7 +187,7 @@ def recommendation_table(fits: tuple[FitData, ...]) -> Table | None:
         preds = _predictions_by_dataset(fd)
         for d in tables.fit_datasets(fd.fit):
             name = str(d.get("name", fd.axis))
-            r = recommend(d, preds.get(name))
+            r = recommend(d, preds.get(name), fd.fit.get("model_choice"))
             rows.append((name, r.label, tables.fmt(r.rmse_deg, 3), r.why, r.support))
     if not rows:
         return None

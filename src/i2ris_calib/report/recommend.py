@@ -1,7 +1,8 @@
 """Which fitted model the report recommends per dataset, why, and where the data end.
 
-The rule (stated in the report): among the models that converged, the lowest held-out
-RMSE wins; the continuous EGPI_C is preferred over the paper's EGPI when its held-out
+The rule (stated in the report): the default model ``fit`` picked after fitting on a
+signed input (fit.json ``model_choice``), else among the models that converged, the
+lowest held-out RMSE wins; the continuous EGPI_C is preferred over the paper's EGPI when its held-out
 RMSE is within :data:`CONTINUOUS_MARGIN` of it (EGPI's output steps at the flag point,
 which a feedforward inversion cannot follow). Parameters the data do not identify are
 named. The supported range is that of the dataset's own measured samples: outside
@@ -91,8 +92,15 @@ def supported_range(d: Mapping[str, Any], pred: pd.DataFrame | None) -> str:
     return "unknown"
 
 
-def recommend(d: Mapping[str, Any], pred: pd.DataFrame | None = None) -> Recommendation:
-    """The :class:`Recommendation` for one fit.json dataset record (rule: module doc)."""
+def recommend(
+    d: Mapping[str, Any], pred: pd.DataFrame | None = None, choice: Mapping | None = None
+) -> Recommendation:
+    """The :class:`Recommendation` for one fit.json dataset record (rule: module doc).
+
+    ``choice``: the fit's ``model_choice``; when its default model was picked after
+    fitting (``picked_after_fit``: the signed input) and converged here, that model is
+    recommended with the figures that picked it (one rule: fitting/pipeline.py
+    ``pick_after_fit``)."""
     name = str(d.get("name", "dataset"))
     support = supported_range(d, pred)
     cands = {
@@ -113,7 +121,14 @@ def recommend(d: Mapping[str, Any], pred: pd.DataFrame | None = None) -> Recomme
         why[0] += f"; next {LABELS[k2]} {fmt_sig(v2, 2, pad=True)} deg)"
     else:
         why[0] += ")"
-    if best == "egpi" and "egpi_c" in cands:
+    fitted_pick = isinstance(choice, Mapping) and choice.get("picked_after_fit")
+    picked = choice.get("main") if fitted_pick else None
+    if picked in cands:
+        best = picked
+        text = str(choice.get("why", ""))
+        at = text.find("picked after fitting")
+        why = [text[at:] if at >= 0 else f"the fit's default model ({best})"]
+    elif best == "egpi" and "egpi_c" in cands:
         c, e = cands["egpi_c"], cands["egpi"]
         if c <= e * (1 + CONTINUOUS_MARGIN):
             best = "egpi_c"

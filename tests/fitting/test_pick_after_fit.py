@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
+from through_zero import yaw_recording
 
 from i2ris_calib.cli import main
 from i2ris_calib.fitting.pipeline import ModelChoice, output_jump, pick_after_fit
@@ -27,17 +28,7 @@ def piezo_like_frame(seed: int, n: int = 2400, rate_hz: float = 30.0) -> pd.Data
     truth = gpi_model(a2=0.0, a4=0.0, r1=2.0, rn=40.0, sigma=0.05)
     y = truth(v)[start:]
     v, t = v[start:], t[start:]
-    return pd.DataFrame(
-        {
-            "time_s": t,
-            "enc_yaw": v,
-            "enc_pitch": 0.0,
-            "yaw_deg": y + rng.normal(0, NOISE, v.size),
-            "pitch_deg": rng.normal(0, 0.05, v.size),
-            "status": "measured",
-            "frame": np.arange(v.size),
-        }
-    )
+    return yaw_recording(rng, t, v, y, NOISE)
 
 
 def test_piezo_like_loop_through_zero_picks_one_gpi_and_says_why(tmp_path, capsys):

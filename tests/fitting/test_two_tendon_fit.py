@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
+from through_zero import yaw_recording
 
 from i2ris_calib.cli import main
 from i2ris_calib.errors import CalibError
@@ -27,17 +28,7 @@ def lab_frame(seed: int, n: int = 3000, rate_hz: float = 30.0):
     t, v, start = through_zero_trajectory(rng, n, rate_hz)
     y = model_for_kind("agpi").with_values(truth)(v)[start:]
     v, t = v[start:], t[start:]
-    frame = pd.DataFrame(
-        {
-            "time_s": t,
-            "enc_yaw": v,
-            "enc_pitch": 0.0,
-            "yaw_deg": y + rng.normal(0, NOISE, v.size),
-            "pitch_deg": rng.normal(0, 0.05, v.size),
-            "status": "measured",
-            "frame": np.arange(v.size),
-        }
-    )
+    frame = yaw_recording(rng, t, v, y, NOISE)
     return frame, y
 
 

@@ -303,6 +303,21 @@ def compensate(
         metavar="SECONDS",
         help="Seconds per unit of the target's time_s (0.001 for ms).",
     ),
+    conditioning: str | None = typer.Option(
+        None,
+        "--conditioning",
+        metavar="auto|sweep|none",
+        help="Start state: 'sweep' prepends a rate-limited sweep to both ends of the fitted "
+        "range (a known state); 'auto' (default) sweeps when the fit's recording started "
+        "mid-loop; 'none' starts from rest (or --history).",
+    ),
+    history: Path | None = typer.Option(
+        None,
+        "--history",
+        metavar="HISTORY.csv",
+        help="Commands sent before (enc_<axis> columns, oldest first, from rest; e.g. an "
+        "earlier COMMANDS.csv or the encoder log): start from the state they leave.",
+    ),
     config: Path | None = ConfigOpt,
 ) -> None:
     """Feedforward motor commands that make the fitted model follow a target angle."""
@@ -312,6 +327,7 @@ def compensate(
     doc = compensate_files(
         fit_json, dataset, target, out, cfg, model=model, max_counts_per_s=max_counts_per_s,
         start_counts=start_counts, model_file=model_file, time_unit_s=time_unit_s,
+        conditioning=conditioning, history=history,
     )  # fmt: skip
     for line in summary_lines(doc):
         typer.echo(line)

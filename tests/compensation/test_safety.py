@@ -79,3 +79,24 @@ def test_max_input_rate_and_entry_ramp():
     ramp = entry_ramp(0.0, 100.0, 420.0, 0.01, 1.0)
     steps = np.diff(np.concatenate(([0.0], ramp, [100.0])))
     assert np.all(steps <= 4.2) and np.all(steps > 0) and ramp.size == 24
+
+
+@pytest.mark.parametrize("last", ["lo", "hi"])
+def test_conditioning_sweep_reaches_both_ends_at_the_rate(last):
+    from i2ris_calib.compensation.safety import conditioning_sweep
+
+    s = conditioning_sweep(1234.0, -3000.0, 4000.0, 500.0, 0.02, 1.0, last=last)
+    v = np.concatenate(([1234.0], s))
+    assert np.max(np.abs(np.diff(v))) <= 500.0 * 0.02 + 1e-9
+    assert np.all(v == np.rint(v))
+    first, end = (4000.0, -3000.0) if last == "lo" else (-3000.0, 4000.0)
+    k = int(np.flatnonzero(v == first)[0])
+    assert v[-1] == end and np.all(np.diff(v[: k + 1]) * np.sign(first - 1234.0) > 0)
+    assert np.all(np.diff(v[k:]) * np.sign(end - first) > 0)  # one straight move across
+    # no limit: the two ends; a bad end name: ValueError
+    np.testing.assert_array_equal(
+        conditioning_sweep(0.0, 0.0, 10.0, np.inf, 0.01, 1.0, last=last),
+        [10.0, 0.0] if last == "lo" else [0.0, 10.0][1:],
+    )
+    with pytest.raises(ValueError, match="last"):
+        conditioning_sweep(0.0, 0.0, 10.0, 1.0, 0.01, 1.0, last="middle")

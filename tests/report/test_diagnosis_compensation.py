@@ -236,6 +236,30 @@ def test_compensation_verdicts_figure_flags_and_ranking():
     )
 
 
+def test_conditioning_sweep_is_said_counted_and_not_called_tracking():
+    comp = compensation_data()
+    n_cond = 2
+    cmd = comp.commands
+    head = cmd.iloc[:n_cond].copy()
+    head["time_s"] = [-0.5, -0.4]
+    head["flags"] = "yaw:conditioning;pitch:conditioning"
+    comp = CompensationData(
+        doc=comp.doc, commands=pd.concat([head, cmd], ignore_index=True), target=comp.target
+    )
+    reason = "the fit's recording started mid-loop (initial_state estimated)"
+    for a in comp.doc["axes"].values():
+        a.update(n_conditioning=n_cond, conditioning_s=0.2, start_state_reason=reason)
+    sec = compensation_section(comp, CFG)
+    texts = [b.text for b in sec.blocks if isinstance(b, Verdict)]
+    assert f"yaw±: conditioning sweep of 2 samples (0.2 s) over the fitted range first: {reason}." in texts
+    flag_t = next(b for b in sec.blocks if isinstance(b, Table) and b.header[0] == "flag")
+    counts = {r[0]: r[1:] for r in flag_t.rows}
+    assert counts["conditioning"][1:] == ("2", "2") and "not tracking" in counts["conditioning"][0]
+    # the target is aligned to the last rows: the sweep rows get none
+    target = figures.aligned_target(comp.commands, comp.target, "yaw")
+    assert np.isnan(target[: n_cond + 3]).all() and np.isfinite(target[n_cond + 3 :]).all()
+
+
 def test_flags_are_counted_from_the_csv_when_the_json_has_none():
     comp = compensation_data()
     for a in comp.doc["axes"].values():

@@ -10,6 +10,8 @@ from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 
 #: The kinds compensation inverts (the registry's ``inverse``) and ``"diagnosed"``
 _KINDS = ("", *INVERSE_KINDS, "diagnosed")
+#: how the commands start (`--conditioning`, docs/compensate.md "Start state")
+CONDITIONING = ("auto", "sweep", "none")
 _DATASETS = ("yaw+", "yaw-", "yaw±", "pitch+", "pitch-", "pitch±")
 
 
@@ -35,6 +37,11 @@ class CompensateConfig:
         ``max_input_rate_counts_per_s``); ``inf``: none.
     time_unit_s : float
         Seconds per unit of the target's ``time_s`` (0.001 for ms).
+    conditioning : str
+        How the commands start (docs/compensate.md, "Start state"): ``auto`` (a
+        conditioning sweep over the fitted range when a fit's recording started
+        mid-loop, so the model's state at rest is not known), ``sweep`` (always) or
+        ``none`` (the robot is assumed relaxed at the start counts).
     """
 
     target: str = ""
@@ -42,6 +49,7 @@ class CompensateConfig:
     model: str = ""
     max_counts_per_s: float = 0.0
     time_unit_s: float = 1.0
+    conditioning: str = "auto"
 
     def __post_init__(self) -> None:
         """Validated on construction, not only when loaded from TOML: field types, then
@@ -62,6 +70,10 @@ class CompensateConfig:
         if self.max_counts_per_s < 0:
             raise ValueError(
                 "max_counts_per_s must be >= 0 (0 = the fit's fastest input move, inf = none)"
+            )
+        if self.conditioning not in CONDITIONING:
+            raise ValueError(
+                f"conditioning '{self.conditioning}' is not one of {', '.join(CONDITIONING)}"
             )
         if not (self.time_unit_s > 0 and self.time_unit_s < float("inf")):
             raise ValueError("time_unit_s must be a number > 0 (seconds per unit of time_s)")

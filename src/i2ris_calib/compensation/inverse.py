@@ -12,10 +12,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 import i2ris_calib._display as _display
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation._args import check_args
+from i2ris_calib.compensation.kernel import _direction, _family, _select, _shown, _side
 from i2ris_calib.compensation.safety import entry_ramp, find_spikes
 from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
@@ -108,6 +110,13 @@ class CompensationResult:
         Its times (s): one target interval apart, ending one before ``t_s[0]``.
     entry_predicted_deg : ndarray, shape (m,)
         The model's output along the entry ramp (deg).
+    history_commands : ndarray, shape (h,)
+        ``v_history``: the inputs before the entry ramp the model state was carried
+        through (empty without it).
+    history_t_s : ndarray, shape (h,)
+        Their times (s): one target interval apart, ending one before the entry ramp.
+    history_predicted_deg : ndarray, shape (h,)
+        The model's output along them (deg).
     """
 
     commands: np.ndarray
@@ -127,6 +136,9 @@ class CompensationResult:
     entry_commands: np.ndarray = field(default_factory=lambda: np.zeros(0))
     entry_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     entry_predicted_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    history_commands: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    history_t_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    history_predicted_deg: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def flags(self) -> dict[str, np.ndarray]:
@@ -183,6 +195,7 @@ class CompensationResult:
             },
             "flags": {name: int(f.sum()) for name, f in self.flags.items()},
             "n_entry": int(self.entry_commands.size),
+            "n_history": int(self.history_commands.size),
             "spikes_left": int(self.spikes_left),
             "max_command_rate_per_s": self.max_rate_seen(),
         }
@@ -284,21 +297,29 @@ def is_coupled(model) -> bool:
 
 
 def coupling_deg(
-    model, v_other: np.ndarray, v_other_initial: float | None = None, t_s: np.ndarray | None = None
+    model,
+    v_other: np.ndarray,
+    v_other_initial: float | None = None,
+    t_s: np.ndarray | None = None,
+    v_other_history: np.ndarray | None = None,
 ) -> np.ndarray:
     """The part of a coupled model's output (deg), shape (n,), that the other motor's
-    signed input ``v_other`` (shape (n,); preceded by ``v_other_initial`` when given)
-    contributes: additive and independent of this axis's own input, so a coupled model
-    is inverted as its two-tendon GPI on ``target - coupling_deg``."""
+    signed input ``v_other`` (shape (n,); preceded by ``v_other_initial`` when given,
+    and before that by ``v_other_history``, its inputs since rest) contributes:
+    additive and independent of this axis's own input, so a coupled model is inverted
+    as its two-tendon GPI on ``target - coupling_deg``."""
     vo = np.asarray(v_other, dtype=float)
+    pre = [] if v_other_history is None else [np.asarray(v_other_history, dtype=float)]
     if v_other_initial is not None:
-        vo = np.concatenate(([float(v_other_initial)], vo))
+        pre.append(np.array([float(v_other_initial)]))
+    n_pre = sum(a.size for a in pre)
+    vo = np.concatenate((*pre, vo))
     zero = np.zeros(vo.size)
     values = model_values(model)
     with_c = model.evaluate(Signals(v=zero, v_other=vo), values)
     without = model.evaluate(Signals(v=zero), values)
     out = with_c - without
-    return out[1:] if v_other_initial is not None else out
+    return out[n_pre:]
 
 
 def _check(target: np.ndarray, t: np.ndarray | None) -> None:
@@ -323,6 +344,101 @@ def _check(target: np.ndarray, t: np.ndarray | None) -> None:
             )
 
 
+@njit(cache=True)
+def _advance(kind, c, r, p, kappa, vf, db, v, w, state):  # pragma: no cover - compiled
+    """Carry the inverse's state (operator states ``w`` (2, m) and ``state``, as
+    :func:`~.kernel.invert` keeps them) through the given inputs ``v``: the state update
+    the kernel's step applies after choosing a command (the forward recursion)."""
+    m = p.size
+    n_fam = 2 if kind == K.KIND_EGPI else 1
+    w_new = np.empty((2, m))
+    for k in range(v.size):
+        u = v[k]
+        dstate = int(state[0])
+        anchor = state[1]
+        v_prev = state[2]
+        init = state[4] != 0.0
+        side = _side(v_prev, u, init)
+        for f in range(n_fam):
+            _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
+            for i in range(m):
+                w[f, i] = w_new[f, i]
+        fam = _select(kind, dstate, anchor, u, db, vf, init)
+        dstate, anchor = _direction(dstate, anchor, u, db, init)
+        state[0] = dstate
+        state[1] = anchor
+        state[2] = u
+        state[3] = _shown(kind, w, fam, c, p)
+        state[4] = 0.0
+
+
+def _invert_after_history(
+    code, c, r, p, kappa, vf, db, goal, tt, lo, hi, rate, quantum, v_hist, tol_deg, hold,
+    first_free,
+):  # fmt: skip
+    """:func:`~.kernel.invert` from the state the inputs ``v_hist`` leave (the model's
+    initial state at ``v_hist[0]``, then one step per input), not from rest: the kernel's
+    own start and chunked loop with that state."""
+    c, r, p = (np.ascontiguousarray(a, dtype=float) for a in (c, r, p))
+    n = goal.size
+    w = np.zeros((2, p.size))
+    state = np.zeros(K.STATE_SIZE)
+    K._invert_start(code, c, r, p, kappa, vf, db, float(v_hist[0]), True, w, state)
+    _advance(code, c, r, p, kappa, vf, db, np.ascontiguousarray(v_hist[1:], dtype=float), w, state)
+    state[5] = (tt[0] if n else 0.0) - (tt[1] - tt[0] if n > 1 else 1.0)  # last move
+    u_out, u_real, y_out = np.empty(n), np.empty(n), np.empty(n)
+    status = np.zeros(n, dtype=np.int8)
+    hold = np.ascontiguousarray(hold, dtype=np.bool_)
+    for k0 in range(0, n, K.CHUNK):
+        K._invert_chunk(
+            code, c, r, p, kappa, vf, db, goal, tt, lo, hi, rate, quantum, tol_deg,
+            k0, min(n, k0 + K.CHUNK), w, state, u_out, u_real, y_out, status, hold,
+            bool(first_free),
+        )  # fmt: skip
+    return u_out, u_real, y_out, status
+
+
+def _check_history(v_history, v_other_history, v_initial, lo, hi, coupled):
+    """The history as a float array (or None), checked: 1-D, finite, inside
+    ``v_limits``, ending at ``v_initial`` when both are given, the other motor's of the
+    same length (one-line CalibError)."""
+    if v_history is None:
+        if v_other_history is not None:
+            raise CalibError("compensate: v_other_history needs v_history (this motor's)")
+        return None, None
+    h = np.asarray(v_history, dtype=float)
+    if h.ndim != 1 or h.size == 0 or not np.all(np.isfinite(h)):
+        raise CalibError(
+            f"compensate: v_history must be a non-empty 1-D array of finite inputs, got shape "
+            f"{h.shape}"
+        )
+    out = np.flatnonzero((h < lo) | (h > hi))
+    if out.size:
+        raise CalibError(
+            f"compensate: v_history[{out[0]}] = {h[out[0]]:g} is outside v_limits ({lo:g}, "
+            f"{hi:g}): the model is not known there"
+        )
+    if v_initial is not None and float(v_initial) != float(h[-1]):
+        raise CalibError(
+            f"compensate: v_initial {float(v_initial):g} is not the history's last input "
+            f"{h[-1]:g}; give one of them"
+        )
+    ho = None
+    if v_other_history is not None:
+        ho = np.asarray(v_other_history, dtype=float)
+        if ho.shape != h.shape or not np.all(np.isfinite(ho)):
+            raise CalibError(
+                f"compensate: v_other_history must be {h.size} finite signed counts (as "
+                f"v_history), got shape {ho.shape}"
+            )
+    elif coupled:
+        raise CalibError(
+            "compensate: a coupled model with v_history needs v_other_history (the other "
+            "motor's inputs over the same samples)"
+        )
+    return h, ho
+
+
 def compensate(
     model,
     target_deg: np.ndarray,
@@ -337,6 +453,8 @@ def compensate(
     repair_spikes: bool = True,
     v_other: np.ndarray | None = None,
     v_other_initial: float | None = None,
+    v_history: np.ndarray | None = None,
+    v_other_history: np.ndarray | None = None,
 ) -> CompensationResult:
     """Commands that make ``model`` follow ``target_deg``: exact inversion, sample by sample.
 
@@ -385,6 +503,18 @@ def compensate(
         on this axis's input).
     v_other_initial : float, optional
         The other motor's signed counts before the first sample (its start state).
+    v_history : ndarray, shape (h,), optional
+        The inputs the model went through before the entry ramp, from rest: the model
+        starts in its initial state at ``v_history[0]`` and is stepped through the rest
+        (a conditioning sweep that puts it into a known state, or the commands sent
+        before), so the inversion starts from the state they leave, not from rest.
+        ``v_initial`` is then its last input (given too, it must equal it). Inside
+        ``v_limits``. The result's ``history_*`` fields give them back with the
+        model's output along them (times one target interval apart, before the entry
+        ramp).
+    v_other_history : ndarray, shape (h,), optional
+        The other motor's signed inputs over the same samples (a coupled model with
+        ``v_history``).
 
     Returns
     -------
@@ -410,6 +540,11 @@ def compensate(
     if v_initial is not None and not lo <= float(v_initial) <= hi:
         raise CalibError(f"the initial input {v_initial:g} is outside v_limits ({lo:g}, {hi:g})")
     base, delay = _base_and_delay(model)
+    hist, hist_o = _check_history(v_history, v_other_history, v_initial, lo, hi, is_coupled(base))
+    if hist is not None:
+        v_initial = float(hist[-1])
+        if hist_o is not None and v_other_initial is None:
+            v_other_initial = float(hist_o[-1])
     if delay > 0 and t is None:
         raise CalibError("a model with a time delay needs the target's times (time_s)")
     code, c, r, p, kappa, vf, db = kernel_params(base)
@@ -434,20 +569,26 @@ def compensate(
         if delay > 0:
             raise CalibError("compensate: a coupled model with a time delay is not inverted")
         with deferred():
-            goal = goal - coupling_deg(base, vo, v_other_initial)
+            goal = goal - coupling_deg(base, vo, v_other_initial, v_other_history=hist_o)
     tt = np.zeros_like(target) if t is None else t
     v0 = 0.0 if v_initial is None else float(v_initial)
-    if quantum > 0 and v_initial is not None:
+    if quantum > 0 and v_initial is not None and hist is None:
         v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
     has_init = v_initial is not None
     first_free = bool(entry and has_init and np.isfinite(rate))
     hold = np.zeros(target.size, dtype=bool)
     spikes = np.zeros(0, dtype=int)
     for _ in range(MAX_REPAIR_ROUNDS if repair_spikes else 1):
-        u, u_real, y_model, status = K.invert(
-            code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
-            float(quantum), v0, has_init, float(tol_deg), hold=hold, first_free=first_free,
-        )  # fmt: skip
+        if hist is None:
+            u, u_real, y_model, status = K.invert(
+                code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
+                float(quantum), v0, has_init, float(tol_deg), hold=hold, first_free=first_free,
+            )  # fmt: skip
+        else:
+            u, u_real, y_model, status = _invert_after_history(
+                code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi,
+                rate, float(quantum), hist, float(tol_deg), hold, first_free,
+            )  # fmt: skip
         spikes = find_spikes(u, y_model, goal, float(tol_deg), hi - lo, float(quantum))
         new = spikes[~hold[spikes]]
         if not repair_spikes or new.size == 0:
@@ -464,19 +605,35 @@ def compensate(
         # command k serves the target at t_k + delay: report status on the target's samples
         j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
         status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
+    nh = 0 if hist is None else hist.size
+    hist_t = np.zeros(0)
+    if nh:
+        dt_h = float(t[1] - t[0]) if t is not None and t.size > 1 else 1.0
+        first_t = ramp_t[0] if ramp.size else (t[0] if t is not None else 0.0)
+        hist_t = first_t - dt_h * np.arange(nh, 0, -1)
     with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
         vo_all = None
         if coupled:
             vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
             vo_all = np.concatenate((np.full(ramp.size, vo_first), vo))
-        both = forward(
-            model,
-            np.concatenate((ramp, u)),
-            None if t is None else np.concatenate((ramp_t, t)),
-            None if v_initial is None else v0,
-            v_other=vo_all,
-            v_other_initial=v_other_initial,
-        )
+        if nh:
+            both = forward(
+                model,
+                np.concatenate((hist, ramp, u)),
+                None if t is None else np.concatenate((hist_t, ramp_t, t)),
+                None,
+                v_other=None if vo_all is None else np.concatenate((hist_o, vo_all)),
+            )
+        else:
+            both = forward(
+                model,
+                np.concatenate((ramp, u)),
+                None if t is None else np.concatenate((ramp_t, t)),
+                None if v_initial is None else v0,
+                v_other=vo_all,
+                v_other_initial=v_other_initial,
+            )
+    hist_pred, both = both[:nh], both[nh:]
     predicted = both[ramp.size :]
     kind = base.name + ("+time_delay" if delay > 0 else "")
     return CompensationResult(
@@ -497,6 +654,9 @@ def compensate(
         entry_commands=ramp,
         entry_t_s=ramp_t,
         entry_predicted_deg=both[: ramp.size],
+        history_commands=np.zeros(0) if hist is None else hist.copy(),
+        history_t_s=hist_t,
+        history_predicted_deg=hist_pred,
     )
 
 

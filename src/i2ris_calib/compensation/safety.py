@@ -122,3 +122,38 @@ def entry_ramp(
     if quantum > 0:  # whole quanta; less than one per sample: one once the time allows
         step = np.floor(step / quantum + 1e-9) * quantum
     return float(v_start) + np.sign(dist) * np.minimum(step, abs(dist))
+
+
+def conditioning_sweep(
+    v_start: float,
+    lo: float,
+    hi: float,
+    max_rate: float,
+    dt_s: float,
+    quantum: float,
+    last: str = "lo",
+) -> np.ndarray:
+    """A conditioning (homing) sweep: from ``v_start`` to one end of ``[lo, hi]``, then
+    to the other end ``last`` (``"lo"`` or ``"hi"``), straight ramps at no more than
+    ``max_rate`` per second, one command every ``dt_s`` seconds, shape (m,) (ends
+    included, ``v_start`` not). Real-valued for ``quantum`` 0, else whole multiples.
+
+    A play operator's state after a monotone input move across the whole range it was
+    fitted on no longer depends on what came before (its memory is wiped): after the
+    sweep the model and the robot are in the same known state whatever the robot did
+    before, which the model's virgin state at rest is not unless the fit's recording
+    started at rest. Without a rate limit (``inf``) the sweep is the two ends.
+    """
+    if last not in ("lo", "hi"):
+        raise ValueError(f"last must be 'lo' or 'hi', got {last!r}")
+    first_end, last_end = (hi, lo) if last == "lo" else (lo, hi)
+    out = []
+    v = float(v_start)
+    for end in (first_end, last_end):
+        if end == v:
+            continue
+        if np.isfinite(max_rate):
+            out.append(entry_ramp(v, end, max_rate, dt_s, quantum))
+        out.append(np.array([float(end)]))
+        v = float(end)
+    return np.concatenate(out) if out else np.zeros(0)

@@ -13,7 +13,9 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.compensation import STATUS_NAMES, compensate
+from i2ris_calib.compensation.config import CONDITIONING
 from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
+from i2ris_calib.compensation.safety import conditioning_sweep
 from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
@@ -337,6 +339,118 @@ def rate_limit(
     )
 
 
+
+
+def read_history(path: str | Path, setup: dict) -> dict[str, np.ndarray]:
+    """The commands sent before (``--history``): per axis of ``setup`` its ``enc_<axis>``
+    column (signed counts, oldest first) in the model's convention (``sign`` x counts).
+    One-line CalibError for an unreadable file, a missing column, non-numeric values or
+    counts outside the fit's input range (the model is not known there)."""
+    p = Path(path)
+    try:
+        df = pd.read_csv(p, skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
+    df.columns = [str(c).strip() for c in df.columns]
+    need = [f"enc_{axis}" for axis in setup]
+    missing = [c for c in need if c not in df.columns]
+    if missing or len(df) == 0:
+        raise CalibError(
+            f"{p}: --history needs the column(s) {', '.join(need)} with at least one row "
+            f"(found: {', '.join(df.columns) or 'nothing'}; an earlier COMMANDS.csv or the "
+            "encoder log)"
+        )
+    out = {}
+    for axis, a in setup.items():
+        col = f"enc_{axis}"
+        v = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise CalibError(
+                f"{p}: column '{col}' has {bad.size} missing/non-numeric value(s) (first at "
+                f"line {bad[0] + 2}); --history needs every command sent"
+            )
+        m = a["sign"] * v
+        off = np.flatnonzero((m < a["lo"]) | (m > a["hi"]))
+        if off.size:
+            rng = sorted((a["sign"] * a["lo"] + 0.0, a["sign"] * a["hi"] + 0.0))
+            raise CalibError(
+                f"{p}: {col} = {v[off[0]]:g} at line {off[0] + 2} is outside the {a['name']} "
+                f"fit's input range {rng[0]:g}..{rng[1]:g} counts (the model is not known "
+                "there); give a history inside it or --conditioning sweep without --history"
+            )
+        out[axis] = m
+    return out
+
+
+def _virgin_identified(record: dict) -> bool | None:
+    """Whether the fit knows the model's state at rest: True when its recording started
+    at rest (no model of the dataset has an estimated ``initial_state``), False when it
+    started mid-loop (an ``initial_state`` was estimated), None when fit.json does not
+    say (older files)."""
+    models = record.get("models", {}).values()
+    if not any("initial_state" in m for m in models):
+        return None
+    return not any(m.get("initial_state") for m in models)
+
+
+def start_state(setup: dict, conditioning: str, history) -> dict:
+    """How the commands start (``--conditioning``, ``--history``): ``{"sweep": bool,
+    "method": ..., "reason": ...}``, the same for every axis (with a coupled model one
+    motor's history is part of the other's state).
+
+    ``auto`` sweeps when some axis's fit cannot know the robot's state at rest: its
+    recording started mid-loop (fit.json ``initial_state`` estimated), so the model's
+    virgin state is not identified and no command can correct it. It does not sweep
+    with ``--history`` (the state follows from it), when every recording started at rest
+    (the model's state at rest is the relaxed robot's), or when fit.json does not say
+    (older files; said in the reason)."""
+    known = {axis: _virgin_identified(a["record"]) for axis, a in setup.items()}
+    mid = [a["name"] for axis, a in setup.items() if known[axis] is False]
+    unknown = [a["name"] for axis, a in setup.items() if known[axis] is None]
+    if conditioning == "sweep":
+        sweep, reason = True, "--conditioning sweep"
+    elif conditioning == "none":
+        sweep, reason = False, "--conditioning none"
+    elif history is not None:
+        sweep, reason = False, "the state follows from --history"
+    elif mid:
+        sweep = True
+        reason = (
+            f"the {', '.join(mid)} fit's recording started mid-loop (fit.json initial_state "
+            "estimated): the model's state at rest is not identified"
+        )
+    elif unknown:
+        sweep = False
+        reason = (
+            f"fit.json ({', '.join(unknown)}) does not say whether its recording started at "
+            "rest (an older fit): assumed relaxed at the start counts; --conditioning sweep "
+            "if the robot may not be"
+        )
+    else:
+        sweep = False
+        reason = (
+            "the fit's recording started at rest: the model knows the relaxed robot at the "
+            "start counts (--conditioning sweep if it has moved since)"
+        )
+    if history is not None:
+        method = "history+conditioning_sweep" if sweep else "history"
+    else:
+        method = "conditioning_sweep" if sweep else "rest"
+    return {"sweep": sweep, "method": method, "reason": reason}
+
+
+def sweep_last(goal: np.ndarray) -> str:
+    """The end of the input range a conditioning sweep finishes at: ``lo`` when the
+    target first rises (model convention: the entry ramp then approaches its first
+    command from below, in the direction the target moves on), ``hi`` when it first
+    falls; ``lo`` for a constant target."""
+    d = np.asarray(goal, dtype=float) - float(goal[0])
+    span = float(np.ptp(goal))
+    moved = np.flatnonzero(np.abs(d) > 0.01 * span) if span > 0 else np.zeros(0, dtype=int)
+    return "lo" if moved.size == 0 or d[moved[0]] > 0 else "hi"
+
+
 def _flag_column(per_axis: dict[str, list[list[str]]], prefix: bool) -> list[str]:
     """The ``flags`` column: the sample's flags joined by ``;`` (``axis:flag`` with two
     axes), empty when none."""
@@ -367,7 +481,8 @@ def family_switch_steps(model, res, v0: float) -> np.ndarray:
     fam = getattr(model, "flag_point_families", None)
     if fam is None or n == 0:
         return np.zeros(n, dtype=bool)
-    v = np.concatenate(([float(v0)], res.entry_commands, res.commands))
+    pre = res.history_commands if res.history_commands.size else np.array([float(v0)])
+    v = np.concatenate((pre, res.entry_commands, res.commands))
     vals = model_values(model)
     with deferred():
         y1, y2, unloading = fam(Signals(v=v), vals)
@@ -407,11 +522,26 @@ def _holdout(rec: dict) -> float | None:
     return None
 
 
-def _invert_axis(fitted, goal, t, lo, hi, rate, v0, v_other=None, v_other_initial=None):
+def _invert_axis(
+    fitted, goal, t, lo, hi, rate, v0, v_other=None, v_other_initial=None, hist=None,
+    hist_other=None,
+):  # fmt: skip
+    """One axis inverted from rest at ``v0``, or (``hist``: model convention, its first
+    input at rest) from the state its history and conditioning sweep leave."""
     return compensate(
         fitted, goal, t, v_limits=(lo, hi), max_rate=None if not np.isfinite(rate) else rate,
-        quantum=1.0, v_initial=v0, v_other=v_other, v_other_initial=v_other_initial,
+        quantum=1.0, v_initial=v0 if hist is None else None, v_other=v_other,
+        v_other_initial=v_other_initial, v_history=hist,
+        v_other_history=None if hist is None or v_other is None else hist_other,
     )  # fmt: skip
+
+
+def _other_hist(setup: dict, axis: str):
+    """The other axis's history in signed counts (or None)."""
+    other = next((x for x in setup if x != axis), None)
+    if other is None or setup[other]["hist"] is None:
+        return None
+    return setup[other]["sign"] * setup[other]["hist"]
 
 
 #: Kinds that read the other motor's input (inverted only when both axes are compensated)
@@ -434,9 +564,10 @@ def _solve_coupled(setup: dict, current: dict) -> dict:
             other = next(x for x in setup if x != axis)
             vo, vo0 = current[other]
             res = _invert_axis(a["coupled_model"], a["goal"], a["t"], a["lo"], a["hi"],
-                               a["rate"], a["v0"], vo, vo0)  # fmt: skip
+                               a["rate"], a["v0"], vo, vo0, a["hist"],
+                               _other_hist(setup, axis))  # fmt: skip
             out[axis] = res
-            current[axis] = (a["sign"] * res.commands, a["sign"] * a["v0"])
+            current[axis] = (a["sign"] * res.commands, a["sign"] * a["v_entry"])
     return out
 
 
@@ -484,7 +615,7 @@ def _rank_alternatives(a: dict, forced: str) -> None:
         try:
             fitted = load_model(a["doc"], a["record"], kind, a["path"], None)
             a["candidates"][kind] = _invert_axis(
-                fitted, a["goal"], a["t"], a["lo"], a["hi"], a["rate"], a["v0"]
+                fitted, a["goal"], a["t"], a["lo"], a["hi"], a["rate"], a["v0"], hist=a["hist"]
             )
         except CalibError:
             continue
@@ -502,6 +633,8 @@ def compensate_files(
     start_counts: float | None = None,
     model_file: str | Path | None = None,
     time_unit_s: float | None = None,
+    conditioning: str | None = None,
+    history: str | Path | None = None,
 ) -> dict[str, Any]:
     """Command body of ``i2ris-calib compensate``; returns the compensate.json document.
 
@@ -531,6 +664,16 @@ def compensate_files(
     time_unit_s : float, optional
         Seconds per unit of the target's ``time_s`` (default ``[compensate]
         time_unit_s``, else 1).
+    conditioning : {"auto", "sweep", "none"}, optional
+        The start state (:func:`start_state`): ``sweep`` prepends a conditioning sweep
+        (:func:`~i2ris_calib.compensation.safety.conditioning_sweep`) to the commands,
+        ``none`` starts from the model's state at rest (or after ``history``), ``auto``
+        sweeps when the model's state at rest is not identified; default
+        ``[compensate] conditioning`` (``auto``; also in ``run``).
+    history : path, optional
+        CSV of the commands sent before (``enc_<axis>`` per compensated axis, oldest
+        first, from rest; e.g. an earlier COMMANDS.csv or the encoder log): the model
+        starts from the state they leave; the start counts are its last row.
     """
     cc = getattr(config, "compensate", None)
     if model is not None and model not in KINDS:
@@ -542,6 +685,17 @@ def compensate_files(
         if name not in DATASETS:
             raise CalibError(f"--dataset must be one of {', '.join(DATASETS)}, got '{name}'")
     unit = time_unit_s if time_unit_s is not None else getattr(cc, "time_unit_s", 1.0)
+    if conditioning is None:
+        conditioning = getattr(cc, "conditioning", "auto")
+    if conditioning not in CONDITIONING:
+        raise CalibError(
+            f"--conditioning must be one of {', '.join(CONDITIONING)}, got '{conditioning}'"
+        )
+    if history is not None and not Path(history).is_file():
+        raise CalibError(
+            f"--history {history}: file not found (a CSV of the commands sent before, "
+            "enc_<axis> per axis)"
+        )
     if not (np.isfinite(unit) and unit > 0):
         raise CalibError(f"--time-unit-s {unit:g}: give seconds per unit of time_s (> 0)")
     out = Path(out)
@@ -549,7 +703,12 @@ def compensate_files(
         raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
     claim_output_file(
         out,
-        [*fit_paths, target, *([model_file] if model_file else [])],
+        [
+            *fit_paths,
+            target,
+            *([model_file] if model_file else []),
+            *([history] if history is not None else []),
+        ],
         companions=[out.with_name("compensate.json")],
     )
     docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
@@ -603,6 +762,45 @@ def compensate_files(
                     "motor rests at, inside that range"
                 )
         goal = sign * frame[f"{axis}_deg"].to_numpy()
+        setup[axis] = {
+            "name": name, "path": path, "doc": doc, "record": record, "sign": sign, "lo": lo,
+            "hi": hi, "rate": rate, "rate_source": rate_source, "rate_warn": rate_warn,
+            "v0": v0, "start_source": start_source, "goal": goal, "t": t,
+        }  # fmt: skip
+    past = None
+    if history is not None:
+        past = read_history(history, setup)
+        for axis, a in setup.items():
+            last = float(past[axis][-1])
+            if start_counts is not None and last != a["v0"]:
+                raise CalibError(
+                    f"--start-counts {start_counts:g} is not the history's last {axis} counts "
+                    f"{a['sign'] * last:g} ({history}); give one of them"
+                )
+            a["v0"], a["start_source"] = last, f"--history (its last row, {history})"
+    start = start_state(setup, conditioning, history)
+    dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
+    sweeps = {
+        axis: conditioning_sweep(
+            a["v0"], a["lo"], a["hi"], a["rate"], dt0, 1.0, last=sweep_last(a["goal"])
+        )
+        if start["sweep"]
+        else np.zeros(0)
+        for axis, a in setup.items()
+    }  # fmt: skip
+    n_cond = max(x.size for x in sweeps.values())
+    for axis, a in setup.items():
+        cond = np.concatenate((np.full(n_cond - sweeps[axis].size, a["v0"]), sweeps[axis]))
+        pre = past[axis] if past is not None else np.array([a["v0"]])
+        a["hist"] = np.concatenate((pre, cond)) if (past is not None or n_cond) else None
+        a["n_pre"] = pre.size
+        a["v_entry"] = float(a["hist"][-1]) if a["hist"] is not None else a["v0"]
+        a["start"] = start
+        ends = (a["hi"], a["lo"]) if sweep_last(a["goal"]) == "lo" else (a["lo"], a["hi"])
+        a["sweep_ends"] = [float(a["sign"] * x) + 0.0 for x in ends] if sweeps[axis].size else None
+    for axis, a in setup.items():
+        name, path, doc, record = a["name"], a["path"], a["doc"], a["record"]
+        lo, hi, rate, v0, goal = a["lo"], a["hi"], a["rate"], a["v0"], a["goal"]
         mf = None if model_file is None else Path(model_file)
         other = next((x for x in axes if x != axis), None)
         if model is not None:
@@ -634,15 +832,11 @@ def compensate_files(
                 coupled_kind, coupled_model = kind, fitted
                 continue
             try:
-                candidates[kind] = _invert_axis(fitted, goal, t, lo, hi, rate, v0)
+                candidates[kind] = _invert_axis(fitted, goal, t, lo, hi, rate, v0, hist=a["hist"])
             except CalibError as exc:
                 raise CalibError(f"{target} [{name}] {kind}: {exc}") from None
-        setup[axis] = {
-            "name": name, "path": path, "doc": doc, "record": record, "sign": sign, "lo": lo, "hi": hi,
-            "rate": rate, "rate_source": rate_source, "rate_warn": rate_warn, "v0": v0,
-            "start_source": start_source, "goal": goal, "t": t, "candidates": candidates,
-            "models": models, "coupled": coupled_kind, "coupled_model": coupled_model,
-        }  # fmt: skip
+        a.update(candidates=candidates, models=models, coupled=coupled_kind,
+                 coupled_model=coupled_model)  # fmt: skip
     if any(a["coupled"] for a in setup.values()):
         current = {}
         for axis, a in setup.items():
@@ -651,8 +845,8 @@ def compensate_files(
                 if a["candidates"]
                 else None
             )
-            cmds = a["candidates"][best].commands if best else np.full(t.size, a["v0"])
-            current[axis] = (a["sign"] * cmds, a["sign"] * a["v0"])
+            cmds = a["candidates"][best].commands if best else np.full(t.size, a["v_entry"])
+            current[axis] = (a["sign"] * cmds, a["sign"] * a["v_entry"])
         try:
             joint = _solve_coupled(setup, current)
         except CalibError as exc:
@@ -676,7 +870,7 @@ def compensate_files(
             vo = o["sign"] * o["candidates"][o["kind"]].commands
             a["candidates"][a["kind"]] = _invert_axis(
                 a["models"][a["kind"]], a["goal"], t, a["lo"], a["hi"], a["rate"], a["v0"],
-                vo, o["sign"] * o["v0"],
+                vo, o["sign"] * o["v_entry"], a["hist"], _other_hist(setup, axis),
             )  # fmt: skip
     for axis, a in setup.items():
         results[axis] = {
@@ -685,10 +879,13 @@ def compensate_files(
             "model": a["models"][a["kind"]], "lo": a["lo"], "hi": a["hi"], "rate": a["rate"],
             "rate_source": a["rate_source"], "rate_warn": a["rate_warn"], "v0": a["v0"],
             "start_source": a["start_source"], "ranking": a["ranking"],
-            "forced": model is not None,
+            "forced": model is not None, "hist": a["hist"], "n_pre": a["n_pre"],
+            "v_entry": a["v_entry"], "start": a["start"], "sweep_ends": a["sweep_ends"],
+            "history_file": None if history is None else str(history),
         }  # fmt: skip
     table, axes_doc = _outputs(results, frame, t, target, unit)
-    inputs = [*(p for p, _ in docs), Path(target), *([Path(model_file)] if model_file else [])]
+    inputs = [*(p for p, _ in docs), Path(target), *([Path(model_file)] if model_file else []),
+              *([Path(history)] if history is not None else [])]  # fmt: skip
     doc_out = {
         "schema": SCHEMA,
         "commands_csv": out.name,
@@ -727,11 +924,19 @@ def output_step_warning(a: dict, summ: dict) -> str | None:
 
 
 def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: float):
-    """(COMMANDS.csv table, compensate.json ``axes``): every axis's entry ramp padded
-    to the longest (holding its start counts before its own ramp)."""
+    """(COMMANDS.csv table, compensate.json ``axes``): the conditioning sweep (common
+    length, ``a["hist"]`` after the known history's ``a["n_pre"]`` inputs), then every
+    axis's entry ramp padded to the longest (holding the sweep's end, or the start
+    counts, before its own ramp), then the target's samples. The predicted angles are
+    the model run over the whole sequence (history included) from rest."""
     n_entry = max(a["res"].entry_commands.size for a in results.values())
+    first = next(iter(results.values()))
+    n_pre = first["n_pre"] if first["hist"] is not None else 0
+    n_cond = first["hist"].size - n_pre if first["hist"] is not None else 0
     dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
-    t_all = np.concatenate((t[0] - dt0 * np.arange(n_entry, 0, -1), t))
+    n_head = n_pre + n_cond + n_entry
+    t_full = np.concatenate((t[0] - dt0 * np.arange(n_head, 0, -1), t))
+    t_all = t_full[n_pre:]
     cols: dict[str, Any] = {"time_s": t_all}
     reach_all = np.ones(t_all.size, dtype=bool)
     flags_by_axis: dict[str, list[list[str]]] = {}
@@ -740,26 +945,30 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
     seqs = {}
     for axis, a in results.items():
         ramp = a["res"].entry_commands
+        hist = a["hist"] if a["hist"] is not None else np.zeros(0)
         seqs[axis] = np.concatenate(
-            (np.full(n_entry - ramp.size, a["v0"]), ramp, a["res"].commands)
+            (hist, np.full(n_entry - ramp.size, a["v_entry"]), ramp, a["res"].commands)
         )
     for axis, a in results.items():
         res, sign = a["res"], a["sign"]
         ramp = res.entry_commands
-        seq = seqs[axis]
         other = next((x for x in results if x != axis), None)
         vo = vo0 = None
         if other is not None and a["kind"] in COUPLED_KINDS:
             vo = results[other]["sign"] * seqs[other]
             vo0 = results[other]["sign"] * results[other]["v0"]
         with deferred():
-            y = forward(a["model"], seq, t_all, a["v0"], v_other=vo, v_other_initial=vo0)
+            if a["hist"] is not None:  # from rest at the history's first input
+                y = forward(a["model"], seqs[axis], t_full, None, v_other=vo)[n_pre:]
+            else:
+                y = forward(a["model"], seqs[axis], t_all, a["v0"], v_other=vo, v_other_initial=vo0)
+        seq = seqs[axis][n_pre:]
         cols[f"enc_{axis}"] = np.rint(sign * seq).astype(np.int64)
         preds[f"predicted_{axis}_deg"] = sign * y
-        ok = np.concatenate((np.ones(n_entry, dtype=bool), res.reachable))
+        ok = np.concatenate((np.ones(n_cond + n_entry, dtype=bool), res.reachable))
         reach_all &= ok
         reach_cols[f"reachable_{axis}"] = ok.astype(int)
-        per = [["entry"] for _ in range(n_entry)]
+        per = [["conditioning"] for _ in range(n_cond)] + [["entry"] for _ in range(n_entry)]
         fl = dict(res.flags)
         fl["output_step"] = fl["output_step"] | family_switch_steps(a["model"], res, a["v0"])
         for i in range(t.size):
@@ -767,6 +976,12 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
         flags_by_axis[axis] = per
         summ = res.summary()
         summ["flags"] = {name: int(f.sum()) for name, f in fl.items()}
+        summ.pop("n_history", None)
+        sent = np.concatenate(([seqs[axis][n_pre - 1]] if n_pre else [], seq))
+        t_sent = np.concatenate(([t_full[n_pre - 1]] if n_pre else [], t_all))
+        summ["max_command_rate_per_s"] = (
+            float(np.max(np.abs(np.diff(sent)) / np.diff(t_sent))) if sent.size > 1 else 0.0
+        )
         step_warn = output_step_warning(a, summ)
         bad = np.flatnonzero(~res.reachable)
         reach = reachable_angles(a["model"], (a["lo"], a["hi"]), sign)
@@ -788,6 +1003,15 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
             "recording_max_rate_counts_per_s": rec.get("max_input_rate_counts_per_s"),
             "start_counts": float(sign * a["v0"]) + 0.0,
             "start_counts_source": a["start_source"],
+            "start_state": a["start"]["method"],
+            "start_state_reason": a["start"]["reason"],
+            "fit_initial_state": _initial_state_text(rec),
+            "n_conditioning": int(n_cond),
+            "conditioning_s": float(n_cond * dt0),
+            "conditioning_counts": a["sweep_ends"],
+            "history_file": a["history_file"],
+            "n_history": int(n_pre) if a["history_file"] else 0,
+            "entry_from_counts": float(sign * a["v_entry"]) + 0.0,
             "time_unit_s": unit,
             "delay_s": res.delay_s,
             "tol_deg": res.tol_deg,
@@ -807,6 +1031,36 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
     return pd.DataFrame(cols), axes_doc
 
 
+def _initial_state_text(record: dict) -> str | None:
+    """fit.json's sentence on how its recording started (the first model's
+    ``initial_state.text``; "at rest" when none was estimated; None when not recorded)."""
+    known = _virgin_identified(record)
+    if known is None:
+        return None
+    if known:
+        return "the recording started at rest"
+    st = next(m["initial_state"] for m in record["models"].values() if m.get("initial_state"))
+    return str(st.get("text", "initial state estimated"))
+
+
+def _start_text(rec: dict) -> str:
+    """The summary line's start-state clause (empty for a plain start from rest)."""
+    method = rec.get("start_state", "rest")
+    if method == "rest":
+        return f"start: at rest ({rec.get('start_state_reason', '')}); "
+    parts = []
+    if rec.get("n_history"):
+        parts.append(f"history of {rec['n_history']} commands")
+    if rec.get("n_conditioning"):
+        ends = rec.get("conditioning_counts") or []
+        path = " -> ".join(f"{x:g}" for x in [rec["start_counts"], *ends])
+        parts.append(
+            f"conditioning sweep {rec['n_conditioning']} samples ({rec['conditioning_s']:.3g} s, "
+            f"{path} counts; {rec['start_state_reason']})"
+        )
+    return "start: " + ", then ".join(parts) + "; " if parts else ""
+
+
 def summary_lines(doc: dict) -> list[str]:
     """The terminal summary of a compensate.json document: per axis the model (and
     why), the predicted error, every flag counted, the rate limit and where it comes
@@ -820,11 +1074,13 @@ def summary_lines(doc: dict) -> list[str]:
             f"reach {rec['max_command_rate_per_s']:.4g})"
         )  # fmt: skip
         why = "forced by --model" if rec["model_choice"] == "--model" else "best predicted tracking"
+        start = _start_text(rec)
         lines.append(
             f"{rec['dataset']} ({rec['model']}, {why}): predicted RMSE {rec['rmse_deg']:.4f} "
             f"deg, max {rec['max_abs_err_deg']:.4f} deg, {rec['n_unreachable']} of "
-            f"{rec['n_samples']} samples unreachable; flags: {fl}; {rate_txt}; entry "
-            f"{rec['n_entry']} samples from {rec['start_counts']:g} counts"
+            f"{rec['n_samples']} samples unreachable; flags: {fl}; {rate_txt}; {start}entry "
+            f"{rec['n_entry']} samples from {rec.get('entry_from_counts', rec['start_counts']):g} "
+            "counts"
             + "".join(f"; {w}" for w in rec.get("warnings", []) if "where the target passes (" in w)
         )
     return lines

@@ -327,6 +327,7 @@ def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineC
         model=cc.model or None,
         max_counts_per_s=cc.max_counts_per_s or None,
         time_unit_s=cc.time_unit_s,
+        conditioning=cc.conditioning,
     )
 
     write_bytes(out_dir / "target.csv", target.read_bytes())  # the target as used, for the report

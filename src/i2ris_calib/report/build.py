@@ -1034,6 +1034,17 @@ def compensation_verdicts(axes: Mapping[str, Mapping[str, Any]]) -> list[Verdict
                     "warn" if over else "ok",
                 )
             )
+        if a.get("n_conditioning"):
+            out.append(
+                Verdict(
+                    f"{name}: conditioning sweep of {a['n_conditioning']} samples "
+                    f"({fmt_sig(a.get('conditioning_s'), 3)} s) over the fitted range first: "
+                    f"{a.get('start_state_reason') or 'the start state set to one the model knows'}.",
+                    "info",
+                )
+            )
+        elif a.get("start_state_reason"):
+            out.append(Verdict(f"{name}: start state: {a['start_state_reason']}.", "info"))
         if a.get("n_entry"):
             out.append(
                 Verdict(
@@ -1065,6 +1076,8 @@ def _flag_counts(comp: CompensationData, axis: str, two: bool) -> dict[str, int]
         counts = {}
     if a.get("n_entry") is not None:
         counts["entry"] = int(a["n_entry"])
+    if a.get("n_conditioning"):
+        counts["conditioning"] = int(a["n_conditioning"])
     return counts
 
 
@@ -1072,11 +1085,15 @@ def flag_table(comp: CompensationData, axes: list[str]) -> Table:
     """Flag counts per axis (rows: every flag; ``entry`` = the ramp's rows)."""
     counts = {a: _flag_counts(comp, a, len(axes) > 1) for a in axes}
     known = [f for f, _ in COMPENSATION_FLAGS]
-    extra = sorted({f for c in counts.values() for f in c} - set(known) - {"entry"})
-    meaning = dict(COMPENSATION_FLAGS) | {"entry": "entry ramp before the target's first sample"}
+    lead = ("conditioning", "entry")
+    extra = sorted({f for c in counts.values() for f in c} - set(known) - set(lead))
+    meaning = dict(COMPENSATION_FLAGS) | {
+        "conditioning": "conditioning sweep: sets the hysteresis state, not tracking",
+        "entry": "entry ramp before the target's first sample",
+    }
     rows = [
         (f, meaning.get(f, ""), *(tables.fmt(counts[a].get(f)) for a in axes))
-        for f in (*known, *extra, "entry")
+        for f in (*known, *extra, *lead)
         if any(f in counts[a] for a in axes)
     ]
     return Table(
@@ -1165,7 +1182,8 @@ def compensation_section(comp: CompensationData, cfg: ReportConfig) -> Section:
                 "for the commands; their difference with every flagged sample marked (count "
                 "in the legend); the motor command within the fitted input range (dotted); "
                 "the command's rate (counts/s, step to step) with the rate limit (dashed). "
-                "Grey band: the entry ramp before the target's first sample.",
+                "Grey band: the entry ramp before the target's first sample; hatched band: the "
+                "conditioning sweep that sets the hysteresis state (docs/compensate.md).",
             )
         )
     blocks.append(

@@ -73,9 +73,13 @@ def holdout_spans(time_s: np.ndarray, is_holdout: np.ndarray) -> list[tuple[floa
     return spans
 
 
-def _shade(ax, spans: list[tuple[float, float]], color: str, alpha: float, label: str) -> None:
+def _shade(
+    ax, spans: list[tuple[float, float]], color: str, alpha: float, label: str,
+    hatch: str | None = None,
+) -> None:  # fmt: skip
     for i, (a, b) in enumerate(spans):
-        ax.axvspan(a, b, color=color, alpha=alpha, lw=0, label=label if i == 0 else None)
+        ax.axvspan(a, b, color=color, alpha=alpha, lw=0, label=label if i == 0 else None,
+                   hatch=hatch)  # fmt: skip
 
 
 MODEL_CURVES = (
@@ -595,6 +599,7 @@ def compensation_figure_png(
         flags = axis_flags(flags_col, axis, len(axes) > 1)
         entry = np.array(["entry" in f for f in flags])
         spans = holdout_spans(t_all, entry)
+        sweep = holdout_spans(t_all, np.array(["conditioning" in f for f in flags]))
         pred_all = commands[f"predicted_{axis}_deg"].to_numpy(dtype=float)
         tgt_all = aligned_target(commands, target, axis)
         ax_a.plot(t, tgt_all[::step], "-", lw=2.0, color=MEASURED_COLOR, alpha=0.7, label="target")
@@ -630,6 +635,7 @@ def compensation_figure_png(
                              label="fitted input range" if k == 0 else None)  # fmt: skip
         for ax in (ax_a, ax_e, ax_c, ax_r):
             _shade(ax, spans, OTHER_COLOR, 0.25, "entry ramp")
+            _shade(ax, sweep, "0.6", 0.25, "conditioning sweep", hatch="//")
             ax.grid(True, lw=0.4, alpha=0.5)
         ax_e.axhline(0.0, color="0.2", lw=0.5)
         label = doc.get("dataset", axis)

@@ -35,7 +35,7 @@ Also printed (no target): case 2 with a motor rate limit of 5000 counts/s.
    plant = the coupled two-motor robot of ``simulation.two_motor`` (a two-tendon GPI per
    axis, pitch following the yaw joint's bend; seeded draws, 3000 samples at 30 Hz,
    noise U(0.15, 0.5) deg), recorded, written as a synced CSV and fitted per axis by
-   the ``fit`` command's path (``io.fit.fit_files``, default settings, every kind);
+   the ``fit`` command's path (``commands.fit.fit_files``, default settings, every kind);
    target: a 20 s circle through zero on both axes (radius 0.8 x the smaller of the
    recorded true angle's 10th/90th percentile magnitudes, 10 s period, 30 Hz),
    compensated by ``compensate_files([yaw fit.json, pitch fit.json])`` (datasets,
@@ -380,9 +380,10 @@ def two_axis(seeds) -> bool:
 
     import pandas as pd
 
+    from i2ris_calib.commands.fit import fit_files
     from i2ris_calib.io.compensate import _dataset_record, compensate_files, load_model
     from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.io.fit import fit_files, read_fit_json
+    from i2ris_calib.io.fit import read_fit_json
     from i2ris_calib.simulation.two_motor import simulate_two_motor, two_motor_angles
 
     print("\n== 6. both axes: a circle through zero on the coupled two-motor plant")

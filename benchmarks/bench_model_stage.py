@@ -188,11 +188,11 @@ def part_a(n_sets: int, config: FitConfig) -> bool:
 
 def _sync_with_true_clock(session: Path, run_dir: Path, cfg) -> None:
     """Fallback when ``run`` left no synced table: sync with the true clock, then fit."""
+    from i2ris_calib.commands.fit import fit_files
+    from i2ris_calib.io.angles import read_angles
     from i2ris_calib.io.atomic import write_csv
     from i2ris_calib.io.encoders import read_encoder_log
-    from i2ris_calib.io.fit import fit_files
     from i2ris_calib.io.session import encoder_log_path, load_session  # noqa: F401
-    from i2ris_calib.io.sync import read_angles
     from i2ris_calib.sync.clock import ClockModel
     from i2ris_calib.sync.estimate import synced_table
 
@@ -225,10 +225,10 @@ def tracking_crosstalk(synced, truth_frames) -> dict:
 def part_b(quick: bool, seed: int, keep: Path | None) -> bool:
     import pandas as pd
 
+    from i2ris_calib.commands.run import run_sessions
+    from i2ris_calib.commands.simulate import write_simulated_session
     from i2ris_calib.config import PipelineConfig
     from i2ris_calib.fitting.pipeline import model_from_params
-    from i2ris_calib.io.run import run_sessions
-    from i2ris_calib.io.simulate import write_simulated_session
     from i2ris_calib.io.synced import load_datasets
 
     preset = "exact_ci" if quick else "exact"

@@ -30,12 +30,12 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from i2ris_calib.commands.fit import recording_summary  # noqa: E402
 from i2ris_calib.data.dataset import direction_datasets  # noqa: E402
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
 from i2ris_calib.fitting.pipeline import choose_model, fit_dataset, pick_after_fit  # noqa: E402
-from i2ris_calib.io.fit import recording_summary  # noqa: E402
 
 RATE_HZ = 200.0
 SINE_HZ = 1.0

@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.commands.run import run_sessions
+from i2ris_calib.commands.simulate import write_simulated_session
 from i2ris_calib.config import PipelineConfig
-from i2ris_calib.io.run import run_sessions
-from i2ris_calib.io.simulate import write_simulated_session
 from i2ris_calib.simulation.presets import preset_config
 
 
@@ -131,7 +131,7 @@ def diagnose_through_pipeline(root: Path, seed: int) -> bool:
     """Hidden effects in rendered sessions, named by diagnose after track and sync."""
     from dataclasses import replace
 
-    from i2ris_calib.io.diagnose import diagnose_file
+    from i2ris_calib.commands.diagnose import diagnose_file
 
     all_ok = True
     for effect, params in DIAGNOSE_CASES.items():

@@ -35,6 +35,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from i2ris_calib.commands.fit import recording_summary  # noqa: E402
 from i2ris_calib.data.dataset import direction_datasets, input_bands  # noqa: E402
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
@@ -47,7 +48,6 @@ from i2ris_calib.hysteresis.presets import (  # noqa: E402
     through_zero_trajectory,
 )
 from i2ris_calib.hysteresis.registry import model_for_kind  # noqa: E402
-from i2ris_calib.io.fit import recording_summary  # noqa: E402
 from i2ris_calib.simulation import trajectory as tj  # noqa: E402
 from i2ris_calib.simulation.presets import preset_config  # noqa: E402
 from i2ris_calib.simulation.truth import whole_history_angle  # noqa: E402

@@ -52,13 +52,13 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from i2ris_calib.commands.track import track_session  # noqa: E402
 from i2ris_calib.config import PipelineConfig  # noqa: E402
 from i2ris_calib.data.dataset import direction_input, direction_of_samples, input_bands  # noqa: E402
 from i2ris_calib.hysteresis.models import i2ris_egpi_model  # noqa: E402
+from i2ris_calib.io.angles import read_angles  # noqa: E402
 from i2ris_calib.io.encoders import read_encoder_log  # noqa: E402
 from i2ris_calib.io.session import load_session  # noqa: E402
-from i2ris_calib.io.sync import read_angles  # noqa: E402
-from i2ris_calib.io.track import track_session  # noqa: E402
 from i2ris_calib.sync.config import SyncConfig  # noqa: E402
 from i2ris_calib.sync.estimate import estimate_clock  # noqa: E402
 from i2ris_calib.sync.log import make_encoder_log  # noqa: E402

@@ -44,10 +44,10 @@ import numpy as np
 import pandas as pd
 from issue_session import ensure_session, tracking_figures
 
+from i2ris_calib.commands.simulate import build_session
+from i2ris_calib.commands.track import track, track_session
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.io.session import load_session
-from i2ris_calib.io.simulate import build_session
-from i2ris_calib.io.track import track, track_session
 from i2ris_calib.io.video import iter_frames, open_writer
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.tracking.config import TrackingConfig

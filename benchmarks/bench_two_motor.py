@@ -9,7 +9,7 @@ within +-10 deg, pitch coupled to the yaw joint's bend at U(0.3, 0.8) of its own
 circles, figure-eights and holds through zero, 30 Hz (3000 samples) and 5 Hz (600)
 alternately, noise U(0.15, 0.5) deg, the recording starting mid-loop. Each draw is
 written as a synced CSV and read by the commands' own path
-(:func:`i2ris_calib.io.fit.datasets_for_fit`: the default model choice, no flags).
+(:func:`i2ris_calib.commands.fit.datasets_for_fit`: the default model choice, no flags).
 
 Targets, both axes: the default model's held-out RMSE <= 1.2 x noise; its largest
 output jump between consecutive samples <= the truth's + 3 noise sd. ``diagnose``
@@ -31,11 +31,11 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from i2ris_calib.commands.diagnose import diagnosis_dataset  # noqa: E402
+from i2ris_calib.commands.fit import datasets_for_fit, fit_datasets  # noqa: E402
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
-from i2ris_calib.io.diagnose import diagnosis_dataset  # noqa: E402
-from i2ris_calib.io.fit import datasets_for_fit, fit_datasets  # noqa: E402
 from i2ris_calib.simulation.two_motor import simulate_two_motor  # noqa: E402
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from i2ris_calib.io.simulate import build_session
+from i2ris_calib.commands.simulate import build_session
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.simulation.presets import preset_config
 

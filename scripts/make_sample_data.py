@@ -56,8 +56,8 @@ def write_datasets() -> None:
 
 
 def write_session() -> None:
+    from i2ris_calib.commands.simulate import write_simulated_session
     from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.io.simulate import write_simulated_session
 
     cfg = load_config(ROOT / "configs" / "sample_session.toml")
     write_simulated_session(OUT / "session", cfg, force=True)

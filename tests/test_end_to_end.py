@@ -15,10 +15,10 @@ import pandas as pd
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.run import STAMP, run_sessions
+from i2ris_calib.commands.simulate import write_simulated_session
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.io.config_io import to_toml
-from i2ris_calib.io.run import STAMP, run_sessions
-from i2ris_calib.io.simulate import write_simulated_session
 from i2ris_calib.simulation.presets import preset_config
 
 

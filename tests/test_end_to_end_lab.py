@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from i2ris_calib.commands.run import run_sessions
+from i2ris_calib.commands.simulate import write_simulated_session
 from i2ris_calib.config import PipelineConfig
-from i2ris_calib.io.run import run_sessions
-from i2ris_calib.io.simulate import write_simulated_session
 from i2ris_calib.simulation.lab import reference_window
 from i2ris_calib.simulation.presets import preset_config
 

@@ -5,7 +5,8 @@ Stages (each a subpackage of pure functions on arrays and frozen dataclasses):
 ``sync`` (camera clock -> encoder clock), ``hysteresis`` (GPI/EGPI models),
 ``fitting`` (Levenberg-Marquardt), ``diagnosis`` (model-discrepancy workflow),
 ``compensation`` (inverse models), ``report`` (tables and figures). ``io`` reads and
-writes files; ``cli`` is the thin command-line layer.
+writes files; ``commands`` runs a stage per command (files in, stage, files out);
+``cli`` is the thin command-line layer.
 
 The Python API (docs/api.md) is importable from here; names load on first use, so
 ``import i2ris_calib`` stays cheap (the CLI's ``--help`` does not load numba, scipy,

@@ -148,7 +148,7 @@ def simulate(
 ) -> None:
     """Render a synthetic two-microscope session with known ground truth."""
     cfg = _config(config)
-    from i2ris_calib.io.simulate import write_simulated_session
+    from i2ris_calib.commands.simulate import write_simulated_session
 
     write_simulated_session(out, cfg, seed=seed, force=force)
 
@@ -165,7 +165,7 @@ def track(
 ) -> None:
     """Track the ArUco cube in both videos: pitch and yaw per frame with a quality flag."""
     cfg = _config(config)
-    from i2ris_calib.io.track import track_session
+    from i2ris_calib.commands.track import track_session
 
     track_session(session, out, cfg)
 
@@ -182,7 +182,7 @@ def calibrate(
 ) -> None:
     """Camera intrinsics from ChArUco board views (or convert a ROS camera_info YAML)."""
     cfg = _config(config)
-    from i2ris_calib.io.calibrate import calibrate_camera_files
+    from i2ris_calib.commands.calibrate import calibrate_camera_files
 
     calibrate_camera_files(inputs, out, cfg)
 
@@ -206,7 +206,7 @@ def sync(
 ) -> None:
     """Estimate camera/encoder clock offset and drift; write the synced CSV."""
     cfg = _config(config)
-    from i2ris_calib.io.sync import sync_session, with_method
+    from i2ris_calib.commands.sync import sync_session, with_method
 
     sync_session(session, angles, out, with_method(cfg, method))
 
@@ -251,7 +251,7 @@ def fit(
         from dataclasses import replace
 
         cfg = replace(cfg, fit=replace(cfg.fit, signed=signed, split=split))
-    from i2ris_calib.io.fit import fit_files
+    from i2ris_calib.commands.fit import fit_files
     from i2ris_calib.io.synced import with_columns
 
     cfg = with_columns(cfg, columns)
@@ -342,7 +342,7 @@ def paper_sim(
     out: Path = typer.Option(..., "--out", "-o", metavar="DIR", help="Output folder."),
 ) -> None:
     """Reproduce the paper's simulation verification (Section 3.1, Fig 3c/3d/4)."""
-    from i2ris_calib.io.paper_sim import write_paper_sim
+    from i2ris_calib.commands.paper_sim import write_paper_sim
 
     write_paper_sim(out)
 
@@ -378,8 +378,8 @@ def diagnose(
 ) -> None:
     """Find where model and measurement disagree, name the missing effect, add it, refit."""
     cfg = _config(config)
+    from i2ris_calib.commands.diagnose import diagnose_file
     from i2ris_calib.diagnosis.report import verdict_line
-    from i2ris_calib.io.diagnose import diagnose_file
     from i2ris_calib.io.synced import with_columns
 
     cfg = with_columns(cfg, columns)
@@ -403,7 +403,7 @@ def report(
 ) -> None:
     """Write a self-contained HTML report and its Markdown twin (docs/report.md)."""
     cfg = _config(config)
-    from i2ris_calib.io.report import write_report
+    from i2ris_calib.commands.report import write_report
 
     page = write_report(run_dir, out, cfg)
     typer.echo(f"wrote {page} and {page.with_name('report.md')}")
@@ -423,7 +423,7 @@ def run(
 ) -> None:
     """track -> sync -> fit -> report for each session; stages skipped when up to date."""
     cfg = _config(config)
-    from i2ris_calib.io.run import run_sessions
+    from i2ris_calib.commands.run import run_sessions
 
     run_sessions(sessions, out=out, config=cfg, force=force, jobs=jobs)
 

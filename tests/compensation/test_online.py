@@ -152,8 +152,8 @@ def _fit_agpi(tmp_path, seed=3):
     """A signed fit of noisy data (0.05 deg) from the two-tendon truth through zero."""
     from dataclasses import replace
 
+    from i2ris_calib.commands.fit import fit_files
     from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.io.fit import fit_files
 
     rng = np.random.default_rng(seed)
     t = np.arange(0, 80, 1 / 30)

@@ -71,8 +71,8 @@ def test_split_forces_the_paper_models_and_signed_only_kinds_refuse_it(tmp_path)
 
 def test_paper_protocol_keeps_the_paper_split_by_default(tmp_path):
     """Excursions from rest at zero, one direction at a time: the per-direction split."""
+    from i2ris_calib.commands.fit import datasets_for_fit
     from i2ris_calib.hysteresis.presets import loading_trajectory
-    from i2ris_calib.io.fit import datasets_for_fit
 
     rng = np.random.default_rng(2)
     t1, v1 = loading_trajectory(rng, 4, n_samples=1500)

@@ -9,9 +9,9 @@ import pandas as pd
 import pytest
 from hyst_reference import triangle
 
+from i2ris_calib.commands.paper_sim import write_paper_sim
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.paper import PAPER_SIM_VALUES, dead_zones, run_paper_sim
-from i2ris_calib.io.paper_sim import write_paper_sim
 
 
 @pytest.fixture(scope="module")

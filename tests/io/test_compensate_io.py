@@ -210,9 +210,9 @@ def test_diagnosed_model_with_delay(tmp_path):
 
 def test_fit_json_written_by_fit(tmp_path):
     # the real fit.json format (records written by 'fit'), both directions of one axis
+    from i2ris_calib.commands.fit import fit_files
     from i2ris_calib.hysteresis.presets import loading_trajectory
     from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.io.fit import fit_files
 
     rng = np.random.default_rng(5)
     t, v = loading_trajectory(rng, n_cycles=4, n_samples=1200)
@@ -604,8 +604,8 @@ def test_model_file_lacking_the_fits_delay_refused(tmp_path):
 def test_signed_fit_compensated_and_dataset_chosen(tmp_path):
     from dataclasses import replace
 
+    from i2ris_calib.commands.fit import fit_files
     from i2ris_calib.io.config_io import load_config
-    from i2ris_calib.io.fit import fit_files
 
     rng = np.random.default_rng(3)
     t = np.arange(0, 60, 1 / 30)

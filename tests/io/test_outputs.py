@@ -174,7 +174,7 @@ def test_track_out_contains_the_session(session, capsys):
 
 
 def test_sync_out_under_a_file_fails_before_any_work(session, tmp_path, capsys, monkeypatch):
-    import i2ris_calib.io.sync as sync_io
+    import i2ris_calib.commands.sync as sync_io
 
     def no_work(*a, **k):  # pragma: no cover - must not be reached
         raise AssertionError("sync did work before checking --out")
@@ -284,7 +284,7 @@ def test_run_refuses_a_user_folder_under_the_session_name(session, tmp_path, cap
 
 
 def test_batch_run_leaves_no_folder_for_a_failed_session(session, tmp_path, capsys):
-    from i2ris_calib.io import run as run_io
+    from i2ris_calib.commands import run as run_io
 
     def fail(*a, **k):
         raise CalibError("boom")

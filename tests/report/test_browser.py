@@ -17,8 +17,8 @@ import subprocess
 import pytest
 from runfolder import make_run_folder
 
+from i2ris_calib.commands.report import write_report
 from i2ris_calib.config import PipelineConfig
-from i2ris_calib.io.report import write_report
 from i2ris_calib.report.config import ReportConfig
 from i2ris_calib.report.render import png_size
 

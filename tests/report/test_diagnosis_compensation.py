@@ -1,5 +1,5 @@
 """The diagnosis and compensation sections, and the two-tendon models in every part,
-from small synthetic data objects (formats of io/diagnose.py, io/compensate.py, fit.json)."""
+from small synthetic data objects (formats of commands/diagnose.py, io/compensate.py, fit.json)."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def _alt(effect, z, excluded=False, start=None):
 
 
 def diagnosis_record(named=True) -> dict:
-    """A diagnosis.json as io/diagnose.py writes it (the fields the report reads)."""
+    """A diagnosis.json as commands/diagnose.py writes it (the fields the report reads)."""
     steps = []
     if named:
         steps.append(

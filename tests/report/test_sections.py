@@ -23,7 +23,7 @@ CFG = ReportConfig(figure_dpi=40)
 
 
 def _sync_json(clock: ClockModel, t_ref: float, t_range=(0.0, 60.0), **extra) -> dict:
-    """sync.json's clock fields exactly as io/sync.py writes them."""
+    """sync.json's clock fields exactly as commands/sync.py writes them."""
     return {
         "method": clock.method,
         "method_requested": "auto",

@@ -16,7 +16,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from i2ris_calib.io.simulate import build_session  # noqa: E402
+from i2ris_calib.commands.simulate import build_session  # noqa: E402
 from i2ris_calib.simulation.presets import preset_config  # noqa: E402
 
 

@@ -219,7 +219,7 @@ def test_timestamps_not_in_seconds(session, serial_config, capsys, scale, needle
 
 def test_timestamps_header_with_spaces(tmp_path):
     """'frame, time_s' (a space after the comma, as spreadsheets write) is read."""
-    from i2ris_calib.io.track import read_timestamps
+    from i2ris_calib.io.timestamps import read_timestamps
 
     p = tmp_path / "t.csv"
     p.write_text("frame, time_s\n0, 0.0\n1, 0.05\n2, 0.1\n")
@@ -250,12 +250,12 @@ def test_ffmpeg_lines_are_quiet_unless_debug(session, serial_config):
 
 
 def test_ctrl_c_prints_the_message(session, capsys, monkeypatch):
-    import i2ris_calib.io.track as io_track
+    import i2ris_calib.commands.track as track_command
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(io_track, "track_session", interrupted)
+    monkeypatch.setattr(track_command, "track_session", interrupted)
     rc, _, err = run_cli(capsys, ["track", session])
     assert rc == 130
     assert err.strip() == "interrupted (no partial outputs were kept)"

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
+from i2ris_calib.commands.simulate import build_session
+from i2ris_calib.commands.track import track
 from i2ris_calib.io.session import load_session
-from i2ris_calib.io.simulate import build_session
-from i2ris_calib.io.track import track
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.tracking.config import TrackingConfig
 

@@ -8,7 +8,7 @@ import pytest
 
 from i2ris_calib.cli import main
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.calibrate import read_camera_yaml, write_camera_yaml
+from i2ris_calib.io.camera_yaml import read_camera_yaml, write_camera_yaml
 from i2ris_calib.tracking.calibrate import CharucoSpec, calibrate_from_views, charuco_board
 from i2ris_calib.tracking.geometry import rot_x, rot_y, rot_z
 

@@ -13,8 +13,8 @@ import shutil
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.commands.track import track
 from i2ris_calib.io.session import load_session
-from i2ris_calib.io.track import track
 from i2ris_calib.tracking.config import TrackingConfig
 from i2ris_calib.tracking.geometry import euler_zyx_deg
 

@@ -1,1 +1,1 @@
-"""io stage."""
+"""Readers and writers of file formats (the stage runners are in ``commands``)."""

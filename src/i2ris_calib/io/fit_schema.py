@@ -2,7 +2,7 @@
 and final_model.json (schema ``i2ris-calib.model/1``, docs/diagnosis.md).
 
 Every reader of these files goes through here (:func:`check_fit_doc`:
-``io.fit.read_fit_json`` for ``compensate``, ``io.report`` for ``report``;
+``io.fit.read_fit_json`` for ``compensate``, ``io.run_folder`` for ``report``;
 :func:`check_model_doc`: ``io.fit.read_model_file`` for ``fit --model-file`` and
 ``compensate --model diagnosed``), so a hand-edited or damaged file is one
 :class:`~i2ris_calib.errors.CalibError` naming the file, the dataset and the key

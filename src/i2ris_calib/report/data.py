@@ -1,4 +1,4 @@
-"""In-memory contents of a run folder, as read by :mod:`i2ris_calib.io.report`.
+"""In-memory contents of a run folder, as read by :mod:`i2ris_calib.io.run_folder`.
 
 Every field is optional: a stage that has not run leaves its field ``None`` and
 the report states it. The loader has already checked the shapes of what is

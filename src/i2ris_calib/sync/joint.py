@@ -905,6 +905,226 @@ DRIFT_TOL_SD = 0.1
 DRIFT_MAX_ROUNDS = 10
 
 
+def search_window(
+    series: list[AxisSeries], log: EncoderLog, cfg: SyncConfig, t_c: float, prior: ClockModel | None
+) -> tuple[float, float, float, float]:
+    """Where the offset profile is scanned: ``(centre, halfwidth, step, margin)`` (s).
+
+    Without ``prior`` the centre is the cross-correlation offset, the halfwidth
+    ``profile_halfwidth_s`` (the scan extends beyond it as needed) and the frames keep a
+    margin of 5 halfwidths; with ``prior`` (an event clock) the centre is its offset at
+    ``t_c``, the halfwidth +-4 of its standard errors (at least 4 ``profile_tol_s``),
+    the step at most half of that and the margin 2 halfwidths.
+    """
+    step = cfg.profile_step_s
+    if prior is None:
+        o_x = coarse_xcorr_offset(frames_series(series), log, cfg)
+        halfwidth = cfg.profile_halfwidth_s
+        margin = 5 * halfwidth
+    else:
+        o_x = prior.offset_at(t_c)
+        halfwidth = max(4 * prior.offset_stderr_at(t_c), 4 * cfg.profile_tol_s)
+        step = min(step, halfwidth / 2)
+        margin = 2 * halfwidth
+    return o_x, halfwidth, step, margin
+
+
+def starting_drift(cfg: SyncConfig, prior: ClockModel | None) -> float:
+    """The drift (ppm) the profile starts at: the event's when it has one (its window is
+    that clock's offset at t_c; at drift 0 frames far from t_c would be mapped up to
+    drift x half the recording away from it), else 0."""
+    if prior is not None and cfg.estimate_drift and np.isfinite(prior.drift_stderr_ppm):
+        return float(prior.drift_ppm)
+    return 0.0
+
+
+def profile_minimum(
+    series: list[AxisSeries],
+    log: EncoderLog,
+    cfg: SyncConfig,
+    fit_config,
+    t_c: float,
+    window: tuple[float, float, float, float],
+    d0: float,
+    extend: bool,
+) -> tuple[OffsetProfile, list[Block], float]:
+    """The offset profile at drift ``d0``, its blocks and its minimum (offset at ``t_c``).
+
+    The profile is scanned over ``window`` (:func:`search_window`; beyond it when
+    ``extend``), its blocks' direction attribution redone at the scanned minimum, and
+    the minimum refined by golden-section search with warm starts only. CalibError when
+    no axis moves enough inside the encoder log.
+    """
+    o_x, halfwidth, step, margin = window
+
+    def blocks_at(offset: float) -> list[Block]:
+        return model_blocks(
+            series, log, offset, t_c, margin, fit_config, cfg.min_axis_range_counts,
+        )  # fmt: skip
+
+    blocks = blocks_at(o_x)
+    if not blocks:
+        raise CalibError(
+            "sync (model): no axis moves enough inside the encoder log to fit the hysteresis "
+            f"(need > {cfg.min_axis_range_counts:g} counts of motion; use a sync flash instead)"
+        )
+    profile = OffsetProfile(blocks, log, t_c, d0, cfg.model, fit_config)
+    best = scan_profile(profile, o_x, halfwidth, step, extend=extend)
+    # the direction attribution was made at the coarse offset: redo it at the minimum
+    # (same frames, so only frames near a change of direction can change block)
+    seeds = profile.best_params()
+    blocks = blocks_at(best)
+    if [b.name for b in blocks] != [b.name for b in profile.blocks] or any(
+        not np.array_equal(a.in_direction, b.in_direction)
+        for a, b in zip(blocks, profile.blocks, strict=True)
+    ):
+        scanned = profile
+        profile = OffsetProfile(blocks, log, t_c, d0, cfg.model, fit_config, seeds)
+        for x in sorted(scanned.cache, key=lambda k: abs(k - best))[:3]:
+            profile(x)
+    profile.cold = False  # refinement: warm starts only
+    best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
+    return profile, blocks, best
+
+
+@dataclass(frozen=True)
+class DriftRounds:
+    """What :func:`drift_by_rounds` returns: the profile refitted at the final drift and
+    its minimum, the drift (ppm) and its Gauss-Newton sd, the rounds run and the last
+    change of the drift (ppm; NaN without a round)."""
+
+    profile: OffsetProfile
+    best: float
+    drift: float
+    drift_sd: float
+    rounds: int
+    change: float
+
+
+def drift_by_rounds(
+    profile: OffsetProfile,
+    blocks: list[Block],
+    log: EncoderLog,
+    cfg: SyncConfig,
+    fit_config,
+    t_c: float,
+    best: float,
+    drift: float,
+    step: float,
+) -> DriftRounds:
+    """Rounds of drift by Gauss-Newton with the models held, then the offset profile
+    refitted at it, until the drift moves by less than DRIFT_TOL_PPM or DRIFT_TOL_SD of
+    its sd, or after DRIFT_MAX_ROUNDS (none when ``[sync] estimate_drift`` is off)."""
+    drift_sd = float("nan")
+    rounds, change = 0, float("nan")
+    if cfg.estimate_drift:
+        while rounds < DRIFT_MAX_ROUNDS:
+            # drift with the models held, then the offset profile refitted at it
+            rounds += 1
+            _, new_drift, cov = drift_gauss_newton(profile, best, drift)
+            drift_sd = float(np.sqrt(cov[1, 1]))
+            change, drift = abs(new_drift - drift), new_drift
+            seeds = profile.best_params()
+            profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
+            best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
+            if change < max(DRIFT_TOL_PPM, DRIFT_TOL_SD * drift_sd):
+                break
+    return DriftRounds(profile, best, drift, drift_sd, rounds, change)
+
+
+def clock_sds(
+    found: DriftRounds, cfg: SyncConfig, t_c: float, step: float
+) -> tuple[float, float, dict]:
+    """``(offset sd at t_c (s), drift sd (ppm), uncertainty evidence)`` of the minimum.
+
+    The offset's sd is the profile's (:func:`offset_stderr`) with the golden-section
+    search's resolution; both sds are at least those of the per-cycle offsets with a
+    block bias (:func:`block_bias_cov`), and the drift's at least that of a line through
+    the per-cycle offsets (evidence ``drift``).
+    """
+    profile, best, drift, drift_sd = found.profile, found.best, found.drift, found.drift_sd
+    drift_scatter = {}
+    sd_c, unc = offset_stderr(profile, best, 1.5 * step)
+    # the golden-section search ends anywhere inside its last interval (profile_tol_s)
+    unc["search_resolution_sd_s"] = cfg.profile_tol_s / np.sqrt(12.0)
+    sd_c = float(np.hypot(sd_c, unc["search_resolution_sd_s"]))
+    # per-cycle offsets: white sd inflated by F (misfit correlated within a cycle, as
+    # for the offset)
+    t_g, o_g, sd_g, blk = cycle_offsets(profile, best, drift)
+    f_ac = unc.get("autocorr_factor_F", 1.0)
+    sd_g = sd_g * np.sqrt(max(1.0, f_ac if np.isfinite(f_ac) else 1.0))
+    # a misfit shared by all cycles of a block (axis-direction) biases offset and drift
+    # alike: the sd of both is at least that of the per-cycle offsets with a block bias
+    cov_b, block_info = block_bias_cov(t_g, o_g, sd_g, blk, t_c, best, drift, cfg.estimate_drift)
+    if np.isfinite(cov_b[0, 0]):
+        block_info["offset_sd_before_s"] = sd_c
+        sd_c = max(sd_c, float(np.sqrt(cov_b[0, 0])))
+        unc["blocks"] = block_info
+    if cfg.estimate_drift:
+        # the drift's sd is at least that of a line through the per-cycle offsets,
+        # scaled by their reduced chi-square when they scatter more than their sd
+        if t_g.size >= 3 and np.ptp(t_g) > 0:
+            _, d_line, cov_line, chi2_line = clock_from_offsets(t_g, o_g, sd_g, True, "if_larger")
+            line_sd = float(np.sqrt(cov_line[1, 1]))
+            drift_scatter = {
+                "rounds": found.rounds,
+                "last_change_ppm": found.change,
+                "n_cycles": int(t_g.size),
+                "line_drift_ppm": float(d_line),
+                "line_drift_sd_ppm": line_sd,
+                "chi2_reduced": float(chi2_line),
+                "gauss_newton_drift_sd_ppm": drift_sd,
+            }
+            drift_sd = max(drift_sd, line_sd)
+        if np.isfinite(cov_b[1, 1]):
+            drift_scatter["block_bias_drift_sd_ppm"] = float(np.sqrt(cov_b[1, 1]))
+            drift_sd = max(drift_sd, float(np.sqrt(cov_b[1, 1])))
+    return sd_c, drift_sd, unc | ({"drift": drift_scatter} if drift_scatter else {})
+
+
+def clock_covariance(sd_c: float, drift_sd: float, t_c: float) -> np.ndarray:
+    """Covariance of (offset at camera time 0 (s), drift (ppm)) from the offset's sd at
+    ``t_c`` and the drift's (a drift sd of NaN: drift not estimated, variance 0)."""
+    var_d = drift_sd**2 if np.isfinite(drift_sd) else 0.0
+    return np.array(
+        [[sd_c**2 + (t_c * PPM) ** 2 * var_d, -t_c * PPM * var_d], [-t_c * PPM * var_d, var_d]]
+    )
+
+
+def model_evidence(
+    profile: OffsetProfile,
+    blocks: list[Block],
+    cfg: SyncConfig,
+    t_c: float,
+    o_x: float,
+    halfwidth: float,
+    best: float,
+    uncertainty: dict,
+    with_prior: bool,
+) -> dict:
+    """The clock's evidence (sync.json ``evidence``): models, search window, blocks,
+    the offset profile, RMSE at the minimum and the uncertainty terms."""
+    x, y = profile.points()
+    return {
+        "model": cfg.model,
+        "models": {b.name: profile.kind_of(b) for b in blocks},
+        "model_choice": {b.name: b.why for b in blocks},
+        "prior_offset_at_t_ref_s" if with_prior else "xcorr_offset_s": o_x,
+        "search_halfwidth_s": halfwidth,
+        "t_ref_cam_s": t_c,
+        "blocks": [
+            {"name": b.name, "n_frames": int(b.t_cam_s.size), "n_in_loss": b.n_loss} for b in blocks
+        ],
+        "profile": {"offset_at_t_ref_s": x, "rss_deg2": y},
+        "n_samples": profile.n_samples,
+        "rmse_deg": float(np.sqrt(profile(best) / TRIMMED_VARIANCE / max(profile.n_samples, 1))),
+        "uncertainty": uncertainty,
+        "note": "offset profile of the hysteresis-model residual over each axis's whole frame "
+        "history; stderr from its curvature, inflated for misfit (chi2 vs the tracking "
+        "noise) and residual autocorrelation (Newey-West)",
+    }
+
+
 def clock_from_model(
     series: list[AxisSeries],
     log: EncoderLog,
@@ -943,122 +1163,17 @@ def clock_from_model(
     """
     fit_config = replace(fit_config or FitConfig(), holdout_fraction=0.0)
     t_c = float(np.mean(np.concatenate([s.t_cam_s for s in series])))
-    step = cfg.profile_step_s
-    if prior is None:
-        o_x = coarse_xcorr_offset(frames_series(series), log, cfg)
-        halfwidth = cfg.profile_halfwidth_s
-        margin = 5 * halfwidth
-    else:
-        o_x = prior.offset_at(t_c)
-        halfwidth = max(4 * prior.offset_stderr_at(t_c), 4 * cfg.profile_tol_s)
-        step = min(step, halfwidth / 2)
-        margin = 2 * halfwidth
-
-    def blocks_at(offset: float) -> list[Block]:
-        return model_blocks(
-            series, log, offset, t_c, margin, fit_config, cfg.min_axis_range_counts,
-        )  # fmt: skip
-
-    blocks = blocks_at(o_x)
-    if not blocks:
-        raise CalibError(
-            "sync (model): no axis moves enough inside the encoder log to fit the hysteresis "
-            f"(need > {cfg.min_axis_range_counts:g} counts of motion; use a sync flash instead)"
-        )
-    # the drift the profile starts at: the event's when it has one (its window is that
-    # clock's offset at t_c; at drift 0 frames far from t_c would be mapped up to
-    # drift x half the recording away from it), else 0
-    d0 = 0.0
-    if prior is not None and cfg.estimate_drift and np.isfinite(prior.drift_stderr_ppm):
-        d0 = float(prior.drift_ppm)
-    profile = OffsetProfile(blocks, log, t_c, d0, cfg.model, fit_config)
-    best = scan_profile(profile, o_x, halfwidth, step, extend=prior is None)
-    # the direction attribution was made at the coarse offset: redo it at the minimum
-    # (same frames, so only frames near a change of direction can change block)
-    seeds = profile.best_params()
-    blocks = blocks_at(best)
-    if [b.name for b in blocks] != [b.name for b in profile.blocks] or any(
-        not np.array_equal(a.in_direction, b.in_direction)
-        for a, b in zip(blocks, profile.blocks, strict=True)
-    ):
-        scanned = profile
-        profile = OffsetProfile(blocks, log, t_c, d0, cfg.model, fit_config, seeds)
-        for x in sorted(scanned.cache, key=lambda k: abs(k - best))[:3]:
-            profile(x)
-    profile.cold = False  # refinement: warm starts only
-    best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
-    drift, drift_sd = d0, float("nan")
-    drift_scatter = {}
-    rounds, change = 0, float("nan")
-    if cfg.estimate_drift:
-        while rounds < DRIFT_MAX_ROUNDS:
-            # drift with the models held, then the offset profile refitted at it
-            rounds += 1
-            _, new_drift, cov = drift_gauss_newton(profile, best, drift)
-            drift_sd = float(np.sqrt(cov[1, 1]))
-            change, drift = abs(new_drift - drift), new_drift
-            seeds = profile.best_params()
-            profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
-            best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
-            if change < max(DRIFT_TOL_PPM, DRIFT_TOL_SD * drift_sd):
-                break
-    sd_c, unc = offset_stderr(profile, best, 1.5 * step)
-    # the golden-section search ends anywhere inside its last interval (profile_tol_s)
-    unc["search_resolution_sd_s"] = cfg.profile_tol_s / np.sqrt(12.0)
-    sd_c = float(np.hypot(sd_c, unc["search_resolution_sd_s"]))
-    # per-cycle offsets: white sd inflated by F (misfit correlated within a cycle, as
-    # for the offset)
-    t_g, o_g, sd_g, blk = cycle_offsets(profile, best, drift)
-    f_ac = unc.get("autocorr_factor_F", 1.0)
-    sd_g = sd_g * np.sqrt(max(1.0, f_ac if np.isfinite(f_ac) else 1.0))
-    # a misfit shared by all cycles of a block (axis-direction) biases offset and drift
-    # alike: the sd of both is at least that of the per-cycle offsets with a block bias
-    cov_b, block_info = block_bias_cov(t_g, o_g, sd_g, blk, t_c, best, drift, cfg.estimate_drift)
-    if np.isfinite(cov_b[0, 0]):
-        block_info["offset_sd_before_s"] = sd_c
-        sd_c = max(sd_c, float(np.sqrt(cov_b[0, 0])))
-        unc["blocks"] = block_info
-    if cfg.estimate_drift:
-        # the drift's sd is at least that of a line through the per-cycle offsets,
-        # scaled by their reduced chi-square when they scatter more than their sd
-        if t_g.size >= 3 and np.ptp(t_g) > 0:
-            _, d_line, cov_line, chi2_line = clock_from_offsets(t_g, o_g, sd_g, True, "if_larger")
-            line_sd = float(np.sqrt(cov_line[1, 1]))
-            drift_scatter = {
-                "rounds": rounds,
-                "last_change_ppm": change,
-                "n_cycles": int(t_g.size),
-                "line_drift_ppm": float(d_line),
-                "line_drift_sd_ppm": line_sd,
-                "chi2_reduced": float(chi2_line),
-                "gauss_newton_drift_sd_ppm": drift_sd,
-            }
-            drift_sd = max(drift_sd, line_sd)
-        if np.isfinite(cov_b[1, 1]):
-            drift_scatter["block_bias_drift_sd_ppm"] = float(np.sqrt(cov_b[1, 1]))
-            drift_sd = max(drift_sd, float(np.sqrt(cov_b[1, 1])))
-    offset0 = best - drift * PPM * t_c  # offset at camera time 0 (t_ctrl - t_cam)
-    var_d = drift_sd**2 if np.isfinite(drift_sd) else 0.0
-    cov = np.array(
-        [[sd_c**2 + (t_c * PPM) ** 2 * var_d, -t_c * PPM * var_d], [-t_c * PPM * var_d, var_d]]
+    window = search_window(series, log, cfg, t_c, prior)
+    o_x, halfwidth, step, _ = window
+    d0 = starting_drift(cfg, prior)
+    profile, blocks, best = profile_minimum(
+        series, log, cfg, fit_config, t_c, window, d0, extend=prior is None
     )
-    x, y = profile.points()
-    evidence = {
-        "model": cfg.model,
-        "models": {b.name: profile.kind_of(b) for b in blocks},
-        "model_choice": {b.name: b.why for b in blocks},
-        "xcorr_offset_s" if prior is None else "prior_offset_at_t_ref_s": o_x,
-        "search_halfwidth_s": halfwidth,
-        "t_ref_cam_s": t_c,
-        "blocks": [
-            {"name": b.name, "n_frames": int(b.t_cam_s.size), "n_in_loss": b.n_loss} for b in blocks
-        ],
-        "profile": {"offset_at_t_ref_s": x, "rss_deg2": y},
-        "n_samples": profile.n_samples,
-        "rmse_deg": float(np.sqrt(profile(best) / TRIMMED_VARIANCE / max(profile.n_samples, 1))),
-        "uncertainty": unc | ({"drift": drift_scatter} if drift_scatter else {}),
-        "note": "offset profile of the hysteresis-model residual over each axis's whole frame "
-        "history; stderr from its curvature, inflated for misfit (chi2 vs the tracking "
-        "noise) and residual autocorrelation (Newey-West)",
-    }
-    return clock_model(offset0, drift, cov, "model", evidence, cfg.estimate_drift)
+    found = drift_by_rounds(profile, blocks, log, cfg, fit_config, t_c, best, d0, step)
+    sd_c, drift_sd, unc = clock_sds(found, cfg, t_c, step)
+    offset0 = found.best - found.drift * PPM * t_c  # offset at camera time 0 (t_ctrl - t_cam)
+    cov = clock_covariance(sd_c, drift_sd, t_c)
+    evidence = model_evidence(
+        found.profile, blocks, cfg, t_c, o_x, halfwidth, found.best, unc, prior is not None
+    )
+    return clock_model(offset0, found.drift, cov, "model", evidence, cfg.estimate_drift)

@@ -3,7 +3,7 @@ frame times (interpolated, or extrapolated from one side), the refit of frames w
 interpolation disagrees with the first view, the per-frame timing uncertainty of the
 interpolation, and the grey level of the nearest frame (for the sync flash).
 
-Pure array functions (no files): ``io.track`` calls them while fusing a session; see
+Pure array functions (no files): ``commands.track`` calls them while fusing a session; see
 docs/design/tracking.md ("Cameras not triggered together" under Known limits, and "Flagging what
 the interpolation cannot place").
 """

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-from test_fit_io import synced_frame
+from test_fit_command import synced_frame
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.run import compensate_run, compensation_target
 from i2ris_calib.compensation.config import CompensateConfig
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.run import compensate_run, compensation_target
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def test_compensate_stage_writes_commands_and_report_section(run_dir):
     cmds = pd.read_csv(run_dir / "compensate" / "commands.csv")
     # the fitted model follows a reachable smooth target to well within the noise it was fitted on
     assert doc["axes"]["yaw"]["rmse_reachable_deg"] < 0.01 and cmds["reachable"].mean() > 0.95
-    from i2ris_calib.io.report import load_run
+    from i2ris_calib.io.run_folder import load_run
     from i2ris_calib.report.build import build_document
 
     run, _ = load_run(run_dir)

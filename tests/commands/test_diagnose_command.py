@@ -69,10 +69,10 @@ def test_outputs_are_complete_and_name_the_delay(diagnosed):
 
 
 def test_final_model_file_rebuilds_the_fitted_model(diagnosed):
+    from i2ris_calib.commands.diagnose import diagnosis_dataset
     from i2ris_calib.diagnosis.effects import model_values
     from i2ris_calib.diagnosis.serialize import model_from_dict
     from i2ris_calib.fitting.config import FitConfig
-    from i2ris_calib.io.diagnose import diagnosis_dataset
 
     _, out, _, csv = diagnosed
     obj = json.loads((out / "final_model.json").read_text())
@@ -161,9 +161,9 @@ def test_direction_dataset_is_the_whole_history(tmp_path):
     """--direction picks one Dataset of the one reader: every row in time order, the
     direction's input, the angle in its convention (-theta = |theta| for "-") only on
     its own samples; auto = the direction with more in-direction samples."""
+    from i2ris_calib.commands.diagnose import diagnosis_dataset
     from i2ris_calib.errors import CalibError
     from i2ris_calib.fitting.config import FitConfig
-    from i2ris_calib.io.diagnose import diagnosis_dataset
 
     # out to +3000 and back, out to -2000 and back (ramps, no jumps: read_synced refuses
     # encoder jumps faster than the motor moves), then a rest at 0
@@ -245,8 +245,8 @@ def test_fit_model_file_refits_on_exactly_the_diagnosed_samples(tmp_path):
     """diagnose and fit build the same Dataset: the "-" dataset diagnosed over the
     whole history is the one `fit --model-file` refits the final model on (same rows,
     same loss mask, same held-out cycles), and the refit keeps the diagnosed fit."""
+    from i2ris_calib.commands.diagnose import diagnosis_dataset
     from i2ris_calib.config import PipelineConfig
-    from i2ris_calib.io.diagnose import diagnosis_dataset
     from i2ris_calib.io.synced import load_datasets
 
     csv = tmp_path / "synced.csv"
@@ -307,10 +307,10 @@ def test_run_diagnose_stage_writes_what_the_report_reads(tmp_path):
     """`[run] diagnose = true`: one stage per axis and direction under
     <run>/diagnose/<axis><direction>/; a direction without motion is skipped with
     its reason, and the report's loader picks the diagnosis up."""
+    from i2ris_calib.commands.run import diagnose_direction, session_stages
     from i2ris_calib.config import PipelineConfig
     from i2ris_calib.diagnosis.config import DiagnosisConfig
-    from i2ris_calib.io.report import load_run
-    from i2ris_calib.io.run import diagnose_direction, session_stages
+    from i2ris_calib.io.run_folder import load_run
 
     run = tmp_path / "run"
     csv = run / "sync" / "synced.csv"

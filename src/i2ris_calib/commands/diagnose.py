@@ -15,6 +15,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from rich.progress import Progress
 
+from i2ris_calib.commands.fit import datasets_for_fit
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.blas import single_threaded_blas
@@ -27,7 +28,6 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
 from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
-from i2ris_calib.io.fit import datasets_for_fit
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
@@ -50,7 +50,7 @@ def diagnosis_dataset(
     builds exactly the same dataset (samples, loss mask, held-out cycles) from the
     same file and ``[fit]`` settings. ``direction``: ``"+"`` or ``"-"`` (``"±"`` when
     ``[fit] signed = true``), or ``"auto"``: the dataset(s) of the default fit's model
-    choice (:func:`~i2ris_calib.io.fit.datasets_for_fit`: the signed dataset when the
+    choice (:func:`~i2ris_calib.commands.fit.datasets_for_fit`: the signed dataset when the
     input crosses zero or its excursions do not start at rest, else the split), the
     one with more in-direction samples (``"+"`` on a tie).
     """

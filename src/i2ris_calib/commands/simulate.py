@@ -20,7 +20,7 @@ from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json, write_text
-from i2ris_calib.io.calibrate import write_camera_yaml
+from i2ris_calib.io.camera_yaml import write_camera_yaml
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.video import open_writer

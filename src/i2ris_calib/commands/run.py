@@ -27,6 +27,12 @@ import pandas as pd
 from rich.console import Console
 
 from i2ris_calib import __version__
+from i2ris_calib.commands.diagnose import OUTPUTS as DIAGNOSE_OUTPUTS
+from i2ris_calib.commands.diagnose import diagnose_dataset
+from i2ris_calib.commands.fit import fit_files
+from i2ris_calib.commands.report import write_report
+from i2ris_calib.commands.sync import sync_session
+from i2ris_calib.commands.track import track_session
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.diagnosis.workflow import check_dataset
@@ -34,17 +40,11 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_bytes, write_json
 from i2ris_calib.io.compensate import compensate_files
 from i2ris_calib.io.config_io import dataclass_to_dict
-from i2ris_calib.io.diagnose import OUTPUTS as DIAGNOSE_OUTPUTS
-from i2ris_calib.io.diagnose import diagnose_dataset
 from i2ris_calib.io.encoders import encoder_log_path
-from i2ris_calib.io.fit import fit_files
 from i2ris_calib.io.outputs import check_not_input, output_dir
 from i2ris_calib.io.provenance import file_sha256
-from i2ris_calib.io.report import write_report
 from i2ris_calib.io.session import check_cameras, load_session, session_file
-from i2ris_calib.io.sync import sync_session
 from i2ris_calib.io.synced import load_datasets
-from i2ris_calib.io.track import track_session
 from i2ris_calib.io.video import input_files
 from i2ris_calib.session import SessionSpec
 

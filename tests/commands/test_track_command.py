@@ -11,9 +11,10 @@ import pandas as pd
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.simulate import build_session
+from i2ris_calib.commands.track import track_session
 from i2ris_calib.errors import CalibError
-from i2ris_calib.io.simulate import build_session
-from i2ris_calib.io.track import read_timestamps, track_session
+from i2ris_calib.io.timestamps import read_timestamps
 from i2ris_calib.simulation.presets import preset_config
 
 
@@ -139,7 +140,7 @@ def test_unknown_dictionary_name(session, tmp_path):
 # --- issue 19: the other camera's video; backward times are not dropped frames ------------
 def _blind_stream(other_ids: dict, n: int = 6):
     """A stream in which the camera's own marker was never found."""
-    from i2ris_calib.io.track import StreamResult
+    from i2ris_calib.commands.track import StreamResult
 
     return StreamResult(np.full((n, 4, 2), np.nan), np.zeros(n), np.zeros(n, bool), other_ids,
                         (256, 320), 0, 0, 0.0, 0.0)  # fmt: skip
@@ -158,7 +159,7 @@ def _two_camera_spec():
 def test_side_camera_reading_the_top_video_is_not_told_to_change_marker_id():
     """Seeing only the top camera's id means the side camera reads the top camera's film:
     setting its marker_id to that id would track one face twice (issue 19)."""
-    from i2ris_calib.io.track import check_stream
+    from i2ris_calib.commands.track import check_stream
 
     spec = _two_camera_spec()
     ts = pd.DataFrame({"frame": range(6), "time_s": np.arange(6) / 30})
@@ -192,7 +193,7 @@ def _timestamps(tmp_path, t):
 )
 def test_backward_times_are_not_reported_as_dropped_frames(tmp_path, case, dropped, backward,
                                                            first):  # fmt: skip
-    from i2ris_calib.io.track import frame_gaps, track_warnings
+    from i2ris_calib.commands.track import frame_gaps, track_warnings
     from i2ris_calib.tracking.config import TrackingConfig
 
     t = np.arange(200) / 30.0

@@ -282,7 +282,7 @@ def test_same_fit_whatever_the_input_unit(tmp_path, unit_per_count):
 
 
 def test_source_labels_are_the_shortest_distinguishing_paths():
-    from i2ris_calib.io.fit import source_labels
+    from i2ris_calib.commands.fit import source_labels
 
     runs = ["/r/s1/sync/synced.csv", "/r/s2/sync/synced.csv", "/r/s1/sync/synced.csv"]
     assert source_labels(runs) == {

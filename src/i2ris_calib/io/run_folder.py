@@ -1,39 +1,25 @@
-"""``i2ris-calib report RUN_DIR``: read a run folder, write report.html + report.md.
+"""A run folder (or a ``fit`` output folder) read for ``i2ris-calib report``: every
+stage output in a :class:`~i2ris_calib.report.data.RunData` (docs/report.md).
 
 Reading is strict about what is there and lenient about what is not: a missing
 stage output is recorded in :attr:`RunData.absent` and stated in the report; a
 present but malformed JSON/CSV is a one-line :class:`CalibError` naming the file.
-The output folder is written as a whole (temporary folder, renamed when complete).
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Mapping
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from rich.console import Console
-from rich.progress import Progress
 
-from i2ris_calib import __version__
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.registry import ALL_KINDS
-from i2ris_calib.io.config_io import load_config
 from i2ris_calib.io.fit_schema import check_fit_doc
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
-from i2ris_calib.io.provenance import provenance
-from i2ris_calib.report.build import build_document, section_count
 from i2ris_calib.report.data import CompensationData, DiagnosisData, FitData, RunData
-from i2ris_calib.report.render import render_html, render_markdown
-
-REPORT_FILES = ("report.html", "report.md", "figures")
-#: The parts of a run folder a report reads; its --out must not be or contain one.
-RUN_PARTS = ("track", "sync", "fit", "diagnose", "compensate")
-FIGURE_DIR = "figures"
 
 ANGLES_COLUMNS = {"time_s": True, "yaw_deg": True, "pitch_deg": True, "status": False}
 SYNCED_COLUMNS = {
@@ -355,91 +341,3 @@ def _check_is_run_folder(root: Path) -> None:
         raise CalibError(
             f"{root}: no track/, sync/, fit/ or diagnose/ folder; give a run folder written by 'run'"
         )
-
-
-def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, Any]:
-    """Provenance block of the report, input paths relative to the run folder."""
-    prov = provenance(inputs, config)
-    base = root.resolve()
-    prov["inputs"] = {
-        Path(p).resolve().relative_to(base).as_posix(): h
-        for p, h in zip(inputs, prov["inputs"].values(), strict=True)
-    }
-    return prov
-
-
-def _build_with_progress(run: RunData, report_config: Any, prov: dict[str, Any]):
-    """build_document with a transient rich progress bar on stderr (one step per section)."""
-    with Progress(console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task("report", total=section_count(run))
-        started = []
-
-        def step(label: str) -> None:
-            if started:
-                bar.advance(task)
-            started.append(label)
-            bar.update(task, description=f"report: {label}")
-
-        doc = build_document(run, report_config, prov, progress=step)
-        bar.advance(task)
-    return doc
-
-
-def _template(name: str) -> str:
-    return (
-        resources.files("i2ris_calib.report")
-        .joinpath("templates", name)
-        .read_text(encoding="utf-8")
-    )
-
-
-def _inputs(root: Path) -> list[Path]:
-    """What a report of ``root`` reads: the run parts, or a fit folder's files."""
-    return [root / d for d in (FIT_FILES if is_fit_folder(root) else RUN_PARTS)]
-
-
-def _check_out(out: Path, root: Path) -> None:
-    """Refuse an output folder that is or contains the run (or fit) folder, or holds
-    anything but a previous report (io/outputs.py)."""
-    o, r = out.resolve(), root.resolve()
-    if o == r or o in r.parents:
-        what = "fit folder" if is_fit_folder(root) else "run folder"
-        raise CalibError(f"--out {out} contains the {what} {root}; choose e.g. {root / 'report'}")
-    claim_output_dir(out, "report", _inputs(root), REPORT_FILES)
-
-
-def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any = None) -> Path:
-    """Write ``report.html``, ``report.md`` and ``figures/*.png`` for a run folder.
-
-    Parameters
-    ----------
-    run_dir : path
-        The run folder, or a ``fit`` output folder (the report then holds the model
-        sections alone).
-    out : path, optional
-        Output folder (default ``RUN_DIR/report``, ``FIT_DIR/report``); replaced as a whole.
-    config : PipelineConfig, optional
-        Its ``report`` section sets figure DPI and sizes; recorded in provenance.
-
-    Returns
-    -------
-    Path
-        The written ``report.html``.
-    """
-    root = Path(run_dir)
-    cfg = config if config is not None else load_config(None)
-    out_dir = Path(out) if out is not None else root / "report"
-    _check_out(out_dir, root)
-    run, inputs = load_run(root)
-    prov = report_provenance(root, inputs, cfg)
-    doc = _build_with_progress(run, cfg.report, prov)
-    page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
-    markdown, files = render_markdown(doc, FIGURE_DIR)
-    with output_dir(out_dir, "report", _inputs(root), REPORT_FILES) as tmp:
-        tmp.chmod(0o755)  # mkdtemp makes it private; a report is meant to be shared
-        (tmp / "report.html").write_text(page, encoding="utf-8")
-        (tmp / "report.md").write_text(markdown, encoding="utf-8")
-        (tmp / FIGURE_DIR).mkdir()
-        for rel, png in files.items():
-            (tmp / rel).write_bytes(png)
-    return out_dir / "report.html"

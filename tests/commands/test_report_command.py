@@ -12,10 +12,11 @@ from pathlib import Path
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.report import write_report
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.outputs import MARKER
-from i2ris_calib.io.report import load_run, png_paths, write_report
+from i2ris_calib.io.run_folder import load_run, png_paths
 from i2ris_calib.report.config import ReportConfig
 
 _spec = importlib.util.spec_from_file_location(

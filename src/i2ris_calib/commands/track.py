@@ -21,10 +21,11 @@ from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json
-from i2ris_calib.io.calibrate import read_camera_yaml
+from i2ris_calib.io.camera_yaml import read_camera_yaml
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import check_cameras, load_session, session_file
+from i2ris_calib.io.timestamps import read_timestamps
 from i2ris_calib.io.video import header_frame_count, input_files, iter_frames
 from i2ris_calib.io.workers import quiet_pool
 from i2ris_calib.session import CameraSpec, SessionSpec
@@ -50,12 +51,6 @@ from i2ris_calib.tracking.timing import (
     refit_lagged_frames,
     resample_corners,
 )
-
-#: Above this fraction of out-of-order timestamps the file is refused (not flagged).
-MAX_NON_MONOTONIC = 0.05
-#: A median frame interval above this (s) means time_s is not in seconds (ms, ns).
-MAX_FRAME_INTERVAL_S = 2.0
-
 
 #: The files ``track`` writes in its output folder.
 OUTPUTS = ("angles.csv", "track.json")
@@ -175,50 +170,6 @@ def track(session: Path, spec: SessionSpec, cfg: TrackingConfig, progress: bool 
 
 
 # ----------------------------------------------------------------------------- inputs
-def read_timestamps(path: Path) -> pd.DataFrame:
-    """Timestamp CSV (``frame``, ``time_s``) with a ``valid`` column for monotonic rows."""
-    try:
-        df = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{path}: unreadable CSV ({str(exc).splitlines()[0]})") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    missing = {"frame", "time_s"} - set(df.columns)
-    if missing:
-        raise CalibError(
-            f"{path}: missing column(s) {', '.join(sorted(missing))} (need frame, time_s)"
-        )
-    if len(df) < 2:
-        raise CalibError(
-            f"{path}: {len(df)} frame row(s) below the header (need one row per video frame: "
-            "re-export the camera timestamps)"
-        )
-    t = pd.to_numeric(df["time_s"], errors="coerce").to_numpy(float)
-    fr = pd.to_numeric(df["frame"], errors="coerce").to_numpy(float)
-    if not np.all(np.isfinite(t)) or not np.all(np.isfinite(fr)):
-        bad = int(np.flatnonzero(~(np.isfinite(t) & np.isfinite(fr)))[0]) + 2
-        raise CalibError(f"{path}: non-numeric frame/time_s at line {bad}")
-    if not np.array_equal(fr, np.arange(len(fr))):
-        raise CalibError(
-            f"{path}: column 'frame' must count 0, 1, 2, ... (one row per video frame, in order)"
-        )
-    running = np.maximum.accumulate(np.concatenate([[-np.inf], t[:-1]]))
-    valid = t > running
-    if (~valid).mean() > MAX_NON_MONOTONIC:
-        first = int(np.flatnonzero(~valid)[0]) + 2
-        raise CalibError(
-            f"{path}: {int((~valid).sum())} timestamps are not increasing (first at line {first}); "
-            "fix the camera clock export"
-        )
-    step = float(np.median(np.diff(t[valid]))) if valid.sum() >= 2 else 0.0
-    if step > MAX_FRAME_INTERVAL_S:
-        unit = "milliseconds: divide by 1000" if step < 2000 else "ms, us or ns"
-        raise CalibError(
-            f"{path}: median frame interval {step:g} 'seconds' ({1 / step:.3g} fps): time_s "
-            f"must be in seconds (the values look like {unit})"
-        )
-    return pd.DataFrame({"frame": fr.astype(int), "time_s": t, "valid": valid})
-
-
 def check_calibration(session: Path, name: str, cam: CameraSpec) -> None:
     """A pinhole camera's calibration file exists and parses (before any decoding)."""
     if cam.model != "pinhole":

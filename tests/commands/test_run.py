@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from i2ris_calib.io.run import STAMP, Stage, is_up_to_date, run_stage
+from i2ris_calib.commands.run import STAMP, Stage, is_up_to_date, run_stage
 
 
 @dataclass(frozen=True)
@@ -112,8 +112,8 @@ def _fake_session(folder, name, payload):
 def test_run_dir_refuses_another_session_with_the_same_name(tmp_path):
     """Two sessions named alike, one --out: the second is refused, the first's outputs
     stay; the same session moved to another folder keeps its run folder."""
+    from i2ris_calib.commands.run import claim_run_dir
     from i2ris_calib.errors import CalibError
-    from i2ris_calib.io.run import claim_run_dir
 
     a = _fake_session(tmp_path / "a", "s", b"one recording")
     b = _fake_session(tmp_path / "b", "s", b"another recording!")
@@ -135,7 +135,7 @@ def _stub_run(monkeypatch, calls):
     but stand-in actions, so nothing is decoded."""
     import dataclasses
 
-    from i2ris_calib.io import run as run_io
+    from i2ris_calib.commands import run as run_io
 
     real = run_io.session_stages
 
@@ -214,8 +214,8 @@ def test_changed_input_is_named_and_its_stages_rerun(tmp_path, monkeypatch, caps
 def test_moved_session_with_changed_inputs_is_another_session(tmp_path):
     """Only a different folder with different named inputs is refused; a moved session
     whose named files kept their names and sizes is the same one."""
+    from i2ris_calib.commands.run import claim_run_dir
     from i2ris_calib.errors import CalibError
-    from i2ris_calib.io.run import claim_run_dir
 
     a = _fake_session(tmp_path / "a", "s", b"one recording")
     run_dir = tmp_path / "runs" / "s"

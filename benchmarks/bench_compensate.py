@@ -380,10 +380,11 @@ def two_axis(seeds) -> bool:
 
     import pandas as pd
 
+    from i2ris_calib.commands.compensate import compensate_files
     from i2ris_calib.commands.fit import fit_files
-    from i2ris_calib.io.compensate import _dataset_record, compensate_files, load_model
     from i2ris_calib.io.config_io import load_config
     from i2ris_calib.io.fit import read_fit_json
+    from i2ris_calib.io.fit_records import dataset_record, load_model
     from i2ris_calib.simulation.two_motor import simulate_two_motor, two_motor_angles
 
     print("\n== 6. both axes: a circle through zero on the coupled two-motor plant")
@@ -421,7 +422,7 @@ def two_axis(seeds) -> bool:
             for axis in ("yaw", "pitch"):
                 fdoc = read_fit_json(tmp / axis / "fit.json")
                 name = doc["axes"][axis]["dataset"]
-                record = _dataset_record(fdoc, name, tmp / axis / "fit.json")
+                record = dataset_record(fdoc, name, tmp / axis / "fit.json")
                 fitted[axis] = load_model(fdoc, record, doc["axes"][axis]["model"], tmp / axis)
         # the TRUE plant driven through every row (conditioning, entry, target) from a
         # state the compensator does not know: (a) virgin rest at 0 counts, (b) after

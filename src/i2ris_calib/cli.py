@@ -322,7 +322,7 @@ def compensate(
 ) -> None:
     """Feedforward motor commands that make the fitted model follow a target angle."""
     cfg = _config(config)
-    from i2ris_calib.io.compensate import compensate_files, summary_lines
+    from i2ris_calib.commands.compensate import compensate_files, summary_lines
 
     doc = compensate_files(
         fit_json, dataset, target, out, cfg, model=model, max_counts_per_s=max_counts_per_s,

@@ -170,8 +170,9 @@ def _fit_agpi(tmp_path, seed=3):
 
 
 def test_agpi_fitted_from_noisy_data_tracks_a_target_through_zero(tmp_path):
-    from i2ris_calib.io.compensate import compensate_files, load_model
+    from i2ris_calib.commands.compensate import compensate_files
     from i2ris_calib.io.fit import read_fit_json
+    from i2ris_calib.io.fit_records import load_model
 
     truth, fit_json = _fit_agpi(tmp_path)
     doc = read_fit_json(fit_json)

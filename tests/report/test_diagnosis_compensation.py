@@ -1,5 +1,5 @@
 """The diagnosis and compensation sections, and the two-tendon models in every part,
-from small synthetic data objects (formats of commands/diagnose.py, io/compensate.py, fit.json)."""
+from small synthetic data objects (formats of commands/diagnose.py, commands/compensate.py, fit.json)."""
 
 from __future__ import annotations
 

@@ -27,6 +27,7 @@ import pandas as pd
 from rich.console import Console
 
 from i2ris_calib import __version__
+from i2ris_calib.commands.compensate import compensate_files
 from i2ris_calib.commands.diagnose import OUTPUTS as DIAGNOSE_OUTPUTS
 from i2ris_calib.commands.diagnose import diagnose_dataset
 from i2ris_calib.commands.fit import fit_files
@@ -38,7 +39,6 @@ from i2ris_calib.data.dataset import AXES
 from i2ris_calib.diagnosis.workflow import check_dataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_bytes, write_json
-from i2ris_calib.io.compensate import compensate_files
 from i2ris_calib.io.config_io import dataclass_to_dict
 from i2ris_calib.io.encoders import encoder_log_path
 from i2ris_calib.io.outputs import check_not_input, output_dir

@@ -3,7 +3,7 @@ target angle, by exact inversion of the stateful model (:mod:`.kernel`).
 
 Everything here works in the *model's* convention: the input ``v`` the model sees
 (a motion direction's input, >= 0, encoder counts for I2RIS) and its output angle
-(deg; ``-theta`` for a ``"-"`` dataset). :mod:`i2ris_calib.io.compensate` maps
+(deg; ``-theta`` for a ``"-"`` dataset). :mod:`i2ris_calib.commands.compensate` maps
 signed encoder counts and angles to and from it.
 """
 

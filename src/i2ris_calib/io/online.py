@@ -13,8 +13,8 @@ import numpy as np
 from i2ris_calib.compensation import online
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_json
-from i2ris_calib.io.compensate import _dataset_record, _holdout, load_model, rate_limit
 from i2ris_calib.io.fit import read_fit_json
+from i2ris_calib.io.fit_records import dataset_record, holdout_rmse, load_model, rate_limit
 
 #: Kinds the online compensator inverts
 ONLINE_KINDS = tuple(online.KIND_NAMES.values())
@@ -74,7 +74,7 @@ class Compensator(online.Compensator):
             if name is None:
                 name = f"{axis}±" if f"{axis}±" in have else (have[0] if have else f"{axis}+")
             name = name.replace("+-", "±")
-            record = _dataset_record(doc, name, p)
+            record = dataset_record(doc, name, p)
             fitted = [k for k in record.get("models", {}) if k in ONLINE_KINDS]
             kind = model
             if kind is None:
@@ -83,7 +83,7 @@ class Compensator(online.Compensator):
                         f"{p} [{name}]: none of its models can be compensated online "
                         f"({', '.join(ONLINE_KINDS)})"
                     )
-                kind = min(fitted, key=lambda k: _holdout(record["models"][k]) or np.inf)
+                kind = min(fitted, key=lambda k: holdout_rmse(record["models"][k]) or np.inf)
             elif kind not in ONLINE_KINDS:
                 raise CalibError(
                     f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "

@@ -10,11 +10,11 @@ import pandas as pd
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.compensate import compensate_files
 from i2ris_calib.compensation.inverse import forward
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
-from i2ris_calib.io.compensate import compensate_files
 
 RATE = 3000.0
 MID_LOOP = {

@@ -9,11 +9,11 @@ import pandas as pd
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.compensate import compensate_files
 from i2ris_calib.compensation.inverse import forward
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
-from i2ris_calib.io.compensate import compensate_files
 
 
 def _fit_json(path, axis="yaw", kinds=("egpi", "egpi_c", "gpi"), rate=1e6):
@@ -668,7 +668,7 @@ def test_stepping_model_flagged_in_summary_and_warnings(tmp_path, capsys):
 
 
 def test_ranking_steps_double_the_score_not_last_whatever_the_error():
-    from i2ris_calib.io.compensate import rank_models
+    from i2ris_calib.commands.compensate import rank_models
 
     class Res:  # a CompensationResult's summary and flags: n samples, `steps` output steps
         def __init__(self, rmse, steps, n=600):

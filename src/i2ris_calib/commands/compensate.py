@@ -18,27 +18,28 @@ from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
 from i2ris_calib.compensation.safety import conditioning_sweep
 from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
-from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
 from i2ris_calib.interrupts import deferred
 from i2ris_calib.io.atomic import atomic_path, write_json
-from i2ris_calib.io.fit import read_fit_json, read_model_file
+from i2ris_calib.io.fit import read_fit_json
+from i2ris_calib.io.fit_records import (
+    dataset_names,
+    dataset_record,
+    holdout_rmse,
+    load_model,
+    rate_limit,
+)
 from i2ris_calib.io.outputs import claim_output_file
 from i2ris_calib.io.provenance import provenance
+from i2ris_calib.io.target_csv import read_history, read_target
 
 SCHEMA = "i2ris-calib.compensate/1"
 #: ``--model`` choices: the kinds with an inverse (registry) and ``"diagnosed"``
 KINDS = (*INVERSE_KINDS, "diagnosed")
 #: ``--dataset`` choices (``yaw+-`` is accepted for ``yaw±``)
 DATASETS = ("yaw+", "yaw-", "yaw±", "pitch+", "pitch-", "pitch±")
-#: Median target sample interval (s) a motor command stream can plausibly have
-#: (100 kHz .. 1 Hz); outside it the target's time unit is questioned
-PLAUSIBLE_TARGET_STEP_S = (1e-5, 1.0)
-#: Rate limit when fit.json does not store the recording's fastest input move (older
-#: files): this share of the fitted input range per second
-FALLBACK_RANGE_SHARE_PER_S = 0.1
 
 METHOD_NOTE = (
     "exact inversion of the stateful model sample by sample (one root find per branch "
@@ -52,96 +53,12 @@ METHOD_NOTE = (
 )
 
 
-def read_target(path: str | Path, axes: Sequence[str], time_unit_s: float = 1.0) -> pd.DataFrame:
-    """Read and validate a target CSV: ``time_s`` and ``<axis>_deg`` for every axis.
-
-    ``time_s`` is multiplied by ``time_unit_s`` (seconds per unit of the column: 1e-3
-    for ms). One-line CalibError for: unreadable file, missing columns, non-numeric or
-    NaN values, time not strictly increasing, a median sample interval outside
-    :data:`PLAUSIBLE_TARGET_STEP_S` (naming the ``time_unit_s`` that fits).
-    """
-    p = Path(path)
-    if not p.is_file():
-        raise CalibError(f"{p}: target file not found (a CSV with time_s and <axis>_deg)")
-    try:
-        df = pd.read_csv(p, skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    need = ["time_s", *[f"{a}_deg" for a in axes]]
-    missing = [c for c in need if c not in df.columns]
-    if missing:
-        raise CalibError(
-            f"{p}: missing column(s) {', '.join(missing)} (found: {', '.join(df.columns)}); "
-            f"a target CSV has {', '.join(need)}"
-        )
-    if len(df) == 0:
-        raise CalibError(f"{p}: no rows")
-    for col in need:
-        num = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
-        bad = np.flatnonzero(~np.isfinite(num))
-        if bad.size:
-            raise CalibError(
-                f"{p}: column '{col}' has {bad.size} missing/non-numeric value(s) "
-                f"(first at line {bad[0] + 2}: {df[col].iloc[bad[0]]!r}); fill or remove them"
-            )
-        df[col] = num
-    t = df["time_s"].to_numpy()
-    d = np.flatnonzero(np.diff(t) <= 0)
-    if d.size:
-        raise CalibError(
-            f"{p}: time_s must increase strictly; line {d[0] + 3} (t = {t[d[0] + 1]:g} s) "
-            f"does not (previous t = {t[d[0]]:g} s)"
-        )
-    df["time_s"] = t * float(time_unit_s)
-    _check_target_step(p, df["time_s"].to_numpy(), float(time_unit_s))
-    return df
-
-
-def _check_target_step(p: Path, t: np.ndarray, unit_s: float) -> None:
-    """CalibError when the median sample interval (s) is implausible for a command
-    stream (:data:`PLAUSIBLE_TARGET_STEP_S`), naming the ``time_unit_s`` that fits."""
-    if t.size < 2:
-        return
-    step = float(np.median(np.diff(t)))
-    lo, hi = PLAUSIBLE_TARGET_STEP_S
-    if lo <= step <= hi:
-        return
-    hint = "give time_s in seconds or the unit with --time-unit-s / [compensate] time_unit_s"
-    for unit, name in ((1e-3, "ms"), (1e-6, "us"), (1e-9, "ns"), (60.0, "min")):
-        if lo <= step * unit <= hi:
-            hint = (
-                f"the times look like {name}: give --time-unit-s {unit_s * unit:g} "
-                "(or [compensate] time_unit_s)"
-            )
-            break
-    raise CalibError(
-        f"{p}: time_s steps by {step:g} s per sample (median, time_unit_s = {unit_s:g}), "
-        f"outside {lo:g}..{hi:g} s for motor commands; {hint}"
-    )
-
-
-def _dataset_record(doc: dict, name: str, path: Path) -> dict:
-    names = [d.get("name") for d in doc.get("datasets", [])]
-    for d in doc.get("datasets", []):
-        if d.get("name") == name:
-            return d
-    raise CalibError(
-        f"{path}: no dataset '{name}' (it has {', '.join(map(str, names)) or 'none'}); "
-        "choose --dataset from those (omit it to let compensate choose) or fit that direction"
-    )
-
-
-def _dataset_names(doc: dict) -> list[str]:
-    return [str(d.get("name")) for d in doc.get("datasets", [])]
-
-
 def choose_dataset(doc: dict, axis: str, target_deg: np.ndarray, path: Path) -> str:
     """The dataset of ``doc`` that serves a target on ``axis`` (``--dataset`` omitted):
     a target crossing zero needs the signed ``<axis>±`` dataset; otherwise the
     direction of the target's median angle (``+`` when >= 0), or the signed dataset
     when that direction was not fitted."""
-    names = _dataset_names(doc)
+    names = dataset_names(doc)
     signed = f"{axis}±"
     lo, hi = float(np.min(target_deg)), float(np.max(target_deg))
     if lo < 0 < hi:
@@ -161,69 +78,6 @@ def choose_dataset(doc: dict, axis: str, target_deg: np.ndarray, path: Path) -> 
         f"{path}: no dataset for a {axis} target of that sign ({name}; it has "
         f"{', '.join(names)}); give --dataset or fit that direction"
     )
-
-
-def best_kind(record: dict) -> str:
-    """The model kind of a fit.json dataset record with the lowest held-out RMSE
-    (fitted-sample RMSE when nothing was held out)."""
-
-    def score(rec):
-        for key in ("holdout_metrics", "metrics"):
-            x = (rec.get(key) or {}).get("rmse_deg")
-            if x is not None and np.isfinite(x):
-                return (0 if key == "holdout_metrics" else 1, float(x))
-        return (2, np.inf)
-
-    models = record.get("models", {})
-    if not models:
-        raise CalibError(f"dataset '{record.get('name')}' has no fitted models; re-run 'fit'")
-    return min(models, key=lambda k: score(models[k]))
-
-
-def load_model(doc: dict, record: dict, kind: str, path: Path, model_file: Path | None = None):
-    """The fitted model ``kind`` of a fit.json dataset record, rebuilt."""
-    models = record.get("models", {})
-    if kind not in models:
-        raise CalibError(
-            f"{path}: dataset '{record['name']}' has no '{kind}' model (it has "
-            f"{', '.join(models) or 'none'}); choose --model from those or re-run 'fit'"
-        )
-    rec = models[kind]
-    if kind == "diagnosed":
-        if model_file is None:
-            raise CalibError(
-                "--model diagnosed needs --model-file final_model.json (the diagnosed "
-                "model's structure; fit.json holds its refitted values)"
-            )
-
-        base = read_model_file(model_file)
-        names = [p.name for p in base.parameters]
-        missing = [n for n in names if n not in rec["params"]]
-        if missing:
-            raise CalibError(
-                f"{model_file}: its parameters {', '.join(missing)} are not in {path}'s "
-                "diagnosed model; give the final_model.json that 'fit --model-file' used"
-            )
-        lacking = [n for n in rec["params"] if n not in names]
-        if lacking:  # e.g. the fit's time delay: inverting without it is wrong
-            raise CalibError(
-                f"{model_file} does not match {path} [{record['name']}]: the fit's diagnosed "
-                f"model has {', '.join(lacking)}, the model file not (another base kind or "
-                "effects); give the final_model.json that 'fit --model-file' used"
-            )
-        return base.with_values(np.array([rec["params"][n] for n in names], dtype=float))
-    try:  # the values are numbers (read_fit_json); the model may still refuse them
-        return model_from_params(
-            kind,
-            rec["params"],
-            int(rec.get("n_operators") or 30),
-            float(rec.get("deadband_counts", 2.0)),
-        )
-    except CalibError as exc:
-        raise CalibError(
-            f"{path}: dataset '{record['name']}', model '{kind}': {exc} (re-run 'fit' or "
-            "restore the file)"
-        ) from None
 
 
 #: Share of the target outside the angles the model reaches above which compensate
@@ -298,89 +152,6 @@ def range_warning(
         f"{name} ({kind}): {what}: the target spans {t_lo:.3g} to {t_hi:.3g} deg, the model "
         f"{lo:.3g} to {hi:.3g} deg; {fix}"
     )
-
-
-def rate_limit(
-    record: dict,
-    explicit: float | None,
-    configured: float,
-    range_counts: float,
-) -> tuple[float, str, str | None]:
-    """(rate limit in counts/s, where it comes from, a warning line or None).
-
-    ``explicit`` (``--max-counts-per-s``) wins, then ``configured`` (``[compensate]
-    max_counts_per_s``, 0 = not set); ``inf`` means no limit. Otherwise the fastest
-    input move of the fit's recording (fit.json ``max_input_rate_counts_per_s``); a
-    fit.json without it (older files) falls back to :data:`FALLBACK_RANGE_SHARE_PER_S`
-    of the fitted input range per second, with a warning.
-    """
-    for value, source in ((explicit, "--max-counts-per-s"),
-                          (configured or None, "[compensate] max_counts_per_s")):  # fmt: skip
-        if value is not None:
-            if not float(value) > 0:
-                raise CalibError(f"{source} = {value:g}: give a rate > 0 counts/s (inf: no limit)")
-            return float(value), source, None
-    stored = record.get("max_input_rate_counts_per_s")
-    if stored is not None and float(stored) > 0:
-        return (
-            float(stored),
-            "fit.json max_input_rate_counts_per_s (the recording's fastest move)",
-            None,
-        )
-    rate = FALLBACK_RANGE_SHARE_PER_S * range_counts
-    return (
-        rate,
-        "fallback",
-        (
-            f"{record.get('name')}: fit.json has no max_input_rate_counts_per_s (written by an "
-            f"older 'fit'); rate limit {rate:g} counts/s ({FALLBACK_RANGE_SHARE_PER_S:g} of the "
-            "fitted input range per second): re-run 'fit' or give --max-counts-per-s"
-        ),
-    )
-
-
-
-
-def read_history(path: str | Path, setup: dict) -> dict[str, np.ndarray]:
-    """The commands sent before (``--history``): per axis of ``setup`` its ``enc_<axis>``
-    column (signed counts, oldest first) in the model's convention (``sign`` x counts).
-    One-line CalibError for an unreadable file, a missing column, non-numeric values or
-    counts outside the fit's input range (the model is not known there)."""
-    p = Path(path)
-    try:
-        df = pd.read_csv(p, skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    df.columns = [str(c).strip() for c in df.columns]
-    need = [f"enc_{axis}" for axis in setup]
-    missing = [c for c in need if c not in df.columns]
-    if missing or len(df) == 0:
-        raise CalibError(
-            f"{p}: --history needs the column(s) {', '.join(need)} with at least one row "
-            f"(found: {', '.join(df.columns) or 'nothing'}; an earlier COMMANDS.csv or the "
-            "encoder log)"
-        )
-    out = {}
-    for axis, a in setup.items():
-        col = f"enc_{axis}"
-        v = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
-        bad = np.flatnonzero(~np.isfinite(v))
-        if bad.size:
-            raise CalibError(
-                f"{p}: column '{col}' has {bad.size} missing/non-numeric value(s) (first at "
-                f"line {bad[0] + 2}); --history needs every command sent"
-            )
-        m = a["sign"] * v
-        off = np.flatnonzero((m < a["lo"]) | (m > a["hi"]))
-        if off.size:
-            rng = sorted((a["sign"] * a["lo"] + 0.0, a["sign"] * a["hi"] + 0.0))
-            raise CalibError(
-                f"{p}: {col} = {v[off[0]]:g} at line {off[0] + 2} is outside the {a['name']} "
-                f"fit's input range {rng[0]:g}..{rng[1]:g} counts (the model is not known "
-                "there); give a history inside it or --conditioning sweep without --history"
-            )
-        out[axis] = m
-    return out
 
 
 def _virgin_identified(record: dict) -> bool | None:
@@ -514,14 +285,6 @@ def _score(pred_rmse: float, holdout: float | None) -> float:
     return float(np.hypot(pred_rmse, h))
 
 
-def _holdout(rec: dict) -> float | None:
-    for key in ("holdout_metrics", "metrics"):
-        x = (rec.get(key) or {}).get("rmse_deg")
-        if x is not None and np.isfinite(x):
-            return float(x)
-    return None
-
-
 def _invert_axis(
     fitted, goal, t, lo, hi, rate, v0, v_other=None, v_other_initial=None, hist=None,
     hist_other=None,
@@ -588,7 +351,7 @@ def rank_models(
         if models is not None and kind in models:
             stepped = stepped | family_switch_steps(models[kind], res, v0)
         steps = int(stepped.sum())
-        hold = _holdout(record["models"][kind])
+        hold = holdout_rmse(record["models"][kind])
         rows.append({
             "model": kind,
             "predicted_rmse_deg": s["rmse_deg"],
@@ -742,7 +505,7 @@ def compensate_files(
                 f"give the {axis} fit.json too"
             )
         path, doc = found[0]
-        record = _dataset_record(doc, name, path)
+        record = dataset_record(doc, name, path)
         sign = -1.0 if name.endswith("-") else 1.0
         lo, hi = (float(x) for x in record["input_range_counts"])
         if not name.endswith("±"):

@@ -439,6 +439,65 @@ def compensate_files(
         starts from the state they leave; the start counts are its last row.
     """
     cc = getattr(config, "compensate", None)
+    datasets, unit, conditioning = _checked_options(
+        fit_paths, datasets, model, time_unit_s, conditioning, history, cc
+    )
+    out = Path(out)
+    if out.suffix.lower() != ".csv":
+        raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
+    extra = [*([model_file] if model_file else []), *([history] if history is not None else [])]
+    claim_output_file(
+        out, [*fit_paths, target, *extra], companions=[out.with_name("compensate.json")]
+    )
+    docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
+    if not datasets:
+        datasets = _chosen_datasets(docs, target, unit)
+    axes = [n[:-1] for n in datasets]
+    if len(set(axes)) != len(axes):
+        raise CalibError("give at most one --dataset per axis (the direction of each motor)")
+    frame = read_target(target, axes, unit)
+    t = frame["time_s"].to_numpy()
+    configured = float(getattr(cc, "max_counts_per_s", 0.0) or 0.0)
+    setup = {
+        axis: _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configured)
+        for name, axis in zip(datasets, axes, strict=True)
+    }
+    past = None if history is None else _history_start(setup, history, start_counts)
+    _prepend_start(setup, start_state(setup, conditioning, history), past, t)
+    mf = None if model_file is None else Path(model_file)
+    for axis, a in setup.items():
+        _add_candidates(a, axis, axes, model, mf, target)
+    if any(a["coupled"] for a in setup.values()):
+        _add_joint_candidates(setup, t, target)
+    for a in setup.values():
+        _choose_model(a, model)
+    _reinvert_coupled_choice(setup, t)
+    for a in setup.values():
+        a.update(
+            res=a["candidates"][a["kind"]], model=a["models"][a["kind"]],
+            forced=model is not None, history_file=None if history is None else str(history),
+        )  # fmt: skip
+    table, axes_doc = _outputs(setup, frame, t, target, unit)
+    inputs = [*(p for p, _ in docs), Path(target), *(Path(x) for x in extra)]
+    doc_out = {
+        "schema": SCHEMA,
+        "commands_csv": out.name,
+        "method": METHOD_NOTE,
+        "axes": axes_doc,
+        "provenance": provenance(inputs, config),
+    }
+    # both files or neither: compensate.json is renamed into place after the CSV
+    with atomic_path(out.with_name("compensate.json")) as tmp_json:
+        write_json(tmp_json, doc_out)
+        with atomic_path(out) as tmp_csv:
+            table.to_csv(tmp_csv, index=False, float_format="%.10g")
+    return doc_out
+
+
+def _checked_options(fit_paths, datasets, model, time_unit_s, conditioning, history, cc):
+    """(datasets with ``+-`` read as ``±``, seconds per target time unit, conditioning)
+    after checking the options that need no file read; a bad one raises a one-line
+    :class:`CalibError`."""
     if model is not None and model not in KINDS:
         raise CalibError(f"--model must be one of {', '.join(KINDS)}, got '{model}'")
     if not fit_paths:
@@ -461,87 +520,95 @@ def compensate_files(
         )
     if not (np.isfinite(unit) and unit > 0):
         raise CalibError(f"--time-unit-s {unit:g}: give seconds per unit of time_s (> 0)")
-    out = Path(out)
-    if out.suffix.lower() != ".csv":
-        raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
-    claim_output_file(
-        out,
-        [
-            *fit_paths,
-            target,
-            *([model_file] if model_file else []),
-            *([history] if history is not None else []),
-        ],
-        companions=[out.with_name("compensate.json")],
-    )
-    docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
-    if not datasets:
-        head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns if Path(
-            target).is_file() else []  # fmt: skip
-        present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in map(str.strip, head)]
-        if not present:
+    return datasets, unit, conditioning
+
+
+def _chosen_datasets(docs: list, target, unit: float) -> list[str]:
+    """The datasets ``--dataset`` omitted: one per axis with a fit.json and an
+    ``<axis>_deg`` column in the target (:func:`choose_dataset`)."""
+    head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns if Path(
+        target).is_file() else []  # fmt: skip
+    present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in map(str.strip, head)]
+    if not present:
+        raise CalibError(
+            f"{target}: no <axis>_deg column for the fit(s) given (axes "
+            f"{', '.join(str(d.get('axis')) for _, d in docs)}); give the target's angle "
+            "column(s) or --dataset"
+        )
+    frame = read_target(target, present, unit)
+    names = []
+    for axis in present:
+        path, doc = next((p, d) for p, d in docs if d.get("axis") == axis)
+        names.append(choose_dataset(doc, axis, frame[f"{axis}_deg"].to_numpy(), path))
+    return names
+
+
+def _start_counts(name: str, path, lo: float, hi: float, sign: float, start_counts):
+    """(start input in the model's convention, where it comes from): ``--start-counts``
+    (refused outside the fitted range ``lo..hi``), else rest at 0 or the range's end
+    nearest 0."""
+    if start_counts is None:
+        v0 = float(np.clip(0.0, lo, hi))
+        if v0 != 0.0:
+            return v0, "default (the fitted range's end nearest 0)"
+        return v0, "default (rest at 0)"
+    v0 = sign * float(start_counts)
+    if not lo <= v0 <= hi:
+        rng = sorted((sign * lo + 0.0, sign * hi + 0.0))
+        raise CalibError(
+            f"--start-counts {start_counts:g} is outside the {name} fit's input range "
+            f"{rng[0]:g}..{rng[1]:g} counts ({path}); give the encoder counts the "
+            "motor rests at, inside that range"
+        )
+    return v0, "--start-counts"
+
+
+def _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configured) -> dict:
+    """One axis's inversion set-up: its fit.json and dataset record, sign (-1 for a
+    ``-`` dataset), input range, rate limit, start counts and goal (the target in the
+    model's convention)."""
+    found = [(p, d) for p, d in docs if d.get("axis") == axis]
+    if not found:
+        raise CalibError(
+            f"no fit.json for the {axis} axis among {', '.join(str(p) for p, _ in docs)}; "
+            f"give the {axis} fit.json too"
+        )
+    path, doc = found[0]
+    record = dataset_record(doc, name, path)
+    sign = -1.0 if name.endswith("-") else 1.0
+    lo, hi = (float(x) for x in record["input_range_counts"])
+    if not name.endswith("±"):
+        lo = min(lo, 0.0)
+    rate, rate_source, rate_warn = rate_limit(record, max_counts_per_s, configured, hi - lo)
+    v0, start_source = _start_counts(name, path, lo, hi, sign, start_counts)
+    return {
+        "name": name, "path": path, "doc": doc, "record": record, "sign": sign, "lo": lo,
+        "hi": hi, "rate": rate, "rate_source": rate_source, "rate_warn": rate_warn,
+        "v0": v0, "start_source": start_source,
+        "goal": sign * frame[f"{axis}_deg"].to_numpy(), "t": frame["time_s"].to_numpy(),
+    }  # fmt: skip
+
+
+def _history_start(setup: dict, history, start_counts) -> dict:
+    """The ``--history`` commands (axis -> model-convention inputs, oldest first); each
+    axis starts at the history's last row (``--start-counts``, if given, must be it)."""
+    past = read_history(history, setup)
+    for axis, a in setup.items():
+        last = float(past[axis][-1])
+        if start_counts is not None and last != a["v0"]:
             raise CalibError(
-                f"{target}: no <axis>_deg column for the fit(s) given (axes "
-                f"{', '.join(str(d.get('axis')) for _, d in docs)}); give the target's angle "
-                "column(s) or --dataset"
+                f"--start-counts {start_counts:g} is not the history's last {axis} counts "
+                f"{a['sign'] * last:g} ({history}); give one of them"
             )
-        frame = read_target(target, present, unit)
-        for axis in present:
-            path, doc = next((p, d) for p, d in docs if d.get("axis") == axis)
-            datasets.append(choose_dataset(doc, axis, frame[f"{axis}_deg"].to_numpy(), path))
-    axes = [n[:-1] for n in datasets]
-    if len(set(axes)) != len(axes):
-        raise CalibError("give at most one --dataset per axis (the direction of each motor)")
-    frame = read_target(target, axes, unit)
-    t = frame["time_s"].to_numpy()
-    configured = float(getattr(cc, "max_counts_per_s", 0.0) or 0.0)
-    results: dict[str, Any] = {}
-    setup: dict[str, Any] = {}
-    for name, axis in zip(datasets, axes, strict=True):
-        found = [(p, d) for p, d in docs if d.get("axis") == axis]
-        if not found:
-            raise CalibError(
-                f"no fit.json for the {axis} axis among {', '.join(str(p) for p, _ in docs)}; "
-                f"give the {axis} fit.json too"
-            )
-        path, doc = found[0]
-        record = dataset_record(doc, name, path)
-        sign = -1.0 if name.endswith("-") else 1.0
-        lo, hi = (float(x) for x in record["input_range_counts"])
-        if not name.endswith("±"):
-            lo = min(lo, 0.0)
-        rate, rate_source, rate_warn = rate_limit(record, max_counts_per_s, configured, hi - lo)
-        if start_counts is None:
-            v0, start_source = float(np.clip(0.0, lo, hi)), "default (rest at 0)"
-            if v0 != 0.0:
-                start_source = "default (the fitted range's end nearest 0)"
-        else:
-            v0, start_source = sign * float(start_counts), "--start-counts"
-            if not lo <= v0 <= hi:
-                rng = sorted((sign * lo + 0.0, sign * hi + 0.0))
-                raise CalibError(
-                    f"--start-counts {start_counts:g} is outside the {name} fit's input range "
-                    f"{rng[0]:g}..{rng[1]:g} counts ({path}); give the encoder counts the "
-                    "motor rests at, inside that range"
-                )
-        goal = sign * frame[f"{axis}_deg"].to_numpy()
-        setup[axis] = {
-            "name": name, "path": path, "doc": doc, "record": record, "sign": sign, "lo": lo,
-            "hi": hi, "rate": rate, "rate_source": rate_source, "rate_warn": rate_warn,
-            "v0": v0, "start_source": start_source, "goal": goal, "t": t,
-        }  # fmt: skip
-    past = None
-    if history is not None:
-        past = read_history(history, setup)
-        for axis, a in setup.items():
-            last = float(past[axis][-1])
-            if start_counts is not None and last != a["v0"]:
-                raise CalibError(
-                    f"--start-counts {start_counts:g} is not the history's last {axis} counts "
-                    f"{a['sign'] * last:g} ({history}); give one of them"
-                )
-            a["v0"], a["start_source"] = last, f"--history (its last row, {history})"
-    start = start_state(setup, conditioning, history)
+        a["v0"], a["start_source"] = last, f"--history (its last row, {history})"
+    return past
+
+
+def _prepend_start(setup: dict, start: dict, past: dict | None, t: np.ndarray) -> None:
+    """Add to each axis the inputs before its entry ramp: ``hist`` (the history, then the
+    conditioning sweep padded to the longest axis's; None when neither), ``n_pre`` (the
+    history's length), ``v_entry`` (where the entry ramp starts), ``start`` and
+    ``sweep_ends`` (the sweep's turning counts, robot's sign)."""
     dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
     sweeps = {
         axis: conditioning_sweep(
@@ -561,72 +628,95 @@ def compensate_files(
         a["start"] = start
         ends = (a["hi"], a["lo"]) if sweep_last(a["goal"]) == "lo" else (a["lo"], a["hi"])
         a["sweep_ends"] = [float(a["sign"] * x) + 0.0 for x in ends] if sweeps[axis].size else None
-    for axis, a in setup.items():
-        name, path, doc, record = a["name"], a["path"], a["doc"], a["record"]
-        lo, hi, rate, v0, goal = a["lo"], a["hi"], a["rate"], a["v0"], a["goal"]
-        mf = None if model_file is None else Path(model_file)
-        other = next((x for x in axes if x != axis), None)
-        if model is not None:
-            kinds = [model]
-            if model in COUPLED_KINDS and other is None:
-                o = "pitch" if axis == "yaw" else "yaw"
-                raise CalibError(
-                    f"--model {model} for {name} needs the {o} motor's commands: give the {o} "
-                    f"fit.json and a {o}_deg target column too (or another --model)"
-                )
-        else:
-            kinds = [k for k in record.get("models", {}) if k in INVERSE_KINDS]
-            if other is None:  # no other motor's commands: coupled models left out
-                kinds = [k for k in kinds if k not in COUPLED_KINDS]
-            if "diagnosed" in record.get("models", {}) and mf is not None:
-                kinds.append("diagnosed")
-            if not kinds:
-                raise CalibError(
-                    f"{path} [{name}]: none of its models ({', '.join(record.get('models', {}))}) "
-                    f"can be inverted; compensate inverts {', '.join(INVERSE_KINDS)} and "
-                    "diagnosed models (coupled ones with both axes)"
-                )
-        candidates, models = {}, {}
-        coupled_kind, coupled_model = None, None
-        for kind in kinds:
-            fitted = load_model(doc, record, kind, path, mf)
-            models[kind] = fitted
-            if kind in COUPLED_KINDS:  # solved jointly with the other axis, below
-                coupled_kind, coupled_model = kind, fitted
-                continue
-            try:
-                candidates[kind] = _invert_axis(fitted, goal, t, lo, hi, rate, v0, hist=a["hist"])
-            except CalibError as exc:
-                raise CalibError(f"{target} [{name}] {kind}: {exc}") from None
-        a.update(candidates=candidates, models=models, coupled=coupled_kind,
-                 coupled_model=coupled_model)  # fmt: skip
-    if any(a["coupled"] for a in setup.values()):
-        current = {}
-        for axis, a in setup.items():
-            best = (
-                rank_models(a["candidates"], a["record"], a["models"], a["v0"])[0]["model"]
-                if a["candidates"]
-                else None
+
+
+def _kinds_to_invert(a: dict, axis: str, axes: list, model: str | None, mf) -> list[str]:
+    """The model kinds of ``a``'s dataset to invert: ``--model``'s (a coupled one needs
+    the other axis), else every invertible fitted kind (coupled ones only with both
+    axes; ``diagnosed`` with a model file)."""
+    name, path, record = a["name"], a["path"], a["record"]
+    other = next((x for x in axes if x != axis), None)
+    if model is not None:
+        if model in COUPLED_KINDS and other is None:
+            o = "pitch" if axis == "yaw" else "yaw"
+            raise CalibError(
+                f"--model {model} for {name} needs the {o} motor's commands: give the {o} "
+                f"fit.json and a {o}_deg target column too (or another --model)"
             )
-            cmds = a["candidates"][best].commands if best else np.full(t.size, a["v_entry"])
-            current[axis] = (a["sign"] * cmds, a["sign"] * a["v_entry"])
+        return [model]
+    kinds = [k for k in record.get("models", {}) if k in INVERSE_KINDS]
+    if other is None:  # no other motor's commands: coupled models left out
+        kinds = [k for k in kinds if k not in COUPLED_KINDS]
+    if "diagnosed" in record.get("models", {}) and mf is not None:
+        kinds.append("diagnosed")
+    if not kinds:
+        raise CalibError(
+            f"{path} [{name}]: none of its models ({', '.join(record.get('models', {}))}) "
+            f"can be inverted; compensate inverts {', '.join(INVERSE_KINDS)} and "
+            "diagnosed models (coupled ones with both axes)"
+        )
+    return kinds
+
+
+def _add_candidates(a: dict, axis: str, axes: list, model: str | None, mf, target) -> None:
+    """Load the axis's models to invert and invert the uncoupled ones: adds
+    ``candidates`` (kind -> CompensationResult), ``models`` (kind -> model), ``coupled``
+    and ``coupled_model`` (the coupled kind, solved jointly later, or None)."""
+    candidates, models = {}, {}
+    coupled_kind, coupled_model = None, None
+    for kind in _kinds_to_invert(a, axis, axes, model, mf):
+        fitted = load_model(a["doc"], a["record"], kind, a["path"], mf)
+        models[kind] = fitted
+        if kind in COUPLED_KINDS:  # solved jointly with the other axis
+            coupled_kind, coupled_model = kind, fitted
+            continue
         try:
-            joint = _solve_coupled(setup, current)
+            candidates[kind] = _invert_axis(
+                fitted, a["goal"], a["t"], a["lo"], a["hi"], a["rate"], a["v0"], hist=a["hist"]
+            )
         except CalibError as exc:
-            raise CalibError(f"{target} (coupled, both axes): {exc}") from None
-        for axis, res in joint.items():
-            setup[axis]["candidates"][setup[axis]["coupled"]] = res
-    for a in setup.values():
+            raise CalibError(f"{target} [{a['name']}] {kind}: {exc}") from None
+    a.update(candidates=candidates, models=models, coupled=coupled_kind,
+             coupled_model=coupled_model)  # fmt: skip
+
+
+def _add_joint_candidates(setup: dict, t: np.ndarray, target) -> None:
+    """Add the coupled candidates, solved jointly (:func:`_solve_coupled`) from each
+    axis's best uncoupled commands (or a hold at its entry counts)."""
+    current = {}
+    for axis, a in setup.items():
+        best = (
+            rank_models(a["candidates"], a["record"], a["models"], a["v0"])[0]["model"]
+            if a["candidates"]
+            else None
+        )
+        cmds = a["candidates"][best].commands if best else np.full(t.size, a["v_entry"])
+        current[axis] = (a["sign"] * cmds, a["sign"] * a["v_entry"])
+    try:
+        joint = _solve_coupled(setup, current)
+    except CalibError as exc:
+        raise CalibError(f"{target} (coupled, both axes): {exc}") from None
+    for axis, res in joint.items():
+        setup[axis]["candidates"][setup[axis]["coupled"]] = res
+
+
+def _choose_model(a: dict, model: str | None) -> None:
+    """Rank the axis's candidates (:func:`rank_models`) and choose ``--model`` or the
+    best: adds ``kind`` and ``ranking`` (each row marked ``chosen``)."""
+    ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
+    if model is not None and not ranking[0]["continuous"] and model not in COUPLED_KINDS:
+        _rank_alternatives(a, model)  # the forced model steps: name the others
         ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
-        if model is not None and not ranking[0]["continuous"] and model not in COUPLED_KINDS:
-            _rank_alternatives(a, model)  # the forced model steps: name the others
-            ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
-        kind = model or ranking[0]["model"]
-        for r in ranking:
-            r["chosen"] = r["model"] == kind
-        a["kind"] = kind
-        a["ranking"] = ranking
-    for axis, a in setup.items():  # a coupled choice given the other axis's final commands
+    kind = model or ranking[0]["model"]
+    for r in ranking:
+        r["chosen"] = r["model"] == kind
+    a["kind"] = kind
+    a["ranking"] = ranking
+
+
+def _reinvert_coupled_choice(setup: dict, t: np.ndarray) -> None:
+    """Invert a chosen coupled model once more, given the other axis's final commands."""
+    for axis, a in setup.items():
         if a["kind"] in COUPLED_KINDS:
             other = next(x for x in setup if x != axis)
             o = setup[other]
@@ -635,33 +725,6 @@ def compensate_files(
                 a["models"][a["kind"]], a["goal"], t, a["lo"], a["hi"], a["rate"], a["v0"],
                 vo, o["sign"] * o["v_entry"], a["hist"], _other_hist(setup, axis),
             )  # fmt: skip
-    for axis, a in setup.items():
-        results[axis] = {
-            "name": a["name"], "path": a["path"], "record": a["record"], "kind": a["kind"],
-            "sign": a["sign"], "res": a["candidates"][a["kind"]],
-            "model": a["models"][a["kind"]], "lo": a["lo"], "hi": a["hi"], "rate": a["rate"],
-            "rate_source": a["rate_source"], "rate_warn": a["rate_warn"], "v0": a["v0"],
-            "start_source": a["start_source"], "ranking": a["ranking"],
-            "forced": model is not None, "hist": a["hist"], "n_pre": a["n_pre"],
-            "v_entry": a["v_entry"], "start": a["start"], "sweep_ends": a["sweep_ends"],
-            "history_file": None if history is None else str(history),
-        }  # fmt: skip
-    table, axes_doc = _outputs(results, frame, t, target, unit)
-    inputs = [*(p for p, _ in docs), Path(target), *([Path(model_file)] if model_file else []),
-              *([Path(history)] if history is not None else [])]  # fmt: skip
-    doc_out = {
-        "schema": SCHEMA,
-        "commands_csv": out.name,
-        "method": METHOD_NOTE,
-        "axes": axes_doc,
-        "provenance": provenance(inputs, config),
-    }
-    # both files or neither: compensate.json is renamed into place after the CSV
-    with atomic_path(out.with_name("compensate.json")) as tmp_json:
-        write_json(tmp_json, doc_out)
-        with atomic_path(out) as tmp_csv:
-            table.to_csv(tmp_csv, index=False, float_format="%.10g")
-    return doc_out
 
 
 def output_step_warning(a: dict, summ: dict) -> str | None:
@@ -697,14 +760,47 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
     n_pre = first["n_pre"] if first["hist"] is not None else 0
     n_cond = first["hist"].size - n_pre if first["hist"] is not None else 0
     dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
-    n_head = n_pre + n_cond + n_entry
-    t_full = np.concatenate((t[0] - dt0 * np.arange(n_head, 0, -1), t))
+    t_full = np.concatenate((t[0] - dt0 * np.arange(n_pre + n_cond + n_entry, 0, -1), t))
     t_all = t_full[n_pre:]
+    seqs = _command_sequences(results, n_entry)
     cols: dict[str, Any] = {"time_s": t_all}
     reach_all = np.ones(t_all.size, dtype=bool)
     flags_by_axis: dict[str, list[list[str]]] = {}
     axes_doc: dict[str, Any] = {}
     preds, reach_cols = {}, {}
+    for axis, a in results.items():
+        res, sign = a["res"], a["sign"]
+        y = _predicted(results, axis, seqs, t_full, n_pre)
+        seq = seqs[axis][n_pre:]
+        cols[f"enc_{axis}"] = np.rint(sign * seq).astype(np.int64)
+        preds[f"predicted_{axis}_deg"] = sign * y
+        ok = np.concatenate((np.ones(n_cond + n_entry, dtype=bool), res.reachable))
+        reach_all &= ok
+        reach_cols[f"reachable_{axis}"] = ok.astype(int)
+        fl = dict(res.flags)
+        fl["output_step"] = fl["output_step"] | family_switch_steps(a["model"], res, a["v0"])
+        flags_by_axis[axis] = (
+            [["conditioning"] for _ in range(n_cond)]
+            + [["entry"] for _ in range(n_entry)]
+            + [[f for f in FLAG_NAMES if fl[f][i]] for i in range(t.size)]
+        )
+        sent = np.concatenate(([seqs[axis][n_pre - 1]] if n_pre else [], seq))
+        t_sent = np.concatenate(([t_full[n_pre - 1]] if n_pre else [], t_all))
+        axes_doc[axis] = _axis_doc(
+            a, frame[f"{axis}_deg"].to_numpy(), t, fl, _max_rate(sent, t_sent), n_cond, n_pre,
+            dt0, unit,
+        )  # fmt: skip
+    cols.update(preds)
+    if len(results) > 1:
+        cols.update(reach_cols)
+    cols["reachable"] = reach_all.astype(int)
+    cols["flags"] = _flag_column(flags_by_axis, prefix=len(results) > 1)
+    return pd.DataFrame(cols), axes_doc
+
+
+def _command_sequences(results: dict, n_entry: int) -> dict[str, np.ndarray]:
+    """Axis -> every input the model sees (model convention): history and conditioning
+    sweep, the entry ramp padded to ``n_entry`` by holding its start, the commands."""
     seqs = {}
     for axis, a in results.items():
         ramp = a["res"].entry_commands
@@ -712,86 +808,82 @@ def _outputs(results: dict, frame: pd.DataFrame, t: np.ndarray, target, unit: fl
         seqs[axis] = np.concatenate(
             (hist, np.full(n_entry - ramp.size, a["v_entry"]), ramp, a["res"].commands)
         )
-    for axis, a in results.items():
-        res, sign = a["res"], a["sign"]
-        ramp = res.entry_commands
-        other = next((x for x in results if x != axis), None)
-        vo = vo0 = None
-        if other is not None and a["kind"] in COUPLED_KINDS:
-            vo = results[other]["sign"] * seqs[other]
-            vo0 = results[other]["sign"] * results[other]["v0"]
-        with deferred():
-            if a["hist"] is not None:  # from rest at the history's first input
-                y = forward(a["model"], seqs[axis], t_full, None, v_other=vo)[n_pre:]
-            else:
-                y = forward(a["model"], seqs[axis], t_all, a["v0"], v_other=vo, v_other_initial=vo0)
-        seq = seqs[axis][n_pre:]
-        cols[f"enc_{axis}"] = np.rint(sign * seq).astype(np.int64)
-        preds[f"predicted_{axis}_deg"] = sign * y
-        ok = np.concatenate((np.ones(n_cond + n_entry, dtype=bool), res.reachable))
-        reach_all &= ok
-        reach_cols[f"reachable_{axis}"] = ok.astype(int)
-        per = [["conditioning"] for _ in range(n_cond)] + [["entry"] for _ in range(n_entry)]
-        fl = dict(res.flags)
-        fl["output_step"] = fl["output_step"] | family_switch_steps(a["model"], res, a["v0"])
-        for i in range(t.size):
-            per.append([f for f in FLAG_NAMES if fl[f][i]])
-        flags_by_axis[axis] = per
-        summ = res.summary()
-        summ["flags"] = {name: int(f.sum()) for name, f in fl.items()}
-        summ.pop("n_history", None)
-        sent = np.concatenate(([seqs[axis][n_pre - 1]] if n_pre else [], seq))
-        t_sent = np.concatenate(([t_full[n_pre - 1]] if n_pre else [], t_all))
-        summ["max_command_rate_per_s"] = (
-            float(np.max(np.abs(np.diff(sent)) / np.diff(t_sent))) if sent.size > 1 else 0.0
+    return seqs
+
+
+def _predicted(results: dict, axis: str, seqs: dict, t_full: np.ndarray, n_pre: int):
+    """The axis's model output (deg, model convention) over its sequence from the
+    conditioning sweep on (shape ``(seqs[axis].size - n_pre,)``): run from rest at the
+    history's first input, or from the start counts; a coupled model given the other
+    axis's sequence."""
+    a = results[axis]
+    other = next((x for x in results if x != axis), None)
+    vo = vo0 = None
+    if other is not None and a["kind"] in COUPLED_KINDS:
+        vo = results[other]["sign"] * seqs[other]
+        vo0 = results[other]["sign"] * results[other]["v0"]
+    with deferred():
+        if a["hist"] is not None:  # from rest at the history's first input
+            return forward(a["model"], seqs[axis], t_full, None, v_other=vo)[n_pre:]
+        return forward(
+            a["model"], seqs[axis], t_full[n_pre:], a["v0"], v_other=vo, v_other_initial=vo0
         )
-        step_warn = output_step_warning(a, summ)
-        bad = np.flatnonzero(~res.reachable)
-        reach = reachable_angles(a["model"], (a["lo"], a["hi"]), sign)
-        warn = range_warning(
-            a["name"], a["kind"], frame[f"{axis}_deg"].to_numpy(), reach, res.tol_deg,
-            float(res.reachable.mean()),
-        )  # fmt: skip
-        rec = a["record"]
-        axes_doc[axis] = {
-            "dataset": a["name"],
-            "fit_json": str(a["path"]),
-            "model": a["kind"],
-            "model_choice": "--model" if a.get("forced") else "ranking",
-            "ranking": a["ranking"],
-            "params": rec["models"][a["kind"]]["params"],
-            "input_range_counts": [a["lo"], a["hi"]],
-            "max_counts_per_s": a["rate"] if np.isfinite(a["rate"]) else None,
-            "max_counts_per_s_source": a["rate_source"],
-            "recording_max_rate_counts_per_s": rec.get("max_input_rate_counts_per_s"),
-            "start_counts": float(sign * a["v0"]) + 0.0,
-            "start_counts_source": a["start_source"],
-            "start_state": a["start"]["method"],
-            "start_state_reason": a["start"]["reason"],
-            "fit_initial_state": _initial_state_text(rec),
-            "n_conditioning": int(n_cond),
-            "conditioning_s": float(n_cond * dt0),
-            "conditioning_counts": a["sweep_ends"],
-            "history_file": a["history_file"],
-            "n_history": int(n_pre) if a["history_file"] else 0,
-            "entry_from_counts": float(sign * a["v_entry"]) + 0.0,
-            "time_unit_s": unit,
-            "delay_s": res.delay_s,
-            "tol_deg": res.tol_deg,
-            **summ,
-            "n_entry": int(ramp.size),
-            "entry_s": float(ramp.size * dt0),
-            "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
-            "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
-            "reachable_deg": list(reach),
-            "warnings": [w for w in (a["rate_warn"], warn, step_warn) if w is not None],
-        }
-    cols.update(preds)
-    if len(results) > 1:
-        cols.update(reach_cols)
-    cols["reachable"] = reach_all.astype(int)
-    cols["flags"] = _flag_column(flags_by_axis, prefix=len(results) > 1)
-    return pd.DataFrame(cols), axes_doc
+
+
+def _max_rate(sent: np.ndarray, t_sent: np.ndarray) -> float:
+    """The fastest command move (counts/s) over consecutive commands sent; 0 for one."""
+    return float(np.max(np.abs(np.diff(sent)) / np.diff(t_sent))) if sent.size > 1 else 0.0
+
+
+def _axis_doc(a, target_deg, t, fl, max_rate, n_cond, n_pre, dt0, unit) -> dict:
+    """compensate.json's record of one axis (docs/compensate.md): dataset, model and its
+    ranking, limits, start state, the result's summary with every flag counted
+    (``fl``: flag -> bool per target sample), warnings."""
+    res, sign, rec = a["res"], a["sign"], a["record"]
+    ramp = res.entry_commands
+    summ = res.summary()
+    summ["flags"] = {name: int(f.sum()) for name, f in fl.items()}
+    summ.pop("n_history", None)
+    summ["max_command_rate_per_s"] = max_rate
+    step_warn = output_step_warning(a, summ)
+    bad = np.flatnonzero(~res.reachable)
+    reach = reachable_angles(a["model"], (a["lo"], a["hi"]), sign)
+    warn = range_warning(
+        a["name"], a["kind"], target_deg, reach, res.tol_deg, float(res.reachable.mean())
+    )
+    return {
+        "dataset": a["name"],
+        "fit_json": str(a["path"]),
+        "model": a["kind"],
+        "model_choice": "--model" if a.get("forced") else "ranking",
+        "ranking": a["ranking"],
+        "params": rec["models"][a["kind"]]["params"],
+        "input_range_counts": [a["lo"], a["hi"]],
+        "max_counts_per_s": a["rate"] if np.isfinite(a["rate"]) else None,
+        "max_counts_per_s_source": a["rate_source"],
+        "recording_max_rate_counts_per_s": rec.get("max_input_rate_counts_per_s"),
+        "start_counts": float(sign * a["v0"]) + 0.0,
+        "start_counts_source": a["start_source"],
+        "start_state": a["start"]["method"],
+        "start_state_reason": a["start"]["reason"],
+        "fit_initial_state": _initial_state_text(rec),
+        "n_conditioning": int(n_cond),
+        "conditioning_s": float(n_cond * dt0),
+        "conditioning_counts": a["sweep_ends"],
+        "history_file": a["history_file"],
+        "n_history": int(n_pre) if a["history_file"] else 0,
+        "entry_from_counts": float(sign * a["v_entry"]) + 0.0,
+        "time_unit_s": unit,
+        "delay_s": res.delay_s,
+        "tol_deg": res.tol_deg,
+        **summ,
+        "n_entry": int(ramp.size),
+        "entry_s": float(ramp.size * dt0),
+        "unreachable_first_times_s": [float(t[i]) for i in bad[:20]],
+        "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
+        "reachable_deg": list(reach),
+        "warnings": [w for w in (a["rate_warn"], warn, step_warn) if w is not None],
+    }
 
 
 def _initial_state_text(record: dict) -> str | None:

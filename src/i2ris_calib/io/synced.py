@@ -55,14 +55,7 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     if axis not in AXES:
         raise CalibError(f"--axis must be yaw or pitch, got '{axis}'")
     cols = ColumnsConfig() if columns is None else columns
-    cols = ColumnsConfig() if cols is None else cols
-    if not p.is_file():
-        raise CalibError(f"{p}: file not found (give a synced CSV, see docs/formats.md)")
-    try:
-        raw = pd.read_csv(p, skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    raw.columns = [str(c).strip() for c in raw.columns]
+    raw = _raw_csv(p)
     other = other_axis(axis)
     need = ["time_s", f"enc_{axis}", f"{axis}_deg"]
     source = cols.mapping()
@@ -78,19 +71,9 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     df = pd.DataFrame({c: raw[source[c]] for c in present})
     label = {c: f"'{c}'" if source[c] == c else f"'{source[c]}' ({c})" for c in present}
     optional = [c for c in (f"enc_{other}", f"{other}_deg") if c in df.columns]
-    numeric: dict[str, pd.Series] = {}
-    for col in [*need, *optional]:
-        num = pd.to_numeric(df[col], errors="coerce")
-        bad = num.isna() & df[col].notna()
-        if bad.any():
-            k = int(np.flatnonzero(bad.to_numpy())[0])
-            raise CalibError(
-                f"{p}: column {label[col]} is not numeric at line {k + 2} ({df[col].iloc[k]!r}); "
-                "fix or remove that row"
-            )
-        numeric[col] = num
-        df[col] = num.astype(float)
-    for col in ("time_s", f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])):
+    numeric = _numeric_columns(p, df, [*need, *optional], label)
+    encoders = [f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])]
+    for col in ("time_s", *encoders):
         bad = np.flatnonzero(~np.isfinite(df[col].to_numpy()))
         if bad.size:
             raise CalibError(
@@ -105,28 +88,64 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     )
     df["time_s"] = t
     df.attrs["time_origin_s"] = origin
+    _check_increasing(p, t, label["time_s"], origin)
+    _check_time_unit(p, t, label["time_s"], cols.time_unit_s)
+    angles = [c for c in (f"{axis}_deg", f"{other}_deg") if c in df.columns]
+    if cols.angle_unit == "rad":
+        for col in angles:
+            df[col] = np.rad2deg(df[col].to_numpy(dtype=float))
+    for col in encoders:
+        check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
+    if "status" in df.columns:
+        not_measured = df["status"].astype(str).str.strip() != "measured"
+        for col in angles:
+            df.loc[not_measured, col] = np.nan
+    return df
+
+
+def _raw_csv(p: Path) -> pd.DataFrame:
+    """The file as read (header names stripped of spaces); one line when it is missing
+    or not a CSV."""
+    if not p.is_file():
+        raise CalibError(f"{p}: file not found (give a synced CSV, see docs/formats.md)")
+    try:
+        raw = pd.read_csv(p, skipinitialspace=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
+    raw.columns = [str(c).strip() for c in raw.columns]
+    return raw
+
+
+def _numeric_columns(p: Path, df: pd.DataFrame, names: list[str], label: dict) -> dict:
+    """Column name -> its values as numbers (as read: integers stay integers), each
+    column of ``df`` in ``names`` replaced by float64 in place; one line naming the
+    first non-numeric cell (empty cells are NaN)."""
+    numeric: dict[str, pd.Series] = {}
+    for col in names:
+        num = pd.to_numeric(df[col], errors="coerce")
+        bad = num.isna() & df[col].notna()
+        if bad.any():
+            k = int(np.flatnonzero(bad.to_numpy())[0])
+            raise CalibError(
+                f"{p}: column {label[col]} is not numeric at line {k + 2} ({df[col].iloc[k]!r}); "
+                "fix or remove that row"
+            )
+        numeric[col] = num
+        df[col] = num.astype(float)
+    return numeric
+
+
+def _check_increasing(p: Path, t: np.ndarray, label: str, origin: float) -> None:
+    """One line naming the first duplicate or decreasing time (s)."""
     step = np.diff(t)
     if step.size and (step <= 0).any():
         k = int(np.flatnonzero(step <= 0)[0])
         kind = "duplicate" if step[k] == 0 else "decreasing"
         raise CalibError(
-            f"{p}: {kind} {label['time_s']} at line {k + 3} ({t[k]:.6g} -> {t[k + 1]:.6g} s"
+            f"{p}: {kind} {label} at line {k + 3} ({t[k]:.6g} -> {t[k + 1]:.6g} s"
             f"{' after the first sample' if origin else ''}); "
             "time must be strictly increasing (sort the rows and drop duplicates)"
         )
-    _check_time_unit(p, t, label["time_s"], cols.time_unit_s)
-    if cols.angle_unit == "rad":
-        for col in (f"{axis}_deg", f"{other}_deg"):
-            if col in df.columns:
-                df[col] = np.rad2deg(df[col].to_numpy(dtype=float))
-    for col in (f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])):
-        check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
-    if "status" in df.columns:
-        not_measured = df["status"].astype(str).str.strip() != "measured"
-        for col in (f"{axis}_deg", f"{other}_deg"):
-            if col in df.columns:
-                df.loc[not_measured, col] = np.nan
-    return df
 
 
 def _check_mapped_columns(p: Path, raw: pd.DataFrame, cols: ColumnsConfig) -> None:

@@ -338,8 +338,32 @@ def test_run_diagnose_stage_writes_what_the_report_reads(tmp_path):
     on = PipelineConfig(run=type(PipelineConfig().run)(diagnose=True))
     names = [s.name for s in session_stages(session, run, on)]
     diag = [n for n in names if n.startswith("diagnose")]
-    assert diag == ["diagnose yaw+", "diagnose yaw-", "diagnose pitch+", "diagnose pitch-"]
+    assert diag == [f"diagnose {a}{d}" for a in ("yaw", "pitch") for d in ("+", "-", "±")]
     assert names.index(diag[0]) > names.index("fit pitch") and names[-1] == "report"
+    # the paper's protocol: the default fit splits, so the signed stage records why not
+    diagnose_direction(csv, "yaw", "±", run / "diagnose" / "yaw±", cfg)
+    skipped = json.loads((run / "diagnose" / "yaw±" / "skipped.json").read_text())
+    assert "fits yaw+ and yaw-, not yaw± (split: " in skipped["reason"]
+    assert [d.axis for d in load_run(run)[0].diagnoses] == ["yaw+"]
+
+
+def test_run_diagnoses_what_the_default_fit_fits_through_zero(tmp_path):
+    """A recording through zero: the default fit models the axis over its signed input,
+    so `run` diagnoses yaw± and records for yaw+ and yaw- that the fit does not split."""
+    from i2ris_calib.commands.run import diagnose_direction
+    from i2ris_calib.config import PipelineConfig
+
+    csv = tmp_path / "synced.csv"
+    t = np.arange(0, 60, 0.05)
+    enc = np.round(3000 * np.sin(2 * np.pi * t / 10))
+    rng = np.random.default_rng(0)
+    pd.DataFrame(
+        {"time_s": t, "enc_yaw": enc, "yaw_deg": 0.005 * enc + rng.normal(0, 0.1, t.size)}
+    ).to_csv(csv, index=False)
+    for d in ("+", "-"):
+        diagnose_direction(csv, "yaw", d, tmp_path / f"yaw{d}", PipelineConfig())
+        reason = json.loads((tmp_path / f"yaw{d}" / "skipped.json").read_text())["reason"]
+        assert f"fits yaw±, not yaw{d} (signed:" in reason and "crosses zero" in reason
 
 
 def test_run_section_is_validated(tmp_path):

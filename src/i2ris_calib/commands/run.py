@@ -1,7 +1,10 @@
 """``i2ris-calib run``: track -> sync -> fit [-> diagnose] -> report for one or more sessions.
 
-``[run] diagnose = true`` adds a diagnose stage per axis and motion direction
-(``<run>/diagnose/<axis><direction>/``, ``--start auto``), stamped like the others.
+``[run] diagnose = true`` adds a diagnose stage per axis and dataset the default fit
+fits (``<run>/diagnose/<axis><direction>/``, ``--start auto``): ``+`` and ``-`` on the
+paper's protocol, ``±`` when the fit models the axis over its signed input (the input
+crosses zero or the recording starts mid-loop); the others record why they did not run
+in ``skipped.json``. Stamped like the others.
 
 Each stage writes its outputs atomically and then a stamp file ``.stamp.json`` in its
 folder recording the SHA-256 of its inputs, its config section and the package
@@ -30,7 +33,7 @@ from i2ris_calib import __version__
 from i2ris_calib.commands.compensate import compensate_files
 from i2ris_calib.commands.diagnose import OUTPUTS as DIAGNOSE_OUTPUTS
 from i2ris_calib.commands.diagnose import diagnose_dataset
-from i2ris_calib.commands.fit import fit_files
+from i2ris_calib.commands.fit import datasets_for_fit, fit_files
 from i2ris_calib.commands.report import write_report
 from i2ris_calib.commands.sync import sync_session
 from i2ris_calib.commands.track import track_session
@@ -189,6 +192,11 @@ def axis_moves(synced_csv: Path, axis: str, min_span_counts: float = 1.0) -> boo
     return col in enc and float(enc[col].max() - enc[col].min()) >= min_span_counts
 
 
+#: The datasets a ``run`` diagnose stage may diagnose per axis; the default fit's choice
+#: (:func:`~i2ris_calib.commands.fit.datasets_for_fit`) decides at run time which run
+RUN_DIRECTIONS = ("+", "-", "±")
+
+
 def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
     """The ordered stages for one session writing under ``run_dir``."""
     track_dir, sync_dir = run_dir / "track", run_dir / "sync"
@@ -221,9 +229,8 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
 
         stages.append(Stage(f"fit {axis}", fit_dir, (synced,), config.fit, fit_axis))
     if config.run.diagnose:
-        directions = ("±",) if config.fit.signed else ("+", "-")
         for axis in AXES:
-            for direction in directions:
+            for direction in RUN_DIRECTIONS:
                 out = run_dir / "diagnose" / f"{axis}{direction}"
 
                 def diagnose_one(axis: str = axis, direction: str = direction, out: Path = out):
@@ -267,7 +274,10 @@ def diagnose_direction(
 ) -> None:
     """The diagnose stage of one axis and direction (``--start auto``).
 
-    Data the diagnosis cannot work with (the axis does not move in this direction,
+    ``direction`` is diagnosed when the default fit fits it (the dataset of
+    :func:`~i2ris_calib.commands.fit.datasets_for_fit`: ``±`` on a signed choice, else
+    ``+`` and ``-``). A direction it does not fit and data the diagnosis cannot work
+    with (the axis does not move in this direction,
     or fewer than the minimum loading cycles, see
     :func:`~i2ris_calib.diagnosis.workflow.check_dataset`) do not stop the run:
     ``out/skipped.json`` records why and the report shows the other diagnoses.
@@ -275,7 +285,17 @@ def diagnose_direction(
     try:
         if not axis_moves(synced, axis):
             raise CalibError(f"{axis} does not move in {synced}")
-        (dset,) = load_datasets([synced], axis, config.fit, (direction,))[:1]
+        found, choice = datasets_for_fit([synced], axis, config.fit)
+        if (direction == "±") != choice.signed:
+            fitted = f"{axis}±" if choice.signed else f"{axis}+ and {axis}-"
+            raise CalibError(
+                f"the default fit of {axis} fits {fitted}, not {axis}{direction} "
+                f"({'signed' if choice.signed else 'split'}: {choice.why}); their "
+                "diagnose folders have the diagnosis"
+            )
+        dset = next((d for d in found if d.direction == direction), None)
+        if dset is None:  # says why this direction has no dataset
+            (dset,) = load_datasets([synced], axis, config.fit, (direction,))[:1]
         check_dataset(dset, config.diagnose)
     except CalibError as exc:
         with output_dir(out, "diagnose", [synced], DIAGNOSE_OUTPUTS) as tmp:

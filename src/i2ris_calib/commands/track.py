@@ -39,6 +39,7 @@ from i2ris_calib.tracking.pose import (
     tip_pose_from_marker,
     weak_perspective_intrinsics,
 )
+from i2ris_calib.tracking.reference_window import WindowMotion, reference_window_motion
 from i2ris_calib.tracking.timing import (
     LAGGED_SPREAD_DEG,
     REFIT_MIN_PX,
@@ -117,6 +118,16 @@ def track_warnings(summary: dict) -> list[str]:
                 f"backwards (first: frame {g['first_backward_frame']}) and were rejected (status "
                 "rejected, no angles; sync leaves them out); check the camera clock export"
             )
+    motion = summary.get("reference", {}).get("window_motion") or {}
+    if motion.get("moving"):
+        lo, hi = motion["window_s"]
+        out.append(
+            f"the tip moves within the reference window {lo:g}-{hi:g} s (yaw "
+            f"{motion['yaw_deg']:.2f}, pitch {motion['pitch_deg']:.2f} deg): every angle is "
+            "relative to a pose it did not hold, and a bent reference mixes the axes; set "
+            "[track] reference_start_s and reference_duration_s to a hold at the straight pose "
+            "(docs/tracking.md)"
+        )
     if summary.get("view_check", {}).get("verdict") == "inconclusive":
         out.append(
             "the top/side view labels could not be verified (the tip turned too little); "
@@ -369,6 +380,9 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             df[f"pitch_plain_{name}_deg"] = pa[:, 1]
     summary = _summary(df, res, streams, names, M, ref, cfg)
     summary["reference"].update(reference_record(refit))
+    summary["reference"]["window_motion"] = window_motion_record(
+        reference_window_motion(t, ang[:, 0], ang[:, 1], ref), cfg
+    )
     summary.update(_lagged_record(lag, ta["frame"].to_numpy()))
     for n in names:
         summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
@@ -565,6 +579,17 @@ def reference_record(refit: fz.ReferenceFit) -> dict:
             "roll_sd_deg": _num(refit.roll_sd_deg),
             "camera_rotation_change_deg": _num(refit.camera_rotation_change_deg),
             "fit_frames": refit.frames, "window_measured_frames": refit.window_frames}  # fmt: skip
+
+
+def window_motion_record(m: WindowMotion, cfg: TrackingConfig) -> dict:
+    """The tip's motion within the reference window (track.json ``reference.window_motion``,
+    deg; :func:`~i2ris_calib.tracking.reference_window.reference_window_motion`)."""
+    return {
+        "window_s": [cfg.reference_start_s, cfg.reference_start_s + cfg.reference_duration_s],
+        "yaw_deg": _num(m.yaw_deg), "pitch_deg": _num(m.pitch_deg),
+        "noise_sd_deg": _num(m.noise_sd_deg), "threshold_deg": _num(m.threshold_deg),
+        "frames": m.frames, "moving": m.moving,
+    }  # fmt: skip
 
 
 def reference_mask(t: np.ndarray, cfg: TrackingConfig) -> np.ndarray:

@@ -651,9 +651,11 @@ def test_stepping_model_flagged_in_summary_and_warnings(tmp_path, capsys):
     n = doc["flags"]["output_step"]
     assert n > 0
     (warn,) = [w for w in doc["warnings"] if "steps at v_f" in w]
+    score = {r["model"]: f"{r['score_deg']:.3g}" for r in doc["ranking"]}
     assert warn == (  # the forced model steps: the others ranked to name the continuous ones
         f"egpi steps at v_f where the target passes ({n} samples flagged output_step); "
-        "gpi or egpi_c track it without steps: --model gpi"
+        f"gpi ({score['gpi']} deg) or egpi_c ({score['egpi_c']} deg) track it without steps "
+        f"(predicted tracking error; egpi {score['egpi']} deg): --model gpi"
     )
     assert doc["model"] == "egpi" and doc["model_choice"] == "--model"
     assert warn in text

@@ -730,15 +730,23 @@ def _reinvert_coupled_choice(setup: dict, t: np.ndarray) -> None:
 def output_step_warning(a: dict, summ: dict) -> str | None:
     """The line saying the chosen model's predicted output steps where the target passes
     (more than :data:`STEP_SHARE` of the samples flagged ``output_step`` or
-    ``spike_removed``), naming the continuous models of the ranking; None otherwise."""
+    ``spike_removed``), naming the continuous models of the ranking with their predicted
+    tracking error (``score_deg``, the chosen model's too: a smooth model may track
+    worse); None otherwise."""
     n = summ["flags"]["output_step"] + summ["flags"]["spike_removed"]
     if n <= STEP_SHARE * summ["n_samples"]:
         return None
     kind = a["kind"]
     where = " at v_f" if kind == "egpi" else ""
-    smooth = [r["model"] for r in a["ranking"] if r["continuous"] and r["model"] != kind]
+    smooth = [r for r in a["ranking"] if r["continuous"] and r["model"] != kind]
+    mine = next((r["score_deg"] for r in a["ranking"] if r["model"] == kind), None)
     if smooth:
-        alt = f"{' or '.join(smooth)} track it without steps: --model {smooth[0]}"
+        names = " or ".join(f"{r['model']} ({r['score_deg']:.3g} deg)" for r in smooth)
+        cost = "" if mine is None else f"; {kind} {mine:.3g} deg"
+        alt = (
+            f"{names} track it without steps (predicted tracking error{cost}): "
+            f"--model {smooth[0]['model']}"
+        )
     elif a.get("forced"):
         alt = "leave out --model to rank the other models on this target"
     else:

@@ -198,12 +198,46 @@ RUN_DIRECTIONS = ("+", "-", "±")
 
 
 def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
-    """The ordered stages for one session writing under ``run_dir``."""
+    """The ordered stages for one session writing under ``run_dir``: track, sync, a fit
+    per axis, the diagnose stages (``[run] diagnose``), compensate (``[compensate]
+    target``), report."""
+    synced = run_dir / "sync" / "synced.csv"
+    stages = _track_sync_stages(session, run_dir, config)
+    stages += _fit_stages(synced, run_dir, config)
+    if config.run.diagnose:
+        stages += _diagnose_stages(synced, run_dir, config)
+    if config.compensate.target:
+        target = compensation_target(session, config.compensate.target)
+        comp_dir = run_dir / "compensate"
+        stages.append(
+            Stage(
+                "compensate",
+                comp_dir,
+                (target, run_dir / "fit"),
+                config.compensate,
+                lambda: compensate_run(run_dir, target, comp_dir, config),
+            )
+        )
+    folders = ("track", "sync", "fit", "diagnose", "compensate")
+    stages.append(
+        Stage(
+            "report",
+            run_dir / "report",
+            tuple(run_dir / f for f in folders),
+            config.report,
+            lambda: write_report(run_dir, run_dir / "report", config),
+        )
+    )
+    return stages
+
+
+def _track_sync_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
+    """The track and sync stages (their inputs: the files session.toml names)."""
     track_dir, sync_dir = run_dir / "track", run_dir / "sync"
-    angles, synced = track_dir / "angles.csv", sync_dir / "synced.csv"
+    angles = track_dir / "angles.csv"
     spec = load_session(session)
     named, settings = session_inputs(session, spec), session_settings(spec)
-    stages = [
+    return [
         Stage(
             "track",
             track_dir,
@@ -220,6 +254,11 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
             lambda: sync_session(session, angles, sync_dir, config),
         ),
     ]
+
+
+def _fit_stages(synced: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
+    """A fit stage per axis (an axis that does not move is left unfitted)."""
+    stages = []
     for axis in AXES:
         fit_dir = run_dir / "fit" / axis
 
@@ -228,44 +267,29 @@ def session_stages(session: Path, run_dir: Path, config: PipelineConfig) -> list
                 fit_files([synced], axis=axis, model="all", out=fit_dir, config=config)
 
         stages.append(Stage(f"fit {axis}", fit_dir, (synced,), config.fit, fit_axis))
-    if config.run.diagnose:
-        for axis in AXES:
-            for direction in RUN_DIRECTIONS:
-                out = run_dir / "diagnose" / f"{axis}{direction}"
+    return stages
 
-                def diagnose_one(axis: str = axis, direction: str = direction, out: Path = out):
-                    diagnose_direction(synced, axis, direction, out, config)
 
-                stages.append(
-                    Stage(
-                        f"diagnose {axis}{direction}",
-                        out,
-                        (synced,),
-                        (config.fit, config.diagnose),
-                        diagnose_one,
-                    )
+def _diagnose_stages(synced: Path, run_dir: Path, config: PipelineConfig) -> list[Stage]:
+    """A diagnose stage per axis and :data:`RUN_DIRECTIONS` entry
+    (:func:`diagnose_direction` decides at run time which run)."""
+    stages = []
+    for axis in AXES:
+        for direction in RUN_DIRECTIONS:
+            out = run_dir / "diagnose" / f"{axis}{direction}"
+
+            def diagnose_one(axis: str = axis, direction: str = direction, out: Path = out):
+                diagnose_direction(synced, axis, direction, out, config)
+
+            stages.append(
+                Stage(
+                    f"diagnose {axis}{direction}",
+                    out,
+                    (synced,),
+                    (config.fit, config.diagnose),
+                    diagnose_one,
                 )
-    if config.compensate.target:
-        target = compensation_target(session, config.compensate.target)
-        comp_dir = run_dir / "compensate"
-        stages.append(
-            Stage(
-                "compensate",
-                comp_dir,
-                (target, run_dir / "fit"),
-                config.compensate,
-                lambda: compensate_run(run_dir, target, comp_dir, config),
             )
-        )
-    stages.append(
-        Stage(
-            "report",
-            run_dir / "report",
-            (track_dir, sync_dir, run_dir / "fit", run_dir / "diagnose", run_dir / "compensate"),
-            config.report,
-            lambda: write_report(run_dir, run_dir / "report", config),
-        )
-    )
     return stages
 
 
@@ -560,16 +584,7 @@ def run_sessions(
         Parallel sessions; 0 = number of cores.
     """
     console = Console(stderr=True)
-    names = []
-    for s in sessions:
-        try:
-            names.append(checked_session_name(Path(s)))
-        except CalibError as exc:
-            raise CalibError(f"session {s}: {exc}") from None
-    if len(set(names)) != len(names):
-        raise CalibError(
-            f"two sessions share a name ({', '.join(names)}); give each a unique [name] in session.toml"
-        )
+    names = _session_names(sessions)
     run_dirs = {name: Path(out) / name for name in names}
     for s, name in zip(sessions, names, strict=True):
         try:
@@ -577,28 +592,8 @@ def run_sessions(
         except CalibError as exc:
             raise CalibError(f"session {s}: {exc}") from None
     jobs = jobs or os.cpu_count() or 1
-    results: dict[str, list[tuple[str, str]]] = {}
-    failed: dict[str, CalibError] = {}
-    if jobs == 1 or len(sessions) == 1:
-        for s, name in zip(sessions, names, strict=True):
-            console.print(f"[bold]{name}[/]: {s}")
-            try:
-                results[name] = run_one_session(Path(s), run_dirs[name], config, force)
-            except CalibError as exc:
-                failed[name] = exc
-    else:
-        # spawn, not fork: a forked child inherits OpenCV/numba thread pools and can deadlock
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(jobs, len(sessions)), mp_context=ctx) as pool:
-            futures = {
-                pool.submit(run_one_session, Path(s), run_dirs[name], config, force): name
-                for s, name in zip(sessions, names, strict=True)
-            }
-            for fut in as_completed(futures):
-                try:
-                    results[futures[fut]] = fut.result()
-                except CalibError as exc:
-                    failed[futures[fut]] = exc
+    work = [(Path(s), run_dirs[name], name) for s, name in zip(sessions, names, strict=True)]
+    results, failed = _run_all(work, config, force, jobs, console)
     for name in names:
         if name in results:
             done = ", ".join(f"{stage}: {outcome}" for stage, outcome in results[name])
@@ -614,3 +609,48 @@ def run_sessions(
             console.print(f"error: {exc}", markup=False, highlight=False)
         raise CalibError(f"{first}{more}")
     return results
+
+
+def _session_names(sessions: Sequence[Path]) -> list[str]:
+    """Each session's run-folder name (:func:`checked_session_name`); one line when a
+    session is unusable or two share a name."""
+    names = []
+    for s in sessions:
+        try:
+            names.append(checked_session_name(Path(s)))
+        except CalibError as exc:
+            raise CalibError(f"session {s}: {exc}") from None
+    if len(set(names)) != len(names):
+        raise CalibError(
+            f"two sessions share a name ({', '.join(names)}); give each a unique [name] in session.toml"
+        )
+    return names
+
+
+def _run_all(work: list, config: PipelineConfig, force: bool, jobs: int, console) -> tuple:
+    """(name -> stage outcomes, name -> CalibError) of every ``(session, run_dir, name)``
+    in ``work``: one after the other with one job or one session, else in ``jobs``
+    spawned processes."""
+    results: dict[str, list[tuple[str, str]]] = {}
+    failed: dict[str, CalibError] = {}
+    if jobs == 1 or len(work) == 1:
+        for session, run_dir, name in work:
+            console.print(f"[bold]{name}[/]: {session}")
+            try:
+                results[name] = run_one_session(session, run_dir, config, force)
+            except CalibError as exc:
+                failed[name] = exc
+        return results, failed
+    # spawn, not fork: a forked child inherits OpenCV/numba thread pools and can deadlock
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=min(jobs, len(work)), mp_context=ctx) as pool:
+        futures = {
+            pool.submit(run_one_session, session, run_dir, config, force): name
+            for session, run_dir, name in work
+        }
+        for fut in as_completed(futures):
+            try:
+                results[futures[fut]] = fut.result()
+            except CalibError as exc:
+                failed[futures[fut]] = exc
+    return results, failed

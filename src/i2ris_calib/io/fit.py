@@ -21,7 +21,12 @@ from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.effects import base_of
 from i2ris_calib.diagnosis.serialize import model_from_dict
 from i2ris_calib.errors import CalibError
-from i2ris_calib.fitting.pipeline import MODEL_KINDS, ModelChoice, fit_warnings
+from i2ris_calib.fitting.pipeline import (
+    MIN_EXPLAINED_VARIANCE,
+    MODEL_KINDS,
+    ModelChoice,
+    fit_warnings,
+)
 from i2ris_calib.hysteresis.registry import fit_order
 from i2ris_calib.io.fit_schema import FIT_SCHEMA, check_fit_doc, check_model_doc
 
@@ -60,6 +65,36 @@ def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str
     return rec
 
 
+#: The advice of the low-explained-variance warning (:func:`~i2ris_calib.fitting.
+#: pipeline.fit_warnings`), replaced when another model of the dataset explains the angle
+LOW_VARIANCE_ADVICE = (
+    ": the angle may not follow this input (check the axis, the columns and the tracking)"
+)
+
+
+def _explained_elsewhere(models: dict[str, dict]) -> dict[str, dict]:
+    """``models`` (kind -> fit.json record) with the low-explained-variance warning of a
+    model told that another model of the same dataset explains the angle (at least
+    :data:`~i2ris_calib.fitting.pipeline.MIN_EXPLAINED_VARIANCE`): then the data are
+    fine and the model lacks what the other adds (the other motor, a second tendon);
+    "check the columns" would send the user looking for a mistake that is not there."""
+    ev = {k: r["metrics"].get("explained_variance") for k, r in models.items()}
+    good = {k: e for k, e in ev.items() if e is not None and e >= MIN_EXPLAINED_VARIANCE}
+    for kind, rec in models.items():
+        best = max((k for k in good if k != kind), key=good.get, default=None)
+        if best is None:
+            continue
+        rec["warnings"] = [
+            w.replace(
+                LOW_VARIANCE_ADVICE,
+                f"; {best} explains {100 * good[best]:.0f} % of it: this model lacks what "
+                f"{best} models (the data are not at fault)",
+            )
+            for w in rec["warnings"]
+        ]
+    return models
+
+
 def fit_document(
     fitted, axis: str, kinds: Sequence[str], provenance: dict, choice: ModelChoice | None = None
 ) -> dict[str, Any]:
@@ -85,7 +120,9 @@ def fit_document(
                 "input_range_counts": [float(d.v.min()), float(d.v.max())],
                 # the fastest input move: compensate's default rate limit
                 "max_input_rate_counts_per_s": max_input_rate(d.v, d.time_s),
-                "models": {k: model_record(results[k], k, results[k].model, d.v) for k in kinds},
+                "models": _explained_elsewhere(
+                    {k: model_record(results[k], k, results[k].model, d.v) for k in kinds}
+                ),
             }
         )
     doc: dict[str, Any] = {"schema": SCHEMA, "axis": axis, "datasets": datasets}

@@ -652,8 +652,13 @@ def test_stepping_model_flagged_in_summary_and_warnings(tmp_path, capsys):
     assert n > 0
     (warn,) = [w for w in doc["warnings"] if "steps at v_f" in w]
     score = {r["model"]: f"{r['score_deg']:.3g}" for r in doc["ranking"]}
+    df = pd.read_csv(tmp_path / "c.csv", keep_default_na=False)
+    target = pd.read_csv(tmp_path / "t.csv")["yaw_deg"].to_numpy()
+    at = df["flags"].str.contains("output_step").to_numpy()[-target.size :]
+    miss = np.max(np.abs(df["predicted_yaw_deg"].to_numpy()[-target.size :] - target)[at])
     assert warn == (  # the forced model steps: the others ranked to name the continuous ones
-        f"egpi steps at v_f where the target passes ({n} samples flagged output_step); "
+        f"egpi steps at v_f where the target passes ({n} samples flagged output_step, "
+        f"missing the target by up to {miss:.3g} deg there); "
         f"gpi ({score['gpi']} deg) or egpi_c ({score['egpi_c']} deg) track it without steps "
         f"(predicted tracking error; egpi {score['egpi']} deg): --model gpi"
     )

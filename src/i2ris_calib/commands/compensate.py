@@ -727,33 +727,47 @@ def _reinvert_coupled_choice(setup: dict, t: np.ndarray) -> None:
             )  # fmt: skip
 
 
-def output_step_warning(a: dict, summ: dict) -> str | None:
+def output_step_warning(a: dict, summ: dict, stepped: np.ndarray | None = None) -> str | None:
     """The line saying the chosen model's predicted output steps where the target passes
     (more than :data:`STEP_SHARE` of the samples flagged ``output_step`` or
-    ``spike_removed``), naming the continuous models of the ranking with their predicted
-    tracking error (``score_deg``, the chosen model's too: a smooth model may track
-    worse); None otherwise."""
+    ``spike_removed``; ``stepped``: those samples, shape (n,), for the largest miss
+    there), naming the continuous models of the ranking with their predicted tracking
+    error (``score_deg``, the chosen model's too). When the ranking chose the stepping
+    model, the smooth ones track more than :data:`STEP_PENALTY` x worse: they are named
+    as the choice for when smoothness matters more, not as the better model. None when
+    the model does not step."""
     n = summ["flags"]["output_step"] + summ["flags"]["spike_removed"]
     if n <= STEP_SHARE * summ["n_samples"]:
         return None
     kind = a["kind"]
     where = " at v_f" if kind == "egpi" else ""
+    res = a["res"]
+    miss = ""
+    if stepped is not None and stepped.any():
+        err = np.abs(res.predicted_deg - res.target_deg)[stepped]
+        miss = f", missing the target by up to {float(np.max(err)):.3g} deg there"
     smooth = [r for r in a["ranking"] if r["continuous"] and r["model"] != kind]
     mine = next((r["score_deg"] for r in a["ranking"] if r["model"] == kind), None)
     if smooth:
         names = " or ".join(f"{r['model']} ({r['score_deg']:.3g} deg)" for r in smooth)
         cost = "" if mine is None else f"; {kind} {mine:.3g} deg"
-        alt = (
-            f"{names} track it without steps (predicted tracking error{cost}): "
-            f"--model {smooth[0]['model']}"
-        )
+        if a.get("forced"):
+            alt = (
+                f"{names} track it without steps (predicted tracking error{cost}): "
+                f"--model {smooth[0]['model']}"
+            )
+        else:
+            alt = (
+                f"{names} track it without steps but worse (predicted tracking error{cost}); "
+                f"--model {smooth[0]['model']} if smooth output matters more"
+            )
     elif a.get("forced"):
         alt = "leave out --model to rank the other models on this target"
     else:
         alt = "no other model of the fit tracks it without steps"
     return (
         f"{kind} steps{where} where the target passes ({n} samples flagged output_step"
-        f"{' or spike_removed' if summ['flags']['spike_removed'] else ''}); {alt}"
+        f"{' or spike_removed' if summ['flags']['spike_removed'] else ''}{miss}); {alt}"
     )
 
 
@@ -853,7 +867,7 @@ def _axis_doc(a, target_deg, t, fl, max_rate, n_cond, n_pre, dt0, unit) -> dict:
     summ["flags"] = {name: int(f.sum()) for name, f in fl.items()}
     summ.pop("n_history", None)
     summ["max_command_rate_per_s"] = max_rate
-    step_warn = output_step_warning(a, summ)
+    step_warn = output_step_warning(a, summ, fl["output_step"] | fl["spike_removed"])
     bad = np.flatnonzero(~res.reachable)
     reach = reachable_angles(a["model"], (a["lo"], a["hi"]), sign)
     warn = range_warning(

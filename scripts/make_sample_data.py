@@ -8,6 +8,10 @@
   datasets (docs/formats.md, "The synced CSV"): EGPI truth with the fixed paper-like
   parameters of each motion direction, a Fig-5-like input (ramps out and back with pauses,
   six loading cycles), 30 Hz, Gaussian angle noise 0.1 deg, 1 % of frames unmeasured.
+- sample_data/datasets/lab_export.csv (+ lab_export_truth.csv): a lab's own export of a
+  two-motor recording (both motors at once through zero, pitch following the yaw joint,
+  starting mid-loop, 5 Hz, 250 samples, epoch times, 0.3 deg tracker noise) under its own
+  column names, read with configs/columns.lab.toml (docs/formats.md, "A lab's own files").
 """
 
 from __future__ import annotations
@@ -55,6 +59,27 @@ def write_datasets() -> None:
         write_csv(OUT / "datasets" / f"{stem}.csv", synced_dataset(name, seed=100 + k), "%.6f")
 
 
+#: The lab export's column names (configs/columns.lab.toml maps them)
+LAB_COLUMNS = ("Img TS", "Enc TS", "Encoder counts 0", "Encoder counts 1", "yaws", "pitches")
+
+
+def write_lab_export() -> None:
+    """A two-motor recording as a lab's tracker exports it, and its truth beside it."""
+    from i2ris_calib.io.atomic import write_csv
+    from i2ris_calib.simulation.two_motor import simulate_two_motor
+
+    r = simulate_two_motor(7, n_samples=250, rate_hz=5.0, noise_deg=0.3, coupling=0.6)
+    epoch = 1_732_000_000.0  # the tracker's clock: Unix time (s)
+    img, enc_t = epoch + r.t_s, epoch + r.t_s + 0.004  # the encoder read 4 ms after the frame
+    counts = [np.round(e).astype(int) for e in (r.enc_yaw, r.enc_pitch)]
+    cols = (img, enc_t, *counts, r.yaw_deg, r.pitch_deg)
+    frame = pd.DataFrame(dict(zip(LAB_COLUMNS, cols, strict=True)))
+    write_csv(OUT / "datasets" / "lab_export.csv", frame, "%.6f")
+    truth = pd.DataFrame({"Img TS": img, "yaw_true_deg": r.yaw_true_deg,
+                          "pitch_true_deg": r.pitch_true_deg})  # fmt: skip
+    write_csv(OUT / "datasets" / "lab_export_truth.csv", truth, "%.6f")
+
+
 def write_session() -> None:
     from i2ris_calib.commands.simulate import write_simulated_session
     from i2ris_calib.io.config_io import load_config
@@ -65,5 +90,6 @@ def write_session() -> None:
 
 if __name__ == "__main__":
     write_datasets()
+    write_lab_export()
     if "--datasets-only" not in sys.argv:
         write_session()

@@ -86,44 +86,67 @@ def dataclass_from_mapping(cls: type[T], data: Mapping[str, Any], where: str = "
 def _coerce(tp: Any, value: Any, where: str) -> Any:
     """Check ``value`` against type hint ``tp`` and convert TOML types to field types."""
     origin = typing.get_origin(tp)
-    args = typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for a in args:
-            if a is type(None):
-                continue
-            try:
-                return _coerce(a, value, where)
-            except CalibError as exc:
-                errors.append(str(exc))
-        raise CalibError(errors[0] if errors else f"{where}: bad value {value!r}")
+        return _coerce_union(typing.get_args(tp), value, where)
     if origin is typing.Literal:
-        if value not in args:
-            close = difflib.get_close_matches(str(value), [str(a) for a in args], n=1)
-            hint = f"; did you mean '{close[0]}'?" if close else ""
-            raise CalibError(f"{where}: '{value}' is not one of {', '.join(map(str, args))}{hint}")
-        return value
+        return _coerce_literal(typing.get_args(tp), value, where)
     if dataclasses.is_dataclass(tp):
         return dataclass_from_mapping(tp, value, where)
     if origin in (tuple, list) or tp in (tuple, list):
-        if not isinstance(value, (list, tuple)):
-            raise CalibError(f"{where}: expected a list, got {value!r}")
-        if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
-        if origin is tuple and args:
-            if len(args) != len(value):
-                raise CalibError(f"{where}: expected {len(args)} values, got {len(value)}")
-            return tuple(
-                _coerce(a, v, f"{where}[{i}]")
-                for i, (a, v) in enumerate(zip(args, value, strict=True))
-            )
-        return tuple(value)
+        return _coerce_sequence(origin, typing.get_args(tp), value, where)
     if origin in (dict, Mapping) or tp is dict:
         if not isinstance(value, Mapping):
             raise CalibError(f"{where}: expected a table, got {value!r}")
         return dict(value)
+    return _coerce_scalar(tp, value, where)
+
+
+def _coerce_union(args: tuple[Any, ...], value: Any, where: str) -> Any:
+    """``value`` as the first member type of a union (``args``) that accepts it; None
+    when the union is optional and ``value`` is None. The first member's message when
+    none accepts it."""
+    if value is None and type(None) in args:
+        return None
+    errors = []
+    for a in args:
+        if a is type(None):
+            continue
+        try:
+            return _coerce(a, value, where)
+        except CalibError as exc:
+            errors.append(str(exc))
+    raise CalibError(errors[0] if errors else f"{where}: bad value {value!r}")
+
+
+def _coerce_literal(args: tuple[Any, ...], value: Any, where: str) -> Any:
+    """``value`` when it is one of the ``Literal`` values ``args``; else a message with
+    the closest one."""
+    if value not in args:
+        close = difflib.get_close_matches(str(value), [str(a) for a in args], n=1)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        raise CalibError(f"{where}: '{value}' is not one of {', '.join(map(str, args))}{hint}")
+    return value
+
+
+def _coerce_sequence(origin: Any, args: tuple[Any, ...], value: Any, where: str) -> tuple:
+    """A TOML array as a tuple: items coerced for ``tuple[X, ...]`` and fixed-length
+    ``tuple[X, Y]`` (length checked), as given for a bare ``tuple``/``list``."""
+    if not isinstance(value, (list, tuple)):
+        raise CalibError(f"{where}: expected a list, got {value!r}")
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:
+        return tuple(_coerce(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
+    if origin is tuple and args:
+        if len(args) != len(value):
+            raise CalibError(f"{where}: expected {len(args)} values, got {len(value)}")
+        return tuple(
+            _coerce(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
+    return tuple(value)
+
+
+def _coerce_scalar(tp: Any, value: Any, where: str) -> Any:
+    """``value`` checked against ``float`` (ints converted), ``int``, ``bool`` or ``str``
+    (bools are not numbers); any other hint passes ``value`` through."""
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise CalibError(f"{where}: expected a number, got {value!r}")

@@ -122,6 +122,30 @@ def _missing(run: RunData, label: str) -> Note:
 
 def overview_section(run: RunData) -> Section:
     """Which stage outputs were found, and the headline result per dataset."""
+    blocks: list = model_choice_verdicts(run.fits)
+    recs = recommendation_table(run.fits)
+    if recs is not None:
+        blocks.append(recs)
+    headline = _headline(run.fits)
+    if headline is not None:
+        blocks.append(headline)
+    blocks.append(
+        Table(
+            ("stage", "output", "status"),
+            tuple(_stage_output_rows(run)),
+            "Files read from the fit output folder (no run folder: tracking, clock and "
+            "diagnosis are not part of this report)."
+            if run.fit_only
+            else "Stage outputs read from the run folder.",
+        )
+    )
+    blocks.extend(_warning_blocks(run))
+    return Section("overview", "Overview", tuple(blocks))
+
+
+def _stage_output_rows(run: RunData) -> list[tuple[str, str, str]]:
+    """(stage, output file, found / missing: why / not run) for every stage output the
+    report reads; only the fit files, by file name, for a fit output folder."""
     rows = []
     for stage, label in () if run.fit_only else STAGE_INPUTS:
         rows.append(
@@ -148,36 +172,23 @@ def overview_section(run: RunData) -> Section:
         rows = [
             (stage, label.split("/")[-1], status) for stage, label, status in rows if stage == "fit"
         ]
-    blocks: list = model_choice_verdicts(run.fits)
-    recs = recommendation_table(run.fits)
-    if recs is not None:
-        blocks.append(recs)
-    headline = _headline(run.fits)
-    if headline is not None:
-        blocks.append(headline)
-    blocks.append(
-        Table(
-            ("stage", "output", "status"),
-            tuple(rows),
-            "Files read from the fit output folder (no run folder: tracking, clock and "
-            "diagnosis are not part of this report)."
-            if run.fit_only
-            else "Stage outputs read from the run folder.",
-        )
-    )
+    return rows
+
+
+def _warning_blocks(run: RunData) -> list:
+    """A note with the number of warnings and the table of every stage's warnings;
+    empty when there are none."""
     warned = run_warnings(run)
-    if warned:
-        blocks.append(
-            Note(
-                f"{len(warned)} warning(s): results that may be wrong although every stage "
-                "finished. Read them before using the numbers below.",
-                "warn",
-            )
-        )
-        blocks.append(
-            Table(("stage", "where", "warning"), tuple(warned), "Warnings of every stage.")
-        )
-    return Section("overview", "Overview", tuple(blocks))
+    if not warned:
+        return []
+    return [
+        Note(
+            f"{len(warned)} warning(s): results that may be wrong although every stage "
+            "finished. Read them before using the numbers below.",
+            "warn",
+        ),
+        Table(("stage", "where", "warning"), tuple(warned), "Warnings of every stage."),
+    ]
 
 
 def recommendation_table(fits: tuple[FitData, ...]) -> Table | None:
@@ -1149,50 +1160,11 @@ def compensation_section(comp: CompensationData, cfg: ReportConfig) -> Section:
     """Feedforward compensation (``[compensate] target``): verdicts, target vs predicted
     and the commands with the rate limit and every flag, flag counts, the ranking."""
     axes_doc = _axes_doc(comp)
-    rows = []
-    for axis, a in axes_doc.items():
-        un = a.get("unreachable", {}) if isinstance(a.get("unreachable"), Mapping) else {}
-        why = ", ".join(f"{k} {v}" for k, v in un.items() if v) or "-"
-        rows.append(
-            (
-                axis,
-                str(a.get("dataset", "?")),
-                _model_name(a.get("model", "?")),
-                fmt_sig(a.get("rmse_deg"), 3),
-                fmt_sig(a.get("max_abs_err_deg"), 3),
-                f"{a.get('n_unreachable', 0)} of {a.get('n_samples', 0)} ({why})",
-            )
-        )
     blocks: list = compensation_verdicts(axes_doc)
     axes = [a for a in axes_doc if f"enc_{a}" in comp.commands]
     if axes:
-        png = figures.compensation_figure_png(
-            comp.commands,
-            comp.target,
-            axes,
-            axes_doc,
-            dpi=cfg.figure_dpi,
-            max_points=cfg.max_plot_points,
-        )
-        blocks.append(
-            Figure(
-                "compensation",
-                png,
-                "Per axis, top to bottom: the target (grey) and the angle the model predicts "
-                "for the commands; their difference with every flagged sample marked (count "
-                "in the legend); the motor command within the fitted input range (dotted); "
-                "the command's rate (counts/s, step to step) with the rate limit (dashed). "
-                "Grey band: the entry ramp before the target's first sample; hatched band: the "
-                "conditioning sweep that sets the hysteresis state (docs/compensate.md).",
-            )
-        )
-    blocks.append(
-        Table(
-            ("axis", "dataset", "model", "RMSE (deg)", "max |error| (deg)", "unreachable"),
-            tuple(rows),
-            "Predicted angle vs target for the commands in compensate/commands.csv.",
-        )
-    )
+        blocks.append(_compensation_figure(comp, axes, axes_doc, cfg))
+    blocks.append(_compensation_error_table(axes_doc))
     if axes:
         blocks.append(flag_table(comp, axes))
     ranking = ranking_table(axes_doc)
@@ -1207,3 +1179,52 @@ def compensation_section(comp: CompensationData, cfg: ReportConfig) -> Section:
         )
     )
     return Section("compensation", "Feedforward compensation", tuple(blocks))
+
+
+def _compensation_figure(
+    comp: CompensationData, axes: list[str], axes_doc: dict, cfg: ReportConfig
+) -> Figure:
+    """The compensation figure of ``axes`` (:func:`figures.compensation_figure_png`)
+    with its caption."""
+    png = figures.compensation_figure_png(
+        comp.commands,
+        comp.target,
+        axes,
+        axes_doc,
+        dpi=cfg.figure_dpi,
+        max_points=cfg.max_plot_points,
+    )
+    return Figure(
+        "compensation",
+        png,
+        "Per axis, top to bottom: the target (grey) and the angle the model predicts "
+        "for the commands; their difference with every flagged sample marked (count "
+        "in the legend); the motor command within the fitted input range (dotted); "
+        "the command's rate (counts/s, step to step) with the rate limit (dashed). "
+        "Grey band: the entry ramp before the target's first sample; hatched band: the "
+        "conditioning sweep that sets the hysteresis state (docs/compensate.md).",
+    )
+
+
+def _compensation_error_table(axes_doc: Mapping[str, Mapping]) -> Table:
+    """Per axis of compensate.json: dataset, model, RMSE and max error of the predicted
+    angle vs the target (deg), and the unreachable samples with why."""
+    rows = []
+    for axis, a in axes_doc.items():
+        un = a.get("unreachable", {}) if isinstance(a.get("unreachable"), Mapping) else {}
+        why = ", ".join(f"{k} {v}" for k, v in un.items() if v) or "-"
+        rows.append(
+            (
+                axis,
+                str(a.get("dataset", "?")),
+                _model_name(a.get("model", "?")),
+                fmt_sig(a.get("rmse_deg"), 3),
+                fmt_sig(a.get("max_abs_err_deg"), 3),
+                f"{a.get('n_unreachable', 0)} of {a.get('n_samples', 0)} ({why})",
+            )
+        )
+    return Table(
+        ("axis", "dataset", "model", "RMSE (deg)", "max |error| (deg)", "unreachable"),
+        tuple(rows),
+        "Predicted angle vs target for the commands in compensate/commands.csv.",
+    )

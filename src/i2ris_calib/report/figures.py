@@ -424,6 +424,28 @@ def tracking_figure_png(
     fig = _new_figure(10, 7 if has_roll else 6)
     axes = fig.subplots(len(ratios), 1, sharex=True, gridspec_kw={"height_ratios": ratios})
     ax_s, ax_a, ax_r = axes[:3]
+    _plot_status_timeline(ax_s, t_all, status, window_s, sl)
+    _plot_tracked_angles(ax_a, a, t_all, sl)
+    _plot_reprojection_error(ax_r, a, t_all, measured, step)
+    if has_roll:
+        _plot_roll(axes[3], a, t_all, measured, sl)
+    axes[-1].set_xlabel("time (s, camera clock)")
+    for ax in axes[1:]:
+        ax.grid(True, lw=0.4, alpha=0.5)
+    ax_s.grid(True, axis="x", lw=0.4, alpha=0.5)
+    if ax_a.get_legend_handles_labels()[0]:
+        ax_a.legend(fontsize=8, loc="upper right")
+    return figure_png(fig, dpi)
+
+
+def _plot_status_timeline(
+    ax_s, t_all: np.ndarray, status: np.ndarray, window_s: float, sl: slice
+) -> None:
+    """One timeline row per status present (frame counts at right) and, on a twin axis,
+    the measured share (%) in a ``window_s`` (s) window at frames ``sl``.
+
+    ``t_all`` (s) and ``status`` are per frame, shape (n,), sorted by time.
+    """
     kinds = [k for k in STATUS_ORDER if (status == k).any()]
     kinds += sorted(set(status) - set(STATUS_ORDER))
     for row, kind in enumerate(kinds):
@@ -434,7 +456,7 @@ def tracking_figure_png(
                   ha="right", fontsize=7, color="0.1")  # fmt: skip
     ax_s.set_yticks(range(len(kinds)), kinds)
     ax_s.set_ylim(len(kinds) - 0.4, -0.6)
-    rate = detection_rate(t_all, measured, window_s)
+    rate = detection_rate(t_all, status == "measured", window_s)
     ax_share = ax_s.twinx()
     ax_share.plot(t_all[sl], 100 * rate[sl], lw=0.7, color="0.15")
     ax_share.set_ylim(-5, 105)
@@ -444,6 +466,10 @@ def tracking_figure_png(
         f"status of every frame (frame counts at right; line: measured share in a "
         f"{window_s:g} s window)"
     )
+
+
+def _plot_tracked_angles(ax_a, a: pd.DataFrame, t_all: np.ndarray, sl: slice) -> None:
+    """Yaw and pitch (deg) of the frames ``sl``; unmeasured frames leave gaps."""
     for col, color in (("yaw_deg", EGPI_COLOR), ("pitch_deg", GPI_COLOR)):
         if col in a:
             ax_a.plot(
@@ -454,6 +480,20 @@ def tracking_figure_png(
                 label=col.replace("_deg", ""),
             )
     ax_a.set(ylabel="angle (deg)", title="tracked angles (gaps = unmeasured frames)")
+
+
+def _plot_roll(ax_o, a: pd.DataFrame, t_all: np.ndarray, measured: np.ndarray, sl: slice) -> None:
+    """Roll (twist about the tool axis, deg) of the measured frames among ``sl``."""
+    roll = a["roll_deg"].to_numpy(dtype=float)
+    ax_o.plot(t_all[sl], np.where(measured, roll, np.nan)[sl], lw=0.7, color="0.3")
+    ax_o.axhline(0.0, color="0.2", lw=0.5)
+    ax_o.set(ylabel="roll (deg)", title="roll (twist about the tool axis, diagnostic)")
+
+
+def _plot_reprojection_error(
+    ax_r, a: pd.DataFrame, t_all: np.ndarray, measured: np.ndarray, step: int
+) -> None:
+    """Reprojection error (px) of every ``step``-th measured frame and its median."""
     err = (
         a["reproj_err_px"].to_numpy(dtype=float)
         if "reproj_err_px" in a
@@ -466,19 +506,6 @@ def tracking_figure_png(
         ax_r.axhline(float(np.median(err[ok])), color=EGPI_COLOR, lw=0.8, label="median")
         ax_r.legend(fontsize=8, loc="upper right")
     ax_r.set(ylabel="reprojection\nerror (px)", title="reprojection error of measured frames")
-    if has_roll:
-        ax_o = axes[3]
-        roll = a["roll_deg"].to_numpy(dtype=float)
-        ax_o.plot(t_all[sl], np.where(measured, roll, np.nan)[sl], lw=0.7, color="0.3")
-        ax_o.axhline(0.0, color="0.2", lw=0.5)
-        ax_o.set(ylabel="roll (deg)", title="roll (twist about the tool axis, diagnostic)")
-    axes[-1].set_xlabel("time (s, camera clock)")
-    for ax in axes[1:]:
-        ax.grid(True, lw=0.4, alpha=0.5)
-    ax_s.grid(True, axis="x", lw=0.4, alpha=0.5)
-    if ax_a.get_legend_handles_labels()[0]:
-        ax_a.legend(fontsize=8, loc="upper right")
-    return figure_png(fig, dpi)
 
 
 def synced_figure_png(synced: pd.DataFrame, dpi: int = 100, max_points: int = 20000) -> bytes:
@@ -590,69 +617,91 @@ def compensation_figure_png(
     fig = _new_figure(max(6.5 * len(axes), 8.0), 8.0)
     grid = fig.subplots(4, len(axes), sharex=True, squeeze=False)
     step = thinning_step(len(commands), max_points)
-    t_all = commands["time_s"].to_numpy(dtype=float)
-    t = t_all[::step]
     flags_col = commands["flags"] if "flags" in commands else pd.Series([""] * len(commands))
     for j, axis in enumerate(axes):
         doc = axes_doc.get(axis, {}) if isinstance(axes_doc.get(axis), dict) else {}
-        ax_a, ax_e, ax_c, ax_r = grid[:, j]
         flags = axis_flags(flags_col, axis, len(axes) > 1)
-        entry = np.array(["entry" in f for f in flags])
-        spans = holdout_spans(t_all, entry)
-        sweep = holdout_spans(t_all, np.array(["conditioning" in f for f in flags]))
-        pred_all = commands[f"predicted_{axis}_deg"].to_numpy(dtype=float)
-        tgt_all = aligned_target(commands, target, axis)
-        ax_a.plot(t, tgt_all[::step], "-", lw=2.0, color=MEASURED_COLOR, alpha=0.7, label="target")
-        ax_a.plot(t, pred_all[::step], "-", lw=0.9, color=EGPI_COLOR, label="predicted (model)")
-        err = pred_all - tgt_all
-        ax_e.plot(t, err[::step], "-", lw=0.8, color="0.2")
-        enc = commands[f"enc_{axis}"].to_numpy(dtype=float)
-        ax_c.plot(t, enc[::step], "-", lw=0.9, color="0.1", label="command")
-        dt = np.diff(t_all)
-        step_rate = np.r_[0.0, np.abs(np.diff(enc)) / np.where(dt > 0, dt, np.nan)][: enc.size]
-        ax_r.plot(t, step_rate[::step], "-", lw=0.8, color="0.2", label="|Δcommand| / Δt")
-        for name, (marker, color) in FLAG_STYLES.items():
-            on = np.flatnonzero([name in f for f in flags])[::step]
-            if not on.size:
-                continue
-            label = f"{name} ({int(sum(name in f for f in flags))})"
-            y = err if np.isfinite(err[on]).any() else pred_all
-            ax_e.plot(t_all[on], y[on], marker, ms=4, color=color, label=label, ls="none")
-            if name == "rate_limited":
-                ax_r.plot(t_all[on], step_rate[on], marker, ms=4, color=color, label=label,
-                          ls="none")  # fmt: skip
-        limit = doc.get("max_counts_per_s")
-        if limit is not None and np.isfinite(float(limit)):
-            ax_r.axhline(float(limit), color="#D55E00", ls="--", lw=1.2,
-                         label=f"rate limit {float(limit):.5g} counts/s")  # fmt: skip
-        else:
-            ax_r.text(0.5, 0.85, "no rate limit", ha="center", transform=ax_r.transAxes)
-        rng = doc.get("input_range_counts")
-        if isinstance(rng, list) and len(rng) == 2:
-            sign = -1.0 if str(doc.get("dataset", "")).endswith("-") else 1.0
-            for k, v in enumerate(sorted(sign * float(x) for x in rng)):
-                ax_c.axhline(v, color="0.5", ls=":", lw=1.0,
-                             label="fitted input range" if k == 0 else None)  # fmt: skip
-        for ax in (ax_a, ax_e, ax_c, ax_r):
-            _shade(ax, spans, OTHER_COLOR, 0.25, "entry ramp")
-            _shade(ax, sweep, "0.6", 0.25, "conditioning sweep", hatch="//")
-            ax.grid(True, lw=0.4, alpha=0.5)
-        ax_e.axhline(0.0, color="0.2", lw=0.5)
-        label = doc.get("dataset", axis)
-        model = doc.get("model")
-        ax_a.set_title(f"{label}: target and predicted" + (f" ({model})" if model else ""))
-        ax_a.set_ylabel(f"{axis} angle (deg)")
-        ax_e.set_ylabel("predicted − target (deg)")
-        ax_e.set_title("difference; flagged samples marked")
-        ax_c.set_ylabel(f"enc_{axis} (counts)")
-        ax_c.set_title("motor command")
-        ax_r.set_ylabel("command rate (counts/s)")
-        ax_r.set_title("command rate and the rate limit")
-        ax_r.set_xlabel("time (s)")
-        for ax in (ax_a, ax_e, ax_c, ax_r):
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(loc="upper right", fontsize=7, ncol=2)
+        _plot_compensation_column(grid[:, j], commands, target, axis, flags, step)
+        _plot_command_limits(grid[2, j], grid[3, j], doc)
+        _label_compensation_column(grid[:, j], axis, doc, commands["time_s"], flags)
     return figure_png(fig, dpi)
+
+
+def _plot_compensation_column(
+    col, commands: pd.DataFrame, target, axis: str, flags: list[set[str]], step: int
+) -> None:
+    """One axis of :func:`compensation_figure_png` (axes ``col``: angle, difference,
+    command, rate): target and predicted angle (deg), their difference (deg), the command
+    (counts) and its rate (counts/s), every ``step``-th sample; flagged samples marked."""
+    ax_a, ax_e, ax_c, ax_r = col
+    t_all = commands["time_s"].to_numpy(dtype=float)
+    t = t_all[::step]
+    pred_all = commands[f"predicted_{axis}_deg"].to_numpy(dtype=float)
+    tgt_all = aligned_target(commands, target, axis)
+    ax_a.plot(t, tgt_all[::step], "-", lw=2.0, color=MEASURED_COLOR, alpha=0.7, label="target")
+    ax_a.plot(t, pred_all[::step], "-", lw=0.9, color=EGPI_COLOR, label="predicted (model)")
+    err = pred_all - tgt_all
+    ax_e.plot(t, err[::step], "-", lw=0.8, color="0.2")
+    enc = commands[f"enc_{axis}"].to_numpy(dtype=float)
+    ax_c.plot(t, enc[::step], "-", lw=0.9, color="0.1", label="command")
+    dt = np.diff(t_all)
+    step_rate = np.r_[0.0, np.abs(np.diff(enc)) / np.where(dt > 0, dt, np.nan)][: enc.size]
+    ax_r.plot(t, step_rate[::step], "-", lw=0.8, color="0.2", label="|Δcommand| / Δt")
+    for name, (marker, color) in FLAG_STYLES.items():
+        on = np.flatnonzero([name in f for f in flags])[::step]
+        if not on.size:
+            continue
+        label = f"{name} ({int(sum(name in f for f in flags))})"
+        y = err if np.isfinite(err[on]).any() else pred_all
+        ax_e.plot(t_all[on], y[on], marker, ms=4, color=color, label=label, ls="none")
+        if name == "rate_limited":
+            ax_r.plot(t_all[on], step_rate[on], marker, ms=4, color=color, label=label,
+                      ls="none")  # fmt: skip
+
+
+def _plot_command_limits(ax_c, ax_r, doc: dict) -> None:
+    """The rate limit (counts/s) on ``ax_r`` (or "no rate limit") and the fitted input
+    range (counts; negated for a ``-`` dataset) on ``ax_c``, from compensate.json."""
+    limit = doc.get("max_counts_per_s")
+    if limit is not None and np.isfinite(float(limit)):
+        ax_r.axhline(float(limit), color="#D55E00", ls="--", lw=1.2,
+                     label=f"rate limit {float(limit):.5g} counts/s")  # fmt: skip
+    else:
+        ax_r.text(0.5, 0.85, "no rate limit", ha="center", transform=ax_r.transAxes)
+    rng = doc.get("input_range_counts")
+    if isinstance(rng, list) and len(rng) == 2:
+        sign = -1.0 if str(doc.get("dataset", "")).endswith("-") else 1.0
+        for k, v in enumerate(sorted(sign * float(x) for x in rng)):
+            ax_c.axhline(v, color="0.5", ls=":", lw=1.0,
+                         label="fitted input range" if k == 0 else None)  # fmt: skip
+
+
+def _label_compensation_column(col, axis: str, doc: dict, time_s, flags: list[set[str]]) -> None:
+    """Entry-ramp and conditioning-sweep shading (over ``time_s``, s), grids, titles,
+    labels and legends of one axis column of :func:`compensation_figure_png`."""
+    ax_a, ax_e, ax_c, ax_r = col
+    t_all = time_s.to_numpy(dtype=float)
+    spans = holdout_spans(t_all, np.array(["entry" in f for f in flags]))
+    sweep = holdout_spans(t_all, np.array(["conditioning" in f for f in flags]))
+    for ax in col:
+        _shade(ax, spans, OTHER_COLOR, 0.25, "entry ramp")
+        _shade(ax, sweep, "0.6", 0.25, "conditioning sweep", hatch="//")
+        ax.grid(True, lw=0.4, alpha=0.5)
+    ax_e.axhline(0.0, color="0.2", lw=0.5)
+    label = doc.get("dataset", axis)
+    model = doc.get("model")
+    ax_a.set_title(f"{label}: target and predicted" + (f" ({model})" if model else ""))
+    ax_a.set_ylabel(f"{axis} angle (deg)")
+    ax_e.set_ylabel("predicted − target (deg)")
+    ax_e.set_title("difference; flagged samples marked")
+    ax_c.set_ylabel(f"enc_{axis} (counts)")
+    ax_c.set_title("motor command")
+    ax_r.set_ylabel("command rate (counts/s)")
+    ax_r.set_title("command rate and the rate limit")
+    ax_r.set_xlabel("time (s)")
+    for ax in col:
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(loc="upper right", fontsize=7, ncol=2)
 
 
 def before_after_png(
@@ -700,19 +749,35 @@ def clock_figure_png(view, dpi: int = 100) -> bytes:
         the event's and the model's clocks alone. Right (model methods): residual sum of
         squares of the offset profile vs offset at ``t_ref`` (ms from the stated clock).
     """
-    c = view.clock
     t0, t1 = view.t_range_s
     pad = 0.02 * (t1 - t0) if t1 > t0 else 1.0
     t = np.linspace(t0 - pad, t1 + pad, 200)
-    ms = 1e3
     fig = _new_figure(11, 5.6)
-    if view.profile is not None:
+    ax_l, ax_r, ax_p = _clock_axes(fig, view.profile is not None)
+    _plot_clock_lines(ax_l, ax_r, view, t)
+    _plot_flash_edges(ax_l, ax_r, view)
+    _label_clock_axes(ax_l, ax_r, view.clock, (t0 - pad, t1 + pad))
+    if ax_p is not None:
+        _plot_offset_profile(ax_p, view)
+    return figure_png(fig, dpi)
+
+
+def _clock_axes(fig, with_profile: bool) -> tuple:
+    """Axes of :func:`clock_figure_png`: (offset line, residuals, offset profile or None);
+    the profile takes a right-hand column when ``with_profile``."""
+    if with_profile:
         grid = fig.add_gridspec(2, 2, width_ratios=(3, 1))
         ax_l, ax_r = fig.add_subplot(grid[0, 0]), fig.add_subplot(grid[1, 0])
-        ax_p = fig.add_subplot(grid[:, 1])
-    else:
-        ax_l, ax_r = fig.subplots(2, 1, sharex=True)
-        ax_p = None
+        return ax_l, ax_r, fig.add_subplot(grid[:, 1])
+    ax_l, ax_r = fig.subplots(2, 1, sharex=True)
+    return ax_l, ax_r, None
+
+
+def _plot_clock_lines(ax_l, ax_r, view, t: np.ndarray) -> None:
+    """The stated clock with its +-1/+-2 sd bands and the other methods' clocks at camera
+    times ``t`` (s): offset relative to ``t_ref`` on ``ax_l``, residual on ``ax_r`` (ms)."""
+    c = view.clock
+    ms = 1e3
     sd = c.sd(t) * ms
     line = (c.offset(t) - c.offset_ref_s) * ms
     for ax, centre in ((ax_l, line), (ax_r, np.zeros_like(t))):
@@ -727,6 +792,13 @@ def clock_figure_png(view, dpi: int = 100) -> bytes:
         o = other.offset(t) * ms
         ax_l.plot(t, o - c.offset_ref_s * ms, style, color=color, lw=1.1, label=other.label)
         ax_r.plot(t, o - c.offset(t) * ms, style, color=color, lw=1.1, label=other.label)
+
+
+def _plot_flash_edges(ax_l, ax_r, view) -> None:
+    """Flash edges of each camera with +-1 sd error bars (ms): on the offset line
+    (``ax_l``) and as residuals from the stated clock (``ax_r``)."""
+    c = view.clock
+    ms = 1e3
     for cam in sorted({e.camera for e in view.edges}):
         marker, color = CAMERA_MARKERS.get(cam, ("^", "0.3"))
         es = [e for e in view.edges if e.camera == cam]
@@ -737,6 +809,11 @@ def clock_figure_png(view, dpi: int = 100) -> bytes:
         kw = dict(fmt=marker, ms=4, color=color, ecolor=color, elinewidth=0.8, capsize=2)
         ax_l.errorbar(te, base + r, yerr=s, label=f"flash edges ({cam})", **kw)
         ax_r.errorbar(te, r, yerr=s, label=f"flash edges ({cam})", **kw)
+
+
+def _label_clock_axes(ax_l, ax_r, c, xlim: tuple[float, float]) -> None:
+    """Titles, labels, grid, camera-time limits ``xlim`` (s) and legend of the offset
+    line and residual axes of clock ``c``."""
     ax_l.set(
         ylabel="offset − offset at t_ref (ms)",
         title=f"clock line: t_ctrl − t_cam relative to {c.offset_ref_s:.6f} s at "
@@ -750,22 +827,27 @@ def clock_figure_png(view, dpi: int = 100) -> bytes:
     ax_r.axhline(0.0, color="0.2", lw=0.5)
     for ax in (ax_l, ax_r):
         ax.grid(True, lw=0.4, alpha=0.5)
-        ax.set_xlim(t0 - pad, t1 + pad)
+        ax.set_xlim(*xlim)
     ax_l.legend(fontsize=7, loc="best", ncol=2)
-    if ax_p is not None:
-        x, y = view.profile
-        order = np.argsort(x)
-        dx = (x[order] - c.offset_ref_s) * ms
-        ax_p.plot(dx, y[order], "o-", ms=3, lw=0.9, color=DIAGNOSED_COLOR)
-        if np.isfinite(c.offset_ref_sd_s):
-            s_ref = c.offset_ref_sd_s * ms
-            ax_p.axvspan(-s_ref, s_ref, color=EGPI_COLOR, alpha=0.25, lw=0, label="stated ±1 sd")
-        ax_p.axvline(0.0, color=EGPI_COLOR, lw=1.0)
-        ax_p.set(
-            xlabel="offset at t_ref − stated (ms)",
-            ylabel="model residual sum of squares (deg²)",
-            title="model method: offset profile",
-        )
-        ax_p.grid(True, lw=0.4, alpha=0.5)
-        ax_p.legend(fontsize=7, loc="upper center")
-    return figure_png(fig, dpi)
+
+
+def _plot_offset_profile(ax_p, view) -> None:
+    """The model method's residual sum of squares (deg^2) vs offset at ``t_ref`` less
+    the stated one (ms), with the stated +-1 sd."""
+    c = view.clock
+    ms = 1e3
+    x, y = view.profile
+    order = np.argsort(x)
+    dx = (x[order] - c.offset_ref_s) * ms
+    ax_p.plot(dx, y[order], "o-", ms=3, lw=0.9, color=DIAGNOSED_COLOR)
+    if np.isfinite(c.offset_ref_sd_s):
+        s_ref = c.offset_ref_sd_s * ms
+        ax_p.axvspan(-s_ref, s_ref, color=EGPI_COLOR, alpha=0.25, lw=0, label="stated ±1 sd")
+    ax_p.axvline(0.0, color=EGPI_COLOR, lw=1.0)
+    ax_p.set(
+        xlabel="offset at t_ref − stated (ms)",
+        ylabel="model residual sum of squares (deg²)",
+        title="model method: offset profile",
+    )
+    ax_p.grid(True, lw=0.4, alpha=0.5)
+    ax_p.legend(fontsize=7, loc="upper center")

@@ -103,16 +103,42 @@ def recommend(
     ``pick_after_fit``)."""
     name = str(d.get("name", "dataset"))
     support = supported_range(d, pred)
+    cands = _holdout_candidates(d)
+    if not cands:
+        return Recommendation(
+            name, None, float("nan"), "no converged model with a held-out error", support
+        )
+    best, why = _preferred_model(cands, choice)
+    why.append(_identification_note(d, best))
+    info = kind_info(best) if best in ALL_KINDS else None
+    if info is not None and info.coupled:
+        why.append(
+            "it also reads the other motor's input: predict and compensate both axes together"
+        )
+    if "gpi" in cands and best != "gpi":
+        ratio = cands["gpi"] / cands[best] if cands[best] > 0 else float("nan")
+        if math.isfinite(ratio) and ratio > 1:
+            why.append(f"GPI is {fmt_sig(ratio, 2, pad=True)}x worse")
+    return Recommendation(name, best, cands[best], "; ".join(why) + ".", support)
+
+
+def _holdout_candidates(d: Mapping[str, Any]) -> dict[str, float]:
+    """Held-out RMSE (deg) of every converged model of :data:`FIT_MODELS` that has a
+    finite one, in that order."""
     cands = {
         k: _holdout(d, k)
         for k, _ in FIT_MODELS
         if k in d.get("models", {}) and not not_converged(d, k)
     }
-    cands = {k: v for k, v in cands.items() if math.isfinite(v)}
-    if not cands:
-        return Recommendation(
-            name, None, float("nan"), "no converged model with a held-out error", support
-        )
+    return {k: v for k, v in cands.items() if math.isfinite(v)}
+
+
+def _preferred_model(cands: Mapping[str, float], choice: Mapping | None) -> tuple[str, list[str]]:
+    """The recommended model among ``cands`` (held-out RMSE, deg) and the reasons so far.
+
+    The fit's default model when it was picked after fitting and converged; else the
+    lowest held-out RMSE, EGPI_C preferred over EGPI within :data:`CONTINUOUS_MARGIN`.
+    """
     best = min(cands, key=cands.__getitem__)
     ranked = sorted(cands.items(), key=lambda kv: kv[1])
     why = [f"lowest held-out RMSE ({fmt_sig(cands[best], 2, pad=True)} deg"]
@@ -141,27 +167,21 @@ def recommend(
             why.append("EGPI's output steps at the flag point (mind it when inverting)")
     elif best == "egpi":
         why.append("its output steps at the flag point (mind it when inverting)")
+    return best, why
+
+
+def _identification_note(d: Mapping[str, Any], best: str) -> str:
+    """Which fitted parameters of model ``best`` the data do not identify, or that all
+    are identified (profiled ones named)."""
     bad = unidentified(d, best)
     free = d["models"][best].get("free") or d["models"][best].get("params") or []
     n_free = len([n for n in free if n not in PROFILED_PARAMS])
     if bad:
-        why.append(
+        return (
             f"{len(bad)} parameter(s) not identified by these data ({', '.join(bad)}): "
             "trust the predictions, not those values"
         )
-    else:
-        profiled = [n for n in free if n in PROFILED_PARAMS]
-        why.append(
-            f"all {n_free} fitted parameters identified"
-            + (f" ({', '.join(profiled)} profiled)" if profiled else "")
-        )
-    info = kind_info(best) if best in ALL_KINDS else None
-    if info is not None and info.coupled:
-        why.append(
-            "it also reads the other motor's input: predict and compensate both axes together"
-        )
-    if "gpi" in cands and best != "gpi":
-        ratio = cands["gpi"] / cands[best] if cands[best] > 0 else float("nan")
-        if math.isfinite(ratio) and ratio > 1:
-            why.append(f"GPI is {fmt_sig(ratio, 2, pad=True)}x worse")
-    return Recommendation(name, best, cands[best], "; ".join(why) + ".", support)
+    profiled = [n for n in free if n in PROFILED_PARAMS]
+    return f"all {n_free} fitted parameters identified" + (
+        f" ({', '.join(profiled)} profiled)" if profiled else ""
+    )

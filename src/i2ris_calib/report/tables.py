@@ -535,22 +535,45 @@ def grouped_params_table(
     column per tendon and coupling side (:data:`PARAM_GROUPS`), a ``whole axis``
     column for the parameters shared by all (``theta0``). Cells as :func:`param_cell`.
     """
-    info = info or {}
     rec = dataset["models"][key]
     names = list(rec.get("params") or {})
-    units = rec.get("units") if isinstance(rec.get("units"), Mapping) else {}
     labels = dict(PARAM_GROUPS)
     groups = [g for g in GROUP_ORDER if any(param_group(n)[1] == g for n in names)]
     shared = [n for n in names if param_group(n)[1] is None]
-    bases: list[str] = []
+    rows, notes = _grouped_rows(rec, names, groups, info or {})
+    value_cols = ([SHARED_COLUMN] if shared else []) + [labels[g] for g in groups]
+    label = kind_info(key).report_name if key in ALL_KINDS else key
+    return Table(
+        header=("parameter", "unit", *value_cols, "meaning"),
+        rows=tuple(rows),
+        group_header=(("", 2), (f"{label} (value ± stderr)", len(value_cols)), ("", 1)),
+        align=("l", "l", *("r" * len(value_cols)), "l"),
+        caption=_grouped_caption(dataset, label, len(names), groups),
+        footnotes=tuple(f"[{i + 1}] {t}" for i, t in enumerate(notes)),
+    )
+
+
+def _grouped_members(names: list[str]) -> dict[str, list[str]]:
+    """GPI parameter base name -> its per-part names (``a1`` -> ``a1_p``, ``a1_n``, ...),
+    bases in order of first appearance; shared parameters left out."""
     members: dict[str, list[str]] = {}
     for n in names:
         base, g = param_group(n)
         if g is not None:
-            if base not in members:
-                bases.append(base)
-                members[base] = []
-            members[base].append(n)
+            members.setdefault(base, []).append(n)
+    return members
+
+
+def _grouped_rows(
+    rec: Mapping[str, Any],
+    names: list[str],
+    groups: list[str],
+    info: Mapping[str, tuple[str, str]],
+) -> tuple[list[tuple[str, ...]], list[str]]:
+    """Rows of :func:`grouped_params_table` (parameter, unit, shared cell if any, one
+    cell per part in ``groups``, meaning) and the footnotes the meanings refer to."""
+    units = rec.get("units") if isinstance(rec.get("units"), Mapping) else {}
+    shared = [n for n in names if param_group(n)[1] is None]
     rows, notes = [], []
 
     def meaning(name: str, grouped: bool) -> str:
@@ -567,19 +590,17 @@ def grouped_params_table(
     for n in shared:
         cells = [param_cell(rec, n)] + [DASH] * len(groups)
         rows.append((n, unit(n), *cells, meaning(n, False)))
-    for b in bases:
-        first = members[b][0]
+    for b, parts in _grouped_members(names).items():
         cells = [DASH] if shared else []
         cells += [param_cell(rec, b + g) if b + g in names else DASH for g in groups]
-        rows.append((b, unit(first), *cells, meaning(first, True)))
-    value_cols = ([SHARED_COLUMN] if shared else []) + [labels[g] for g in groups]
-    label = kind_info(key).report_name if key in ALL_KINDS else key
-    return Table(
-        header=("parameter", "unit", *value_cols, "meaning"),
-        rows=tuple(rows),
-        group_header=(("", 2), (f"{label} (value ± stderr)", len(value_cols)), ("", 1)),
-        align=("l", "l", *("r" * len(value_cols)), "l"),
-        caption=f"{_dataset_label(dataset)}: {label}, {len(names)} parameters: one GPI "
+        rows.append((b, unit(parts[0]), *cells, meaning(parts[0], True)))
+    return rows, notes
+
+
+def _grouped_caption(dataset: Mapping[str, Any], label: str, n_params: int, groups) -> str:
+    """Caption of :func:`grouped_params_table`: what rows, columns and cells mean."""
+    return (
+        f"{_dataset_label(dataset)}: {label}, {n_params} parameters: one GPI "
         "per tendon"
         + (
             " and per side of the other motor (coupling)"
@@ -590,8 +611,7 @@ def grouped_params_table(
         f"<row>_n, <row>_cp, <row>_cn); {SHARED_COLUMN} = shared by every part. Value ± "
         "one standard error from the Jacobian; not identified = the standard error "
         "exceeds the value or the data do not determine it; fixed = held at its value; "
-        "— = not in that part.",
-        footnotes=tuple(f"[{i + 1}] {t}" for i, t in enumerate(notes)),
+        "— = not in that part."
     )
 
 
@@ -841,22 +861,37 @@ def clock_table(view: Any, sync: Mapping[str, Any]) -> Table:
     sync : mapping
         Parsed sync.json.
     """
+    return Table(
+        header=("quantity", "value"),
+        rows=tuple(_clock_rows(view) + _synced_rows(sync, view.clock)),
+        align=("l", "l"),
+        caption="t_ctrl = offset + (1 + drift 1e-6) t_cam (controller clock from camera "
+        "clock); ± one standard error. The stated error of the clock at any time follows "
+        "from the offset's and the drift's (it grows away from t_ref). The raw sync.json "
+        "is in the appendix.",
+    )
+
+
+def _drift_text(line: Any) -> str:
+    """Drift ± stderr (ppm) of a clock line, or its held value when not fitted."""
+    if math.isfinite(line.drift_sd_ppm):
+        return fmt_pm(line.drift_ppm, line.drift_sd_ppm) + " ppm"
+    return f"{fmt_sig(line.drift_ppm, 3)} ppm (held, not fitted)"
+
+
+def _clock_rows(view: Any) -> list[tuple[str, str]]:
+    """(quantity, value) rows of the clock itself: method, offset at ``t_ref`` (s),
+    drift (ppm), stated error (ms), each method's clock alone, event - model, edges."""
     c = view.clock
     worst, t_worst = view.worst_sd()
     ms = lambda x: fmt_sig(1e3 * x, 2)  # noqa: E731
-
-    def drift_text(line) -> str:
-        if math.isfinite(line.drift_sd_ppm):
-            return fmt_pm(line.drift_ppm, line.drift_sd_ppm) + " ppm"
-        return f"{fmt_sig(line.drift_ppm, 3)} ppm (held, not fitted)"
-
     rows = [
         ("method used (asked)", f"{view.method} ({view.requested})"),
         (
             f"offset at t_cam = {fmt_sig(c.t_ref_s, 4)} s",
             fmt_pm(c.offset_ref_s, c.offset_ref_sd_s) + " s",
         ),
-        ("drift", drift_text(c)),
+        ("drift", _drift_text(c)),
         (
             "stated clock error, 1 sd: middle / worst",
             f"{ms(c.offset_ref_sd_s)} ms / {ms(worst)} ms (at t_cam = {fmt_sig(t_worst, 3)} s)",
@@ -866,7 +901,7 @@ def clock_table(view: Any, sync: Mapping[str, Any]) -> Table:
         rows.append(
             (
                 f"{line.label}: offset at t_cam = {fmt_sig(line.t_ref_s, 4)} s; drift",
-                f"{fmt_pm(line.offset_ref_s, line.offset_ref_sd_s)} s; {drift_text(line)}",
+                f"{fmt_pm(line.offset_ref_s, line.offset_ref_sd_s)} s; {_drift_text(line)}",
             )
         )
     if math.isfinite(view.z):
@@ -878,12 +913,18 @@ def clock_table(view: Any, sync: Mapping[str, Any]) -> Table:
                 f"{len(view.edges)} ({fmt(view.n_camera_edges)} / {fmt(view.n_log_edges)})",
             )
         )
-    rows.append(
+    return rows
+
+
+def _synced_rows(sync: Mapping[str, Any], c: Any) -> list[tuple[str, str]]:
+    """(quantity, value) rows of what sync.json reports besides the clock ``c``: frames
+    synced, glitches, plain cross-correlation (ms from the clock), time ranges (s)."""
+    rows = [
         (
             "frames synced / outside the encoder log",
             f"{fmt(sync.get('n_rows'))} / {fmt(sync.get('n_dropped_outside_log'))}",
         )
-    )
+    ]
     glitches = sync.get("encoder_glitches")
     if isinstance(glitches, Mapping):
         rows.append(("encoder glitches replaced", fmt(glitches.get("n_samples"))))
@@ -900,15 +941,7 @@ def clock_table(view: Any, sync: Mapping[str, Any]) -> Table:
         rng = sync.get(key)
         if isinstance(rng, list) and len(rng) == 2:
             rows.append((f"{label} time range (s)", f"{fmt_sig(rng[0], 4)} – {fmt_sig(rng[1], 4)}"))
-    return Table(
-        header=("quantity", "value"),
-        rows=tuple(rows),
-        align=("l", "l"),
-        caption="t_ctrl = offset + (1 + drift 1e-6) t_cam (controller clock from camera "
-        "clock); ± one standard error. The stated error of the clock at any time follows "
-        "from the offset's and the drift's (it grows away from t_ref). The raw sync.json "
-        "is in the appendix.",
-    )
+    return rows
 
 
 def provenance_table(label: str, prov: Mapping[str, Any]) -> Table:

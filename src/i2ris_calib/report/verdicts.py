@@ -49,44 +49,9 @@ def clock_verdicts(
         95th percentile of the angular speed (deg/s), NaN when unknown.
     """
     out = [Verdict(f"Clock from '{view.method}' (asked: {view.requested}): {view.why}.", "info")]
-    worst, t_worst = view.worst_sd()
-    mid = view.clock.offset_ref_sd_s
-    if math.isfinite(worst):
-        text = (
-            f"Stated clock error at most {_ms(worst)} (1 sd; {_ms(2 * worst)} at 2 sd) anywhere "
-            f"in the recording (largest at t_cam = {fmt_sig(t_worst, 3)} s), {_ms(mid)} in the "
-            "middle"
-        )
-        status = "info"
-        if math.isfinite(rate_deg_s):
-            effect = 2 * worst * rate_deg_s
-            ok = effect <= CLOCK_ANGLE_OK_DEG
-            text += (
-                f"; at the 95th-percentile angular speed ({fmt_sig(rate_deg_s, 2)} deg/s) that "
-                f"moves a sample by up to {fmt_sig(effect, 2)} deg at 2 sd, "
-                + (
-                    f"negligible (< {CLOCK_ANGLE_OK_DEG} deg)"
-                    if ok
-                    else f"above {CLOCK_ANGLE_OK_DEG} deg: clock error shows in the fits"
-                )
-            )
-            status = "ok" if ok else "warn"
-        out.append(Verdict(text + ".", status))
-    else:
-        out.append(Verdict("sync.json states no standard error for the clock.", "warn"))
+    out.append(_stated_error_verdict(view, rate_deg_s))
     if view.edges:
-        z = np.array([abs(e.residual_s) / e.sd_s if e.sd_s > 0 else np.inf for e in view.edges])
-        rms = float(np.sqrt(np.mean([e.residual_s**2 for e in view.edges])))
-        far = int((z > EDGE_Z_OK).sum())
-        seen = f" of {view.n_camera_edges} seen in the video" if view.n_camera_edges else ""
-        text = (
-            f"{len(view.edges)} flash edges matched{seen}; residuals rms {_ms(rms)}, largest "
-            f"{fmt_sig(float(np.max(z)), 2)} sd"
-        )
-        if far:
-            out.append(Verdict(f"{text}: {far} beyond {EDGE_Z_OK:g} sd of the clock.", "warn"))
-        else:
-            out.append(Verdict(f"{text}: all within {EDGE_Z_OK:g} sd of the clock.", "ok"))
+        out.append(_flash_edge_verdict(view))
     if math.isfinite(view.z):
         agree = abs(view.z) <= 3
         out.append(
@@ -103,6 +68,52 @@ def clock_verdicts(
     out += _axis_verdict(sync.get("axis_check"))
     out.append(_coverage_verdict(sync))
     return out
+
+
+def _stated_error_verdict(view: ClockView, rate_deg_s: float) -> Verdict:
+    """The stated clock error (ms, 1 and 2 sd) at worst and in the middle and, when the
+    95th-percentile angular speed ``rate_deg_s`` (deg/s) is known, the angle error it can
+    cause (deg) against :data:`CLOCK_ANGLE_OK_DEG`."""
+    worst, t_worst = view.worst_sd()
+    mid = view.clock.offset_ref_sd_s
+    if not math.isfinite(worst):
+        return Verdict("sync.json states no standard error for the clock.", "warn")
+    text = (
+        f"Stated clock error at most {_ms(worst)} (1 sd; {_ms(2 * worst)} at 2 sd) anywhere "
+        f"in the recording (largest at t_cam = {fmt_sig(t_worst, 3)} s), {_ms(mid)} in the "
+        "middle"
+    )
+    status = "info"
+    if math.isfinite(rate_deg_s):
+        effect = 2 * worst * rate_deg_s
+        ok = effect <= CLOCK_ANGLE_OK_DEG
+        text += (
+            f"; at the 95th-percentile angular speed ({fmt_sig(rate_deg_s, 2)} deg/s) that "
+            f"moves a sample by up to {fmt_sig(effect, 2)} deg at 2 sd, "
+            + (
+                f"negligible (< {CLOCK_ANGLE_OK_DEG} deg)"
+                if ok
+                else f"above {CLOCK_ANGLE_OK_DEG} deg: clock error shows in the fits"
+            )
+        )
+        status = "ok" if ok else "warn"
+    return Verdict(text + ".", status)
+
+
+def _flash_edge_verdict(view: ClockView) -> Verdict:
+    """Matched flash edges: rms residual (ms), largest residual in sd, and how many lie
+    beyond :data:`EDGE_Z_OK` sd of the clock."""
+    z = np.array([abs(e.residual_s) / e.sd_s if e.sd_s > 0 else np.inf for e in view.edges])
+    rms = float(np.sqrt(np.mean([e.residual_s**2 for e in view.edges])))
+    far = int((z > EDGE_Z_OK).sum())
+    seen = f" of {view.n_camera_edges} seen in the video" if view.n_camera_edges else ""
+    text = (
+        f"{len(view.edges)} flash edges matched{seen}; residuals rms {_ms(rms)}, largest "
+        f"{fmt_sig(float(np.max(z)), 2)} sd"
+    )
+    if far:
+        return Verdict(f"{text}: {far} beyond {EDGE_Z_OK:g} sd of the clock.", "warn")
+    return Verdict(f"{text}: all within {EDGE_Z_OK:g} sd of the clock.", "ok")
 
 
 def _axis_verdict(check: Any) -> list[Verdict]:

@@ -200,10 +200,7 @@ def camera_edges(
     list of CameraEdge
         Empty when the grey level never jumps by ``flash_min_contrast_gray``.
     """
-    ok = np.isfinite(t_s) & np.isfinite(gray)
-    t, g = np.asarray(t_s, float)[ok], np.asarray(gray, float)[ok]
-    order = np.argsort(t)
-    t, g = t[order], g[order]
+    t, g = _finite_sorted(t_s, gray)
     if t.size < 4:
         return []
     dark, bright = two_level_split(g)
@@ -214,48 +211,115 @@ def camera_edges(
     exposures = exposure_candidates(cfg.exposure_s, interval)
     change = np.flatnonzero(on[1:] != on[:-1]) + 1  # first frame of each new run
     bounds = np.concatenate([[0], change, [t.size]])
-    found = []
-    for i, k in enumerate(change):
-        rising = bool(on[k])
-        if not rising and not cfg.use_falling_edges:
-            continue
-        before = np.arange(bounds[i], k)  # run before the edge
-        after = np.arange(k, bounds[i + 2])  # run after the edge
-        # steady frames: drop run ends that may straddle an edge
-        win_before = before[(1 if i > 0 else 0) : -1][-LEVEL_FRAMES:]
-        win_after = after[1 : (-1 if i + 2 < bounds.size - 1 else None)][:LEVEL_FRAMES]
-        # frames near the edge, excluding frames that may straddle the neighbouring edges
-        lo_b = bounds[i] + (1 if i > 0 else 0)
-        hi_b = bounds[i + 2] - (1 if i + 2 < bounds.size - 1 else 0)
-        idx = np.arange(max(k - 3, lo_b), min(k + 3, hi_b))
-        # levels at each of those frames: the scene's grey level drifts while the tip moves
-        lvl_before, var_b = _level(t, g, win_before, t[idx], dark if rising else bright)
-        lvl_after, var_a = _level(t, g, win_after, t[idx], bright if rising else dark)
-        found.append((rising, idx, lvl_before, lvl_after, max(var_b, var_a)))
+    found = [
+        _edge_levels(t, g, bounds, i, bool(on[k]), (dark, bright))
+        for i, k in enumerate(change)
+        if on[k] or cfg.use_falling_edges
+    ]
     noise = level_noise_sd(t, g, bounds, change)
-    edges = []
-    for rising, idx, lvl_before, lvl_after, var in found:
-        lo_lvl, hi_lvl = (lvl_before, lvl_after) if rising else (lvl_after, lvl_before)
-        contrast = float(np.min(hi_lvl - lo_lvl))
-        if contrast < cfg.flash_min_contrast_gray:
-            continue
-        frac = (g[idx] - lo_lvl) / (hi_lvl - lo_lvl)
-        frac_sd = noise / contrast * np.sqrt(1.0 + var)
-        te, sd = subframe_edge_time(t[idx], frac, frac_sd, exposures, cfg.frame_time_ref, rising)
-        edges.append(
-            CameraEdge(
-                te,
-                sd,
-                rising,
-                camera,
-                frames_t_s=t[idx],
-                frac=frac,
-                frac_sd=float(frac_sd),
-                exposures_s=exposures,
-                ref=cfg.frame_time_ref,
-            )
-        )
-    return edges
+    edges = [_timed_edge(t, g, levels, noise, exposures, camera, cfg) for levels in found]
+    return [e for e in edges if e is not None]
+
+
+def _finite_sorted(t_s: np.ndarray, gray: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Frames with finite time and grey level, in time order.
+
+    Returns
+    -------
+    t, g : ndarray, shape (m,)
+        Camera-clock times (s) and mean grey levels (0-255), ``m <= n``.
+    """
+    ok = np.isfinite(t_s) & np.isfinite(gray)
+    t, g = np.asarray(t_s, float)[ok], np.asarray(gray, float)[ok]
+    order = np.argsort(t)
+    return t[order], g[order]
+
+
+def _edge_levels(
+    t: np.ndarray,
+    g: np.ndarray,
+    bounds: np.ndarray,
+    i: int,
+    rising: bool,
+    dark_bright: tuple[float, float],
+) -> tuple[bool, np.ndarray, np.ndarray, np.ndarray, float]:
+    """Frames near edge ``i`` and the grey levels before and after it at those frames.
+
+    Parameters
+    ----------
+    t, g : ndarray, shape (m,)
+        Frame times (camera clock, s) and grey levels, time-ordered.
+    bounds : ndarray, shape (n_edges + 2,)
+        First frame of each lit/dark run, then ``m``; edge ``i`` starts run ``i + 1``.
+    i : int
+        Edge index.
+    rising : bool
+        LED switched on at this edge.
+    dark_bright : tuple of float
+        Recording-wide dark and bright levels, used when a run has no steady frame.
+
+    Returns
+    -------
+    rising : bool
+        As given.
+    idx : ndarray of int, shape (k,)
+        Frames near the edge (up to 3 each side), not straddling a neighbouring edge.
+    lvl_before, lvl_after : ndarray, shape (k,)
+        Level of the run before and after the edge at each of those frames (grey).
+    var : float
+        Larger variance of the two levels, in units of the per-frame noise variance.
+    """
+    dark, bright = dark_bright
+    k = bounds[i + 1]
+    before = np.arange(bounds[i], k)  # run before the edge
+    after = np.arange(k, bounds[i + 2])  # run after the edge
+    # steady frames: drop run ends that may straddle an edge
+    win_before = before[(1 if i > 0 else 0) : -1][-LEVEL_FRAMES:]
+    win_after = after[1 : (-1 if i + 2 < bounds.size - 1 else None)][:LEVEL_FRAMES]
+    # frames near the edge, excluding frames that may straddle the neighbouring edges
+    lo_b = bounds[i] + (1 if i > 0 else 0)
+    hi_b = bounds[i + 2] - (1 if i + 2 < bounds.size - 1 else 0)
+    idx = np.arange(max(k - 3, lo_b), min(k + 3, hi_b))
+    # levels at each of those frames: the scene's grey level drifts while the tip moves
+    lvl_before, var_b = _level(t, g, win_before, t[idx], dark if rising else bright)
+    lvl_after, var_a = _level(t, g, win_after, t[idx], bright if rising else dark)
+    return rising, idx, lvl_before, lvl_after, max(var_b, var_a)
+
+
+def _timed_edge(
+    t: np.ndarray,
+    g: np.ndarray,
+    levels: tuple[bool, np.ndarray, np.ndarray, np.ndarray, float],
+    noise: float,
+    exposures: tuple[float, ...],
+    camera: str,
+    cfg: SyncConfig,
+) -> CameraEdge | None:
+    """The edge with its sub-frame time from the lit fractions of the frames near it.
+
+    ``levels`` is what :func:`_edge_levels` returns; ``noise`` the per-frame grey
+    noise sd; ``exposures`` the exposure candidates (s). None when the contrast at
+    some frame is below ``cfg.flash_min_contrast_gray``.
+    """
+    rising, idx, lvl_before, lvl_after, var = levels
+    lo_lvl, hi_lvl = (lvl_before, lvl_after) if rising else (lvl_after, lvl_before)
+    contrast = float(np.min(hi_lvl - lo_lvl))
+    if contrast < cfg.flash_min_contrast_gray:
+        return None
+    frac = (g[idx] - lo_lvl) / (hi_lvl - lo_lvl)
+    frac_sd = noise / contrast * np.sqrt(1.0 + var)
+    te, sd = subframe_edge_time(t[idx], frac, frac_sd, exposures, cfg.frame_time_ref, rising)
+    return CameraEdge(
+        te,
+        sd,
+        rising,
+        camera,
+        frames_t_s=t[idx],
+        frac=frac,
+        frac_sd=float(frac_sd),
+        exposures_s=exposures,
+        ref=cfg.frame_time_ref,
+    )
 
 
 def level_noise_sd(t: np.ndarray, g: np.ndarray, bounds: np.ndarray, change: np.ndarray) -> float:

@@ -1,16 +1,22 @@
 """Reference online compensator in plain Python (no numpy, no numba): the spec a C++ /
 ROS implementer follows. It loads the JSON of ``Compensator.to_json`` (schema
-``i2ris-calib.compensator/1``, docs/compensate.md "Online use") and steps exactly as
-``i2ris_calib.compensation.kernel._step`` does; test_online.py checks it to 1e-9.
+``i2ris-calib.compensator/2``, or ``/1`` without delay and coupling; docs/compensate.md
+"Online use") and steps exactly as ``i2ris_calib.compensation.kernel`` does (``_step``,
+``step_one``, ``step_pair``, ``advance``); test_online.py checks it to 1e-9.
 
 Per axis: ``c`` envelope coefficients (gpi/egpi/egpi_c: a1..a6; agpi: a1..a4 of side p,
 a1..a4 of side n, theta0), ``r``/``p`` thresholds and weights (agpi: side p then side n),
 ``kappa``, ``v_f`` (null = inf), ``deadband_counts``, ``v_limits``, ``max_counts_per_s``
-(null = none), ``quantum``, ``tol_deg``, ``sign`` and ``state``.
+(null = none), ``quantum``, ``tol_deg``, ``sign``, ``delay_s`` (the target a step gets
+is the angle wanted that long after it: nothing else changes), ``coupling`` (null, or
+a two-tendon GPI ``c``/``r``/``p`` on the other motor's signed counts, whose output is
+added to this axis's: the step inverts its own tendons on the target less it) and
+``state``.
 """
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 
@@ -42,6 +48,19 @@ def _side(v_prev, u, init):
 class Axis:
     def __init__(self, a):
         self.kind = a["kernel_kind"]
+        self.coupling = None
+        if a.get("coupling") is not None:  # a two-tendon GPI on the other motor's counts
+            cp, sc = a["coupling"], a["state"]["coupling"]
+            self.coupling = Axis({
+                "kernel_kind": AGPI, "c": cp["c"], "r": cp["r"], "p": cp["p"], "kappa": 1.0,
+                "v_f": None, "deadband_counts": 0.0, "v_limits": [-math.inf, math.inf],
+                "max_counts_per_s": None, "quantum": 0.0, "tol_deg": 0.0, "sign": 1.0,
+                "state": {"operators": [sc["operators"], [0.0] * len(cp["p"])],
+                          "direction": 1, "anchor": sc["other_counts"],
+                          "last_input": sc["other_counts"], "last_output_deg": sc["coupling_deg"],
+                          "init": False, "last_move_s": 0.0, "time_s": 0.0},
+            })  # fmt: skip
+        self.last = (0.0, 0.0, 0, 0.0)  # command, output (robot sign), status, coupling
         self.c, self.r, self.p = list(a["c"]), list(a["r"]), list(a["p"])
         self.kappa = a["kappa"]
         self.vf = math.inf if a["v_f"] is None else a["v_f"]
@@ -107,6 +126,44 @@ class Axis:
         fam = self.select(u, init)
         return self.family(fam, self.w[fam], [0.0] * len(self.p), u, _side(self.v_prev, u, init))
 
+    def slope(self, fam, u, side):
+        """d output / d input of the piece at ``u`` (kernel._slope): the weights of the
+        operators that move with the input, times the envelope's slope."""
+        c, r, p, w = self.c, self.r, self.p, self.w[fam]
+
+        def moving(off, m, a, g, kr, g1, up):
+            acc = 0.0
+            for i in range(off, off + m):
+                if (g - r[i] >= w[i]) if up else (g + kr * r[i] <= min(g1 + r[i], w[i])):
+                    acc += p[i]
+            return a * acc
+
+        if self.kind == AGPI:
+            m = len(p) // 2
+            if u > 0.0 or (u == 0.0 and side == DOWN):
+                sp = _side(max(self.v_prev, 0.0), u, False)
+                if sp == HOLD:
+                    return 0.0
+                a, b = (c[0], c[1]) if sp == UP else (c[2], c[3])
+                return moving(0, m, a, a * u + b, 1.0, math.inf, sp == UP)
+            sn = _side(max(-self.v_prev, 0.0), -u, False)
+            if sn == HOLD:
+                return 0.0
+            a, b = (c[4], c[5]) if sn == UP else (c[6], c[7])
+            return moving(m, m, a, a * -u + b, 1.0, math.inf, sn == UP)
+        if side == UP:
+            return moving(0, len(p), c[0], c[0] * u + c[1], 1.0, math.inf, True)
+        g1 = math.inf
+        if self.kind == EGPI_C:
+            a, b, kr = (c[2], c[3], 1.0) if u > self.vf else (c[4], c[5], self.kappa)
+            if self.v_prev > self.vf >= u:
+                g1 = c[2] * self.vf + c[3]
+        elif fam == 1:
+            a, b, kr = c[4], c[5], self.kappa
+        else:
+            a, b, kr = c[2], c[3], 1.0
+        return moving(0, len(p), a, a * u + b, kr, g1, False)
+
     def root(self, fam, side, lo, hi, target):
         scratch = [0.0] * len(self.p)
 
@@ -120,6 +177,22 @@ class Axis:
         if target >= fhi:
             return hi
         tol_y = 1e-12 * max(1.0, abs(target))
+        if side in (UP, DOWN):  # Newton on the piecewise linear output (kernel._root)
+            x, fx = (hi, fhi) if side == UP else (lo, flo)
+            for _ in range(16):
+                s = self.slope(fam, x, side)
+                if not s > 0.0:
+                    break
+                xn = x - (fx - target) / s
+                if not lo < xn < hi:
+                    break
+                x, fx = xn, f(xn)
+                if abs(fx - target) <= tol_y:
+                    return x
+                if fx < target:
+                    lo, flo = x, fx
+                else:
+                    hi, fhi = x, fx
         bisect = False
         for _ in range(200):
             width = hi - lo
@@ -166,8 +239,41 @@ class Axis:
     def candidate(self, x, tk, init):
         return (x, abs(self.exact(x, init) - tk), init or self.direction(x, init)[0] == self.d)
 
-    def step(self, target_robot_deg, dt):
-        tk = self.sign * target_robot_deg
+    def apply(self, u, init):
+        """The state update of input ``u`` (every family, then v'); the output after it."""
+        side = _side(self.v_prev, u, init)
+        for f in range(2 if self.kind == EGPI else 1):
+            new = [0.0] * len(self.p)
+            self.family(f, self.w[f], new, u, side)
+            self.w[f] = new
+        fam = self.select(u, init)
+        self.d, self.anchor = self.direction(u, init)
+        if self.kind == AGPI:
+            m = len(self.p) // 2
+            y = self.c[8]
+            for i in range(2 * m):
+                y += (1.0 if i < m else -1.0) * self.p[i] * self.w[0][i]
+        else:
+            y = sum(pi * wi for pi, wi in zip(self.p, self.w[fam], strict=True))
+        self.v_prev, self.y_prev, self.init = u, y, False
+        return y
+
+    def advance(self, counts, other_counts, dt):
+        """Carry the state through signed counts already sent (kernel.advance)."""
+        for k, v in enumerate(counts):
+            self.apply(self.sign * v, self.init)
+            if self.coupling is not None:
+                self.coupling.apply(other_counts[k], False)
+            self.t += dt
+        self.t_move = self.t
+
+    def step(self, target_robot_deg, dt, other_counts=0.0):
+        """(signed counts, predicted angle, status) of one step (kernel.step_one);
+        ``other_counts``: the other motor's signed counts now (a coupled axis)."""
+        yc = 0.0
+        if self.coupling is not None:
+            yc = self.coupling.apply(other_counts, False)
+        tk = self.sign * target_robot_deg - yc
         t_k = self.t + dt
         init, v_prev, lo, hi, q = self.init, self.v_prev, self.lo, self.hi, self.q
         a_lim, b_lim = lo, hi
@@ -240,29 +346,58 @@ class Axis:
             best_q = qb if best_q > qb else qa
         # apply the command: every family, then v'
         u = best_q
-        side = _side(v_prev, u, init)
-        for f in range(2 if self.kind == EGPI else 1):
-            new = [0.0] * len(self.p)
-            self.family(f, self.w[f], new, u, side)
-            self.w[f] = new
-        fam = self.select(u, init)
-        self.d, self.anchor = self.direction(u, init)
-        if self.kind == AGPI:
-            m = len(self.p) // 2
-            y = self.c[8]
-            for i in range(2 * m):
-                y += (1.0 if i < m else -1.0) * self.p[i] * self.w[0][i]
-        else:
-            y = sum(pi * wi for pi, wi in zip(self.p, self.w[fam], strict=True))
+        y = self.apply(u, init)
         if u != v_prev or init:
             self.t_move = t_k
-        self.v_prev, self.y_prev, self.init, self.t = u, y, False, t_k
-        return self.sign * u, self.sign * y, stat
+        self.t = t_k
+        self.last = (self.sign * u, self.sign * (y + yc), stat, yc)
+        return self.last[:3]
+
+
+def step_pair(a, b, ta, tb, dt, rounds=8):
+    """Both axes of which at least one is coupled (kernel.step_pair): the uncoupled one
+    first; two coupled ones by Gauss-Seidel, each step from a copy of the state before
+    the sample, a given b's command, b given a's, a again, ..., until a step repeats its
+    axis's command (or 2 rounds steps). Returns ((counts, predicted, status, settled)
+    of a, of b)."""
+    if b.coupling is None:
+        b.step(tb, dt)
+        a.step(ta, dt, b.last[0])
+        return a.last[:3] + (True,), b.last[:3] + (True,)
+    if a.coupling is None:
+        a.step(ta, dt)
+        b.step(tb, dt, a.last[0])
+        return a.last[:3] + (True,), b.last[:3] + (True,)
+    save = {id(a): copy.deepcopy(a), id(b): copy.deepcopy(b)}
+
+    def restep(x, target, other_counts):
+        x.__dict__.update(copy.deepcopy(save[id(x)]).__dict__)
+        return x.step(target, dt, other_counts)[0]
+
+    ub = b.sign * b.v_prev
+    ua = restep(a, ta, ub)
+    n, done, last_a = 1, False, True
+    while n < 2 * rounds and not done:
+        if last_a:
+            u_new = restep(b, tb, ua)
+            done, ub = u_new == ub, u_new
+        else:
+            u_new = restep(a, ta, ub)
+            done, ua = u_new == ua, u_new
+        n += 1
+        last_a = not last_a
+    if not done:  # the axis stepped before the last follows the other's command sent
+        x, vo = (b, ua) if last_a else (a, ub)
+        x.coupling = copy.deepcopy(save[id(x)].coupling)
+        yc = x.coupling.apply(vo, False)
+        u, y, st, yc_old = x.last
+        x.last = (u, y + x.sign * (yc - yc_old), st, yc)
+    return a.last[:3] + (done,), b.last[:3] + (done,)
 
 
 def load(path):
     """{axis: Axis} of a compensator JSON."""
     with open(path, encoding="utf-8") as f:
         doc = json.load(f)
-    assert doc["schema"] == "i2ris-calib.compensator/1"
+    assert doc["schema"] in ("i2ris-calib.compensator/1", "i2ris-calib.compensator/2")
     return {name: Axis(a) for name, a in doc["axes"].items()}

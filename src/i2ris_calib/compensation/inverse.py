@@ -12,12 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 
 import i2ris_calib._display as _display
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation._args import check_args
-from i2ris_calib.compensation.kernel import _direction, _family, _select, _shown, _side
 from i2ris_calib.compensation.safety import entry_ramp, find_spikes
 from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
@@ -275,6 +273,24 @@ def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float
     )
 
 
+def coupling_params(model) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(c (9,), r, p (2 m,)) of a coupled model's coupling as a two-tendon GPI on the
+    other motor's signed counts (:data:`~.kernel.KIND_AGPI`: side p = ``cp``, side n =
+    ``cn``, ``theta0`` 0, the held signs folded into ``p``): its output is exactly the
+    coupling :func:`coupling_deg` gives. None for a model without coupling."""
+    base = base_of(model)
+    if not is_coupled(base):
+        return None
+    v = base.value_dict()
+    cs, rs, ps = [], [], []
+    for side in ("cp", "cn"):
+        r_s = thresholds(v[f"r1_{side}"], v[f"rn_{side}"], int(base.n))
+        rs.append(r_s)
+        ps.append(float(v[f"sign_{side}"]) * density(r_s, v[f"lam_{side}"], v[f"sigma_{side}"]))
+        cs += [v[f"{k}_{side}"] for k in ("a1", "a2", "a3", "a4")]
+    return np.array([*cs, 0.0], dtype=float), np.concatenate(rs), np.concatenate(ps)
+
+
 def default_tol(code: int, c: np.ndarray, p: np.ndarray, quantum: float) -> float:
     """Half the angle (deg) of one ``quantum`` on the steepest envelope:
     ``0.5 quantum max(a1, a3) sum p`` (for the two-tendon GPI the steeper side's)."""
@@ -344,58 +360,18 @@ def _check(target: np.ndarray, t: np.ndarray | None) -> None:
             )
 
 
-@njit(cache=True)
-def _advance(kind, c, r, p, kappa, vf, db, v, w, state):  # pragma: no cover - compiled
-    """Carry the inverse's state (operator states ``w`` (2, m) and ``state``, as
-    :func:`~.kernel.invert` keeps them) through the given inputs ``v``: the state update
-    the kernel's step applies after choosing a command (the forward recursion)."""
-    m = p.size
-    n_fam = 2 if kind == K.KIND_EGPI else 1
-    w_new = np.empty((2, m))
-    for k in range(v.size):
-        u = v[k]
-        dstate = int(state[0])
-        anchor = state[1]
-        v_prev = state[2]
-        init = state[4] != 0.0
-        side = _side(v_prev, u, init)
-        for f in range(n_fam):
-            _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
-            for i in range(m):
-                w[f, i] = w_new[f, i]
-        fam = _select(kind, dstate, anchor, u, db, vf, init)
-        dstate, anchor = _direction(dstate, anchor, u, db, init)
-        state[0] = dstate
-        state[1] = anchor
-        state[2] = u
-        state[3] = _shown(kind, w, fam, c, p)
-        state[4] = 0.0
-
-
-def _invert_after_history(
-    code, c, r, p, kappa, vf, db, goal, tt, lo, hi, rate, quantum, v_hist, tol_deg, hold,
-    first_free,
-):  # fmt: skip
-    """:func:`~.kernel.invert` from the state the inputs ``v_hist`` leave (the model's
-    initial state at ``v_hist[0]``, then one step per input), not from rest: the kernel's
-    own start and chunked loop with that state."""
+def history_state(code, c, r, p, kappa, vf, db, v_hist):
+    """The inverse's state (``w`` (2, m), ``state``) the inputs ``v_hist`` (shape (h,))
+    leave: the model's initial state at ``v_hist[0]``, then one step per input
+    (:func:`~.kernel.start`, :func:`~.kernel.advance`: the update the inverse applies,
+    also used by the online compensator's ``advance``)."""
     c, r, p = (np.ascontiguousarray(a, dtype=float) for a in (c, r, p))
-    n = goal.size
     w = np.zeros((2, p.size))
     state = np.zeros(K.STATE_SIZE)
-    K._invert_start(code, c, r, p, kappa, vf, db, float(v_hist[0]), True, w, state)
-    _advance(code, c, r, p, kappa, vf, db, np.ascontiguousarray(v_hist[1:], dtype=float), w, state)
-    state[5] = (tt[0] if n else 0.0) - (tt[1] - tt[0] if n > 1 else 1.0)  # last move
-    u_out, u_real, y_out = np.empty(n), np.empty(n), np.empty(n)
-    status = np.zeros(n, dtype=np.int8)
-    hold = np.ascontiguousarray(hold, dtype=np.bool_)
-    for k0 in range(0, n, K.CHUNK):
-        K._invert_chunk(
-            code, c, r, p, kappa, vf, db, goal, tt, lo, hi, rate, quantum, tol_deg,
-            k0, min(n, k0 + K.CHUNK), w, state, u_out, u_real, y_out, status, hold,
-            bool(first_free),
-        )  # fmt: skip
-    return u_out, u_real, y_out, status
+    v_hist = np.ascontiguousarray(v_hist, dtype=float)
+    K.start(code, c, r, p, kappa, vf, db, float(v_hist[0]), True, w, state)
+    K.advance(code, c, r, p, kappa, vf, db, v_hist[1:], w, state)
+    return w, state
 
 
 def _check_history(v_history, v_other_history, v_initial, lo, hi, coupled):
@@ -578,22 +554,22 @@ def compensate(
     first_free = bool(entry and has_init and np.isfinite(rate))
     hold = np.zeros(target.size, dtype=bool)
     spikes = np.zeros(0, dtype=int)
+    resume = K.Resume()  # a repair round re-inverts only what its new holds change
+    start = None  # from rest at v0, or from the state the history leaves
+    if hist is not None:
+        start = history_state(code, c, r, p, float(kappa), float(vf), float(db), hist)
     for _ in range(MAX_REPAIR_ROUNDS if repair_spikes else 1):
-        if hist is None:
-            u, u_real, y_model, status = K.invert(
-                code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
-                float(quantum), v0, has_init, float(tol_deg), hold=hold, first_free=first_free,
-            )  # fmt: skip
-        else:
-            u, u_real, y_model, status = _invert_after_history(
-                code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi,
-                rate, float(quantum), hist, float(tol_deg), hold, first_free,
-            )  # fmt: skip
+        u, u_real, y_model, status = K.invert(
+            code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
+            float(quantum), v0, has_init, float(tol_deg), hold=hold, first_free=first_free,
+            start_state=start, resume=resume,
+        )  # fmt: skip
         spikes = find_spikes(u, y_model, goal, float(tol_deg), hi - lo, float(quantum))
         new = spikes[~hold[spikes]]
         if not repair_spikes or new.size == 0:
             break
         hold[new] = True
+        resume.changed = new
     spikes_left = int(spikes.size) if not repair_spikes else int((~hold[spikes]).sum())
     ramp = np.zeros(0)
     ramp_t = np.zeros(0)

@@ -31,6 +31,19 @@ codes, ``w`` operator states (2, m) (family 1 only used by the paper's EGPI).
 :func:`invert` runs the compiled loop :data:`CHUNK` samples at a time, the state carried
 across calls that return nothing: a Ctrl-C is raised between two of them, in Python,
 never while numba converts returned arrays (that crashed: i2ris_calib/interrupts.py).
+
+The state API the batch (:mod:`.inverse`) and the online compensator (:mod:`.online`)
+share: :func:`start` (the model's state at rest at an input), :func:`advance` (carry a
+state through inputs already sent: the one state update, :func:`_update`, that the
+inverse also applies after choosing each command), ``invert(start_state=...)`` (invert
+from such a state) and :class:`Resume` (the spike repair re-inverts only what its new
+holds change). Online: :func:`step_one` (one axis; a coupled axis's coupling is advanced
+with the other motor's counts first), :func:`step_pair` (two axes solved jointly).
+
+Root finding (:func:`_root`): on a loading or unloading side the model output is
+piecewise linear in the input, convex when loading and concave when unloading, so Newton
+steps (:func:`_slope`) from the far end land on the root's piece exactly after as many
+steps as pieces crossed; safeguarded regula falsi finishes otherwise.
 """
 
 from __future__ import annotations
@@ -233,18 +246,106 @@ def _exact(
 
 
 @njit(cache=True)
+def _active_sum(w, off, m, a, b, r, p, kr, g1, up):  # pragma: no cover - compiled
+    """``a`` times the weights of the operators ``off .. off + m - 1`` that move with the
+    input at envelope value ``g = a u + b`` (passed as ``b``): loading ``g - r >= w``,
+    unloading ``g + kr r <= min(g1 + r, w)``."""
+    acc = 0.0
+    for i in range(off, off + m):
+        if up:
+            if b - r[i] >= w[i]:
+                acc += p[i]
+        elif b + kr * r[i] <= min(g1 + r[i], w[i]):
+            acc += p[i]
+    return a * acc
+
+
+@njit(cache=True)
+def _slope(kind, fam, w, c, r, p, kappa, vf, v_prev, u, side):  # pragma: no cover - compiled
+    """A slope (d output / d input) of family ``fam``'s output after one step to ``u``
+    on a loading or unloading side: the output is piecewise linear in ``u``, convex
+    when loading and concave when unloading (the envelopes are straight lines), and
+    this is the slope of the piece the moving operators at ``u`` define (one of the
+    two at a kink: a sub- or supergradient, which is what :func:`_root`'s Newton step
+    needs)."""
+    if kind == KIND_AGPI:
+        m = p.size // 2
+        if u > 0.0 or (u == 0.0 and side == SIDE_DOWN):
+            sp = _side(max(v_prev, 0.0), u, False)
+            if sp == SIDE_UP:
+                return _active_sum(w, 0, m, c[0], c[0] * u + c[1], r, p, 1.0, np.inf, True)
+            if sp == SIDE_DOWN:
+                return _active_sum(w, 0, m, c[2], c[2] * u + c[3], r, p, 1.0, np.inf, False)
+            return 0.0
+        un = -u
+        sn = _side(max(-v_prev, 0.0), un, False)
+        if sn == SIDE_UP:  # d(-Y_n(-u))/du = Y_n'(un)
+            return _active_sum(w, m, m, c[4], c[4] * un + c[5], r, p, 1.0, np.inf, True)
+        if sn == SIDE_DOWN:
+            return _active_sum(w, m, m, c[6], c[6] * un + c[7], r, p, 1.0, np.inf, False)
+        return 0.0
+    m = p.size
+    if side == SIDE_UP:
+        return _active_sum(w, 0, m, c[0], c[0] * u + c[1], r, p, 1.0, np.inf, True)
+    g1 = np.inf
+    if kind == KIND_EGPI_C:
+        if u > vf:
+            a, b, kr = c[2], c[3], 1.0
+        else:
+            a, b, kr = c[4], c[5], kappa
+        if v_prev > vf >= u:
+            g1 = c[2] * vf + c[3]
+    elif fam == 1:
+        a, b, kr = c[4], c[5], kappa
+    else:
+        a, b, kr = c[2], c[3], 1.0
+    return _active_sum(w, 0, m, a, a * u + b, r, p, kr, g1, False)
+
+
+#: Newton steps :func:`_root` tries before regula falsi
+NEWTON_STEPS = 16
+
+
+@njit(cache=True)
 def _root(
     kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, side, lo, hi, target
 ):  # pragma: no cover
     """Input in [lo, hi] where the (nondecreasing) family output meets ``target``:
-    the nearer end when the target is outside the range of the region."""
+    the nearer end when the target is outside the range of the region. Returns (input,
+    the family output there).
+
+    Loading and unloading sides: Newton steps on the piecewise linear output (convex
+    when loading, from ``hi``; concave when unloading, from ``lo``): each lands on the
+    root of the piece it starts from, so it ends on the root's piece exactly, after as
+    many steps as pieces crossed. Any step that leaves the bracket ends them; then (and
+    on the initial step) safeguarded regula falsi on the bracket."""
     flo = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, lo, side)
     if target <= flo:
-        return lo
+        return lo, flo
     fhi = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, hi, side)
     if target >= fhi:
-        return hi
+        return hi, fhi
     tol_y = 1e-12 * max(1.0, abs(target))
+    if side == SIDE_UP or side == SIDE_DOWN:
+        if side == SIDE_UP:
+            x, fx = hi, fhi
+        else:
+            x, fx = lo, flo
+        for _ in range(NEWTON_STEPS):
+            s = _slope(kind, fam, w, c, r, p, kappa, vf, v_prev, x, side)
+            if not s > 0.0:
+                break
+            xn = x - (fx - target) / s
+            if not (lo < xn < hi):
+                break
+            fx = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, xn, side)
+            x = xn
+            if abs(fx - target) <= tol_y:
+                return x, fx
+            if fx < target:
+                lo, flo = x, fx
+            else:
+                hi, fhi = x, fx
     bisect = False
     x = lo
     fx = flo
@@ -260,13 +361,15 @@ def _root(
                 x = 0.5 * (lo + hi)
         fx = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, x, side)
         if abs(fx - target) <= tol_y:
-            return x
+            return x, fx
         if fx < target:
             lo, flo = x, fx
         else:
             hi, fhi = x, fx
         bisect = (hi - lo) > 0.5 * width
-    return lo if abs(flo - target) <= abs(fhi - target) else hi
+    if abs(flo - target) <= abs(fhi - target):
+        return lo, flo
+    return hi, fhi
 
 
 @njit(cache=True)
@@ -321,7 +424,7 @@ STATE_SIZE = 6
 
 def invert(
     kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, v_init, has_init, tol_deg,
-    chunk=CHUNK, hold=None, first_free=False,
+    chunk=CHUNK, hold=None, first_free=False, start_state=None, resume=None,
 ):  # fmt: skip
     """Invert the model on ``target`` sample by sample.
 
@@ -333,9 +436,9 @@ def invert(
     Parameters
     ----------
     kind : int
-        ``KIND_GPI``, ``KIND_EGPI`` or ``KIND_EGPI_C``.
+        ``KIND_GPI``, ``KIND_EGPI``, ``KIND_EGPI_C`` or ``KIND_AGPI``.
     c : ndarray, shape (6,)
-        Envelope coefficients a1..a6.
+        Envelope coefficients a1..a6 (``KIND_AGPI``: shape (9,), see there).
     r, p : ndarray, shape (m,)
         Thresholds and weights.
     kappa, vf, db : float
@@ -369,6 +472,17 @@ def invert(
         With ``has_init``: the first step is not rate limited (the caller sends a
         rate-limited entry ramp from ``v_init`` before it: a monotone ramp leaves the
         same operator state as one step).
+    start_state : (ndarray (2, m), ndarray (STATE_SIZE,)), optional
+        Start from this state (operator states ``w`` and ``state`` as :func:`start`
+        and :func:`advance` leave them, e.g. after a command history) instead of
+        ``v_init`` / ``has_init`` (then ignored, except ``first_free`` needs
+        ``has_init``); copied, not changed.
+    resume : Resume, optional
+        Checkpoints of an earlier call on the same arguments but ``hold`` (filled by
+        every call given one; ``resume.changed``: the samples whose ``hold`` changed
+        since): only what the change reaches is inverted again (:class:`Resume`; the
+        spike repair of :func:`~i2ris_calib.compensation.inverse.compensate`); the
+        results are those of a whole inversion.
 
     Rate limit with whole counts: when ``max_rate`` allows less than one ``quantum``
     per sample, one quantum may move once ``max_rate`` times the time since the last
@@ -390,8 +504,6 @@ def invert(
     t = np.ascontiguousarray(t, dtype=float)
     c, r, p = (np.ascontiguousarray(a, dtype=float) for a in (c, r, p))
     n = target.size
-    w = np.zeros((2, p.size))
-    state = np.zeros(STATE_SIZE)
     u_out = np.empty(n)
     u_real = np.empty(n)
     y_out = np.empty(n)
@@ -399,28 +511,95 @@ def invert(
     kind, kappa, vf, db = int(kind), float(kappa), float(vf), float(db)
     lo, hi, max_rate, quantum, tol_deg = (float(x) for x in (lo, hi, max_rate, quantum, tol_deg))
     hold = np.zeros(n, np.bool_) if hold is None else np.ascontiguousarray(hold, dtype=np.bool_)
-    _invert_start(kind, c, r, p, kappa, vf, db, float(v_init), bool(has_init), w, state)
+    if start_state is None:
+        w = np.zeros((2, p.size))
+        state = np.zeros(STATE_SIZE)
+        start(kind, c, r, p, kappa, vf, db, float(v_init), bool(has_init), w, state)
+    else:
+        w = np.array(start_state[0], dtype=float).reshape(2, p.size)
+        state = np.array(start_state[1], dtype=float)[:STATE_SIZE].copy()
     state[_T_MOVE] = (t[0] if n else 0.0) - (t[1] - t[0] if n > 1 else 1.0)
     step = max(1, int(chunk))
-    for k0 in range(0, n, step):
+    outs = (u_out, u_real, y_out, status)
+    if resume is None:
+        for k0 in range(0, n, step):
+            _invert_chunk(
+                kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
+                k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status, hold,
+                bool(first_free),
+            )  # fmt: skip
+        return outs
+    step = min(step, RESUME_GRID)
+    old, old_res = resume.states, resume.results
+    valid = old_res is not None and resume.step == step and old_res[0].size == n
+    changed = np.sort(np.asarray(resume.changed, dtype=np.int64)) if valid else None
+    new_states: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    k0 = 0
+    while k0 < n:
+        if valid and k0 in old and _same(old[k0], w, state):
+            # from here the earlier call's results hold until the next changed sample
+            j = np.searchsorted(changed, k0)
+            k1 = min(n, (int(changed[j]) // step) * step if j < changed.size else n)
+            if k1 > k0:
+                for a_new, a_old in zip(outs, old_res, strict=True):
+                    a_new[k0:k1] = a_old[k0:k1]
+                for kk in range(k0, k1, step):
+                    new_states[kk] = old[kk]
+                if k1 >= n:
+                    break
+                w, state = (a.copy() for a in old[k1])
+                k0 = k1
+                continue
+        new_states[k0] = (w.copy(), state.copy())
         _invert_chunk(
             kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
             k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status, hold,
             bool(first_free),
         )  # fmt: skip
-    return u_out, u_real, y_out, status
+        k0 += step
+    resume.states, resume.results, resume.step = new_states, outs, step
+    resume.changed = np.zeros(0, dtype=np.int64)
+    return outs
+
+
+def _same(saved, w, state) -> bool:
+    """True when the state (``w``, ``state``) is exactly the ``saved`` one."""
+    return bool(np.array_equal(saved[0], w) and np.array_equal(saved[1], state))
+
+
+#: Samples between the checkpoints of a :class:`Resume`
+RESUME_GRID = 4096
+
+
+class Resume:
+    """Checkpoints of :func:`invert` for a re-inversion with a few changed ``hold``
+    samples (the spike repair): the state at every :data:`RESUME_GRID` samples and the
+    results of the last call; ``changed``: the samples whose ``hold`` changed since.
+    The next call re-inverts the grid cells from the first changed sample until its
+    state is again exactly the last call's at a grid point, copies the last call's
+    results up to the next changed sample's cell, and so on: the same results as a
+    whole inversion, for the cost of the cells the change reaches."""
+
+    def __init__(self) -> None:
+        self.states: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.results: tuple[np.ndarray, ...] | None = None
+        self.step = 0
+        self.changed = np.zeros(0, dtype=np.int64)
 
 
 @njit(cache=True)
-def _invert_start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # pragma: no cover
-    """The state before the first sample: operator states ``w`` (2, m) and ``state``
-    (``v'`` direction and anchor, previous input and output, whether the first command
-    sets the initial state), as :func:`invert` describes."""
+def start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # pragma: no cover
+    """The state before the first sample, written to ``w`` (2, m) (operator states)
+    and ``state`` (shape (>= :data:`STATE_SIZE`,): ``v'`` direction and anchor,
+    previous input and output, whether the first command sets the initial state, time
+    of the last move): with ``has_init`` the model's initial state at rest at
+    ``v_init``, else the first command sets it (:func:`invert`)."""
     state[_DSTATE] = 1.0
     state[_ANCHOR] = 0.0
     state[_V_PREV] = 0.0
     state[_Y_PREV] = 0.0
     state[_INIT] = 1.0
+    state[_T_MOVE] = 0.0
     if has_init:
         n_fam = 2 if kind == KIND_EGPI else 1
         for f in range(n_fam):
@@ -432,6 +611,48 @@ def _invert_start(kind, c, r, p, kappa, vf, db, v_init, has_init, w, state):  # 
         state[_V_PREV] = v_init
         state[_Y_PREV] = _shown(kind, w, fam, c, p)
         state[_INIT] = 0.0
+
+
+@njit(cache=True)
+def _update(kind, c, r, p, kappa, vf, db, u, w, w_new, state):  # pragma: no cover
+    """The state update of one input ``u`` (the forward recursion): every operator
+    family, ``v'``, previous input and output (``w`` and ``state`` in place; ``w_new``
+    (2, m) work space). Returns the model output after ``u`` (deg). The one update
+    :func:`_step` (after choosing a command) and :func:`advance` apply."""
+    m = p.size
+    n_fam = 2 if kind == KIND_EGPI else 1
+    dstate = int(state[_DSTATE])
+    anchor = state[_ANCHOR]
+    v_prev = state[_V_PREV]
+    init = state[_INIT] != 0.0
+    side = _side(v_prev, u, init)
+    for f in range(n_fam):
+        _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
+        for i in range(m):
+            w[f, i] = w_new[f, i]
+    fam = _select(kind, dstate, anchor, u, db, vf, init)
+    dstate, anchor = _direction(dstate, anchor, u, db, init)
+    y_new = _shown(kind, w, fam, c, p)
+    state[_DSTATE] = dstate
+    state[_ANCHOR] = anchor
+    state[_V_PREV] = u
+    state[_Y_PREV] = y_new
+    state[_INIT] = 0.0
+    return y_new
+
+
+@njit(cache=True)
+def advance(kind, c, r, p, kappa, vf, db, v, w, state):  # pragma: no cover - compiled
+    """Carry the state (``w`` (2, m), ``state`` as :func:`start` writes them; in
+    place) through the inputs ``v`` (shape (h,)) already sent: :func:`_update` per
+    input, the update the inverse applies after choosing a command. Returns the model
+    output after the last one (the previous output for an empty ``v``). The time of
+    the last move is left to the caller."""
+    w_new = np.empty((2, p.size))
+    y = state[_Y_PREV]
+    for k in range(v.size):
+        y = _update(kind, c, r, p, kappa, vf, db, v[k], w, w_new, state)
+    return y
 
 
 @njit(cache=True)
@@ -463,58 +684,187 @@ def _invert_chunk(
         status[k] = st
 
 
-@njit(cache=True)
-def step_one(kind, prm, mem, target, dt):  # pragma: no cover - compiled
-    """One online step (:class:`~i2ris_calib.compensation.online.Compensator`): the
-    batch's :func:`_step` on one target sample (deg), ``dt`` seconds after the previous
-    one. Two packed arrays keep the call cheap (:func:`pack`):
+# --------------------------------------------------------------------------- online
+# ``prm`` (parameters) and ``mem`` (state) of one axis of the online compensator, flat
+# float arrays (cheap to pass to a compiled call; :func:`pack`):
+#   prm = (len(c), M, kappa, v_f, dead band, lo, hi, max_rate, quantum, tol_deg, Mc,
+#          sign, c, r, p, [cc (9), cr (Mc), cp (Mc)])
+#   mem = (w (2 M, row-major), state (STATE_SIZE), time of the previous command (s),
+#          out (OUT_SIZE), [wc (2 Mc), cstate (STATE_SIZE)])
+# M = len(p); Mc = len(cp), 0 for an axis without coupling; cc, cr, cp the coupling's
+# two-tendon GPI on the other motor's signed counts (KIND_AGPI, its theta0 0, its
+# signs folded into cp); wc, cstate its state (as w, state; the other motor's last
+# counts in cstate[_V_PREV]); sign: robot counts = sign x model input.
+#   out = (command, best real-valued input, model output incl. coupling, status,
+#          coupling (deg), Gauss-Seidel rounds of a joint step (-1: not settled))
+PRM_HEAD = 12
+OUT_SIZE = 6
 
-    ``prm`` = (len(c), M, kappa, v_f, dead band, lo, hi, max_rate, quantum, tol_deg,
-    c, r, p), ``M`` = len(p); ``mem`` = (operator states ``w`` (2 M, row-major), the
-    batch's state (:data:`STATE_SIZE`), time of the previous command (s), command, best
-    real-valued input, model output, status), updated in place.
-    """
+
+@njit(cache=True)
+def _coupling_step(prm, mem, vo):  # pragma: no cover - compiled
+    """Advance an axis's coupling state with the other motor's signed counts ``vo``;
+    returns the coupling (deg); 0 for an axis without coupling."""
     nc = int(prm[0])
     m = int(prm[1])
-    c = prm[10 : 10 + nc]
-    r = prm[10 + nc : 10 + nc + m]
-    p = prm[10 + nc + m : 10 + nc + 2 * m]
+    mc = int(prm[10])
+    if mc == 0:
+        return 0.0
+    o = PRM_HEAD + nc + 2 * m
+    cc = prm[o : o + 9]
+    cr = prm[o + 9 : o + 9 + mc]
+    cp = prm[o + 9 + mc : o + 9 + 2 * mc]
+    q = 2 * m + STATE_SIZE + 1 + OUT_SIZE
+    wc = mem[q : q + 2 * mc].reshape((2, mc))
+    cstate = mem[q + 2 * mc : q + 2 * mc + STATE_SIZE]
+    return _update(KIND_AGPI, cc, cr, cp, 1.0, np.inf, 0.0, vo, wc, np.empty((2, mc)), cstate)
+
+
+@njit(cache=True)
+def step_one(kind, prm, mem, target, dt, vo):  # pragma: no cover - compiled
+    """One online step (:class:`~i2ris_calib.compensation.online.Compensator`): the
+    batch's :func:`_step` on one target sample (deg, model convention), ``dt`` seconds
+    after the previous one, on the packed arrays of :func:`pack` (``mem`` updated in
+    place, results in its ``out``). A coupled axis first advances its coupling with the
+    other motor's signed counts ``vo`` at this sample and inverts its own tendons on the
+    target less the coupling (as the batch does); ``vo`` is ignored otherwise."""
+    nc = int(prm[0])
+    m = int(prm[1])
+    c = prm[PRM_HEAD : PRM_HEAD + nc]
+    r = prm[PRM_HEAD + nc : PRM_HEAD + nc + m]
+    p = prm[PRM_HEAD + nc + m : PRM_HEAD + nc + 2 * m]
     w = mem[: 2 * m].reshape((2, m))
     state = mem[2 * m : 2 * m + STATE_SIZE + 1]
+    yc = _coupling_step(prm, mem, vo)
     w_new = np.empty((2, m))
     scratch = np.empty(m)
     buf = np.empty(40)
     keep = np.empty(16, dtype=np.bool_)
     t_k = state[STATE_SIZE] + dt
     u, ur, y, st = _step(
-        kind, c, r, p, prm[2], prm[3], prm[4], target, t_k, dt, prm[5], prm[6], prm[7],
+        kind, c, r, p, prm[2], prm[3], prm[4], target - yc, t_k, dt, prm[5], prm[6], prm[7],
         prm[8], prm[9], False, False, w, w_new, scratch, buf, keep, state,
     )  # fmt: skip
     state[STATE_SIZE] = t_k
     o = 2 * m + STATE_SIZE + 1
     mem[o] = u
     mem[o + 1] = ur
-    mem[o + 2] = y
+    mem[o + 2] = y + yc
     mem[o + 3] = st
-
-
-def pack(c, r, p, cfg):
-    """(``prm``, ``mem``) of :func:`step_one` for kernel arrays ``c``, ``r``, ``p`` and
-    ``cfg`` = (kappa, v_f, dead band, lo, hi, max_rate, quantum, tol_deg); ``mem``
-    zeroed (shape (2 M + STATE_SIZE + 5,))."""
-    c, r, p, cfg = (np.asarray(a, dtype=float).ravel() for a in (c, r, p, cfg))
-    prm = np.concatenate(([c.size, p.size], cfg, c, r, p))
-    mem = np.zeros(2 * p.size + STATE_SIZE + 5)
-    return prm, mem
+    mem[o + 4] = yc
+    mem[o + 5] = 1.0
 
 
 @njit(cache=True)
-def start_state(kind, c, r, p, kappa, vf, db, v_init, w, state):  # pragma: no cover
-    """The online compensator's start: :func:`_invert_start` from rest at ``v_init``
-    (``state`` shape (:data:`STATE_SIZE` + 1,), time 0 and the last move at 0)."""
-    _invert_start(kind, c, r, p, kappa, vf, db, v_init, True, w, state)
-    state[_T_MOVE] = 0.0
-    state[STATE_SIZE] = 0.0
+def _last_counts(prm, mem):  # pragma: no cover - compiled
+    """The axis's last command in signed counts (robot sign)."""
+    return prm[11] * mem[2 * int(prm[1]) + _V_PREV]
+
+
+@njit(cache=True)
+def step_pair(ka, prm_a, mem_a, kb, prm_b, mem_b, ta, tb, dt, rounds):  # pragma: no cover
+    """One online step of two axes whose models read each other's motor (at least one
+    coupled): the two commands solved jointly at this sample by Gauss-Seidel. Axis a is
+    stepped (:func:`step_one`, from the state before this sample) given b's last
+    command, then b given a's command, then a again given b's new one, and so on, until
+    a step repeats the command it had (a fixed point: each command is then the batch's
+    inverse given the other motor's command sent) or after ``2 rounds`` steps. An
+    uncoupled axis is solved first (one step each). Unsettled: the last commands are
+    sent; the axis stepped before the last has its coupling advanced with the command
+    the other axis sends (the model state stays the robot's) and ``out`` rounds -1.
+    Settled: ``out`` rounds = the steps taken."""
+    if prm_b[10] == 0:  # b does not read a: b first, then a with b's command
+        step_one(kb, prm_b, mem_b, tb, dt, 0.0)
+        step_one(ka, prm_a, mem_a, ta, dt, _last_counts(prm_b, mem_b))
+        return
+    if prm_a[10] == 0:
+        step_one(ka, prm_a, mem_a, ta, dt, 0.0)
+        step_one(kb, prm_b, mem_b, tb, dt, _last_counts(prm_a, mem_a))
+        return
+    save_a = mem_a.copy()
+    save_b = mem_b.copy()
+    ub = _last_counts(prm_b, mem_b)
+    step_one(ka, prm_a, mem_a, ta, dt, ub)
+    ua = _last_counts(prm_a, mem_a)
+    n = 1
+    done = False
+    last_a = True  # the axis stepped last
+    while n < 2 * rounds:
+        if last_a:
+            if n > 1:
+                mem_b[:] = save_b
+            step_one(kb, prm_b, mem_b, tb, dt, ua)
+            u_new = _last_counts(prm_b, mem_b)
+            done = u_new == ub
+            ub = u_new
+        else:
+            mem_a[:] = save_a
+            step_one(ka, prm_a, mem_a, ta, dt, ub)
+            u_new = _last_counts(prm_a, mem_a)
+            done = u_new == ua
+            ua = u_new
+        n += 1
+        last_a = not last_a
+        if done:
+            break
+    oa = 2 * int(prm_a[1]) + STATE_SIZE + 1
+    ob = 2 * int(prm_b[1]) + STATE_SIZE + 1
+    if done:
+        mem_a[oa + 5] = n
+        mem_b[ob + 5] = n
+        return
+    # not settled: the axis stepped before the last follows the other's command sent
+    if last_a:
+        _recouple(prm_b, mem_b, save_b, ua)
+    else:
+        _recouple(prm_a, mem_a, save_a, ub)
+    mem_a[oa + 5] = -1.0
+    mem_b[ob + 5] = -1.0
+
+
+@njit(cache=True)
+def _recouple(prm, mem, save, vo):  # pragma: no cover - compiled
+    """Redo an axis's coupling step of this sample with the other motor's counts ``vo``
+    (its coupling state restored from ``save``), its output in ``out`` updated."""
+    m = int(prm[1])
+    mc = int(prm[10])
+    o = 2 * m + STATE_SIZE + 1
+    q = o + OUT_SIZE
+    mem[q : q + 2 * mc + STATE_SIZE] = save[q : q + 2 * mc + STATE_SIZE]
+    yc = _coupling_step(prm, mem, vo)
+    mem[o + 2] = mem[o + 2] - mem[o + 4] + yc
+    mem[o + 4] = yc
+
+
+def pack(c, r, p, cfg, sign=1.0, coupling=None):
+    """(``prm``, ``mem``) of :func:`step_one` for kernel arrays ``c``, ``r``, ``p``,
+    ``cfg`` = (kappa, v_f, dead band, lo, hi, max_rate, quantum, tol_deg), ``sign``
+    and ``coupling`` = (cc, cr, cp) or None (layout above); ``mem`` zeroed."""
+    c, r, p, cfg = (np.asarray(a, dtype=float).ravel() for a in (c, r, p, cfg))
+    parts = [[c.size, p.size], cfg, [0.0 if coupling is None else len(coupling[2]), sign], c, r, p]
+    mc = 0
+    if coupling is not None:
+        cc, cr, cp = (np.asarray(a, dtype=float).ravel() for a in coupling)
+        mc = cp.size
+        parts += [cc, cr, cp]
+    prm = np.concatenate([np.asarray(x, dtype=float) for x in parts])
+    mem = np.zeros(2 * p.size + STATE_SIZE + 1 + OUT_SIZE + (2 * mc + STATE_SIZE if mc else 0))
+    return prm, mem
+
+
+def views(prm, mem):
+    """Named views into an axis's ``mem``: (w (2, M), state (STATE_SIZE + 1: the last
+    is the time), out (OUT_SIZE,), wc (2, Mc) or None, cstate or None)."""
+    m, mc = int(prm[1]), int(prm[10])
+    o = 2 * m + STATE_SIZE + 1
+    w = mem[: 2 * m].reshape(2, m)
+    state = mem[2 * m : o]
+    out = mem[o : o + OUT_SIZE]
+    if not mc:
+        return w, state, out, None, None
+    q = o + OUT_SIZE
+    wc = mem[q : q + 2 * mc].reshape(2, mc)
+    return w, state, out, wc, mem[q + 2 * mc : q + 2 * mc + STATE_SIZE]
 
 
 @njit(cache=True)
@@ -527,8 +877,6 @@ def _step(
     (command, best real-valued input, model output, status). ``hold_k``: hold the
     previous command; ``free``: no rate limit on this step. ``w_new``, ``scratch``,
     ``buf`` (40,), ``cand_keep`` (16,): work space."""
-    m = p.size
-    n_fam = 2 if kind == KIND_EGPI else 1
     dstate = int(state[_DSTATE])
     anchor = state[_ANCHOR]
     v_prev = state[_V_PREV]
@@ -621,14 +969,22 @@ def _step(
                 continue
             mid = 0.5 * (e0 + e1)
             fam = _select(kind, dstate, anchor, mid, db, vf, init)
-            x = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
+            x, y = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
             # an open end (the previous input, a breakpoint) -> just inside the region
             eps = 1e-9 * max(1.0, abs(x))
+            moved = False
             if x == e0 and not (init or (side == SIDE_DOWN and j == 0)):
                 x = min(e0 + eps, mid)
+                moved = True
             elif x == e1 and not (init or (side == SIDE_UP and j == ne - 2)):
                 x = max(e1 - eps, mid)
-            y = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init)
+                moved = True
+            if moved or kind == KIND_EGPI:
+                # the output the model shows there (the EGPI: maybe the other family);
+                # else the root's own evaluation is that output (same family and side)
+                y = _exact(
+                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init
+                )
             cand_x[nc] = x
             cand_e[nc] = abs(y - tk)
             d_new, _ = _direction(dstate, anchor, x, db, init)
@@ -683,22 +1039,10 @@ def _step(
         y_f = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_q, init)
         if abs(y_f - tk) > tol and stat == STATUS_OK:
             stat = STATUS_GAP
-    # apply the chosen command to every family and to v'
+    # apply the chosen command (the forward recursion, as :func:`advance`)
     u = best_q
-    side = _side(v_prev, u, init)
-    for f in range(n_fam):
-        _family(kind, f, w[f], w_new[f], c, r, p, kappa, vf, v_prev, u, side)
-        for i in range(m):
-            w[f, i] = w_new[f, i]
-    fam = _select(kind, dstate, anchor, u, db, vf, init)
-    dstate, anchor = _direction(dstate, anchor, u, db, init)
-    y_new = _shown(kind, w, fam, c, p)
+    y_new = _update(kind, c, r, p, kappa, vf, db, u, w, w_new, state)
     if u != v_prev or init:
         t_move = t_k
-    state[_DSTATE] = dstate
-    state[_ANCHOR] = anchor
-    state[_V_PREV] = u
-    state[_Y_PREV] = y_new
-    state[_INIT] = 0.0
     state[_T_MOVE] = t_move
     return u, best_r, y_new, stat

@@ -16,8 +16,10 @@ from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import read_fit_json
 from i2ris_calib.io.fit_records import dataset_record, holdout_rmse, load_model, rate_limit
 
-#: Kinds the online compensator inverts
-ONLINE_KINDS = tuple(online.KIND_NAMES.values())
+#: Kinds the online compensator inverts (``diagnosed``: with ``model_file``)
+ONLINE_KINDS = (*online.KIND_NAMES.values(), "agpi_coupled")
+#: Kinds that read the other motor (chosen by default only with both axes' fits)
+_COUPLED = ("agpi_coupled",)
 
 
 class Compensator(online.Compensator):
@@ -40,6 +42,9 @@ class Compensator(online.Compensator):
         model: str | None = None,
         max_counts_per_s: float | None = None,
         start_counts: float | dict[str, float] = 0.0,
+        history: dict[str, Sequence[float]] | None = None,
+        dt_s: float = 0.01,
+        model_file: str | Path | None = None,
     ) -> Compensator:
         """A compensator of the fitted model(s) in fit.json file(s) (one per axis).
 
@@ -51,13 +56,25 @@ class Compensator(online.Compensator):
             ``yaw+``, ``yaw-``, ``yaw±``, ... per file; default: the signed dataset of the
             file when it has one, else its first dataset.
         model : str, optional
-            ``gpi``, ``egpi``, ``egpi_c`` or ``agpi``; default: the dataset's model among
-            those with the lowest held-out RMSE.
+            ``gpi``, ``egpi``, ``egpi_c``, ``agpi``, ``agpi_coupled`` or ``diagnosed``
+            (with ``model_file``; its time delay is inverted); default: the dataset's
+            model with the lowest held-out RMSE among those (``agpi_coupled`` only when
+            both axes' fits are given: it reads the other motor's commands).
         max_counts_per_s : float, optional
             Rate limit (counts/s; ``inf``: none); default: the fit's fastest input move
             (as ``compensate``).
         start_counts : float or dict
-            Signed counts the motor(s) rest at (per axis with a dict).
+            Signed counts the motor(s) rest at (per axis with a dict; a coupled axis
+            compensated alone: its other motor's too).
+        history : dict, optional
+            Axis -> signed counts already sent, oldest first, ``dt_s`` apart (a
+            conditioning sweep, or the commands before): the model starts at rest at the
+            first and is carried through the rest (as ``compensate --history``);
+            replaces ``start_counts``.
+        dt_s : float
+            Interval of the ``history`` samples (s).
+        model_file : path, optional
+            final_model.json of ``--model diagnosed`` (checked against the fit).
         """
         paths = [path] if isinstance(path, (str, Path)) else list(path)
         names = [dataset] if isinstance(dataset, str) or dataset is None else list(dataset)
@@ -65,7 +82,7 @@ class Compensator(online.Compensator):
             names = names * len(paths) if names[0] is None else names
         if len(names) != len(paths):
             raise CalibError("Compensator.from_fit: give one dataset per fit.json (or none)")
-        models, limits, signs, rates, starts = {}, {}, {}, {}, {}
+        models, limits, signs, rates = {}, {}, {}, {}
         for p, name in zip(paths, names, strict=True):
             p = Path(p)
             doc = read_fit_json(p)
@@ -75,7 +92,8 @@ class Compensator(online.Compensator):
                 name = f"{axis}±" if f"{axis}±" in have else (have[0] if have else f"{axis}+")
             name = name.replace("+-", "±")
             record = dataset_record(doc, name, p)
-            fitted = [k for k in record.get("models", {}) if k in ONLINE_KINDS]
+            fitted = [k for k in record.get("models", {}) if k in ONLINE_KINDS
+                      and (len(paths) > 1 or k not in _COUPLED)]  # fmt: skip
             kind = model
             if kind is None:
                 if not fitted:
@@ -84,7 +102,7 @@ class Compensator(online.Compensator):
                         f"({', '.join(ONLINE_KINDS)})"
                     )
                 kind = min(fitted, key=lambda k: holdout_rmse(record["models"][k]) or np.inf)
-            elif kind not in ONLINE_KINDS:
+            elif kind not in ONLINE_KINDS and kind != "diagnosed":
                 raise CalibError(
                     f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "
                     f"got '{kind}'"
@@ -92,16 +110,24 @@ class Compensator(online.Compensator):
             ax = name[:-1]
             if ax in models:
                 raise CalibError(f"Compensator.from_fit: two fits of the {ax} axis")
-            models[ax] = load_model(doc, record, kind, p)
+            models[ax] = load_model(
+                doc, record, kind, p, None if model_file is None else Path(model_file)
+            )
             lo, hi = (float(x) for x in record["input_range_counts"])
             if not name.endswith("±"):
                 lo = min(lo, 0.0)
             limits[ax] = (lo, hi)
             signs[ax] = -1.0 if name.endswith("-") else 1.0
             rates[ax] = rate_limit(record, max_counts_per_s, 0.0, hi - lo)[0]
-            s0 = start_counts.get(ax, 0.0) if isinstance(start_counts, dict) else start_counts
-            starts[ax] = float(s0)
-        return cls(models, limits, signs=signs, max_counts_per_s=rates, start_counts=starts)
+        return cls(
+            models,
+            limits,
+            signs=signs,
+            max_counts_per_s=rates,
+            start_counts=start_counts,
+            history=history,
+            dt_s=dt_s,
+        )
 
     def to_json(self, path: str | Path) -> None:
         """Write :meth:`to_dict` (atomically) to ``path``."""

@@ -15,6 +15,7 @@ from i2ris_calib.cli import main
 from i2ris_calib.fitting.pipeline import ModelChoice, output_jump, pick_after_fit
 from i2ris_calib.hysteresis.models import gpi_model
 from i2ris_calib.hysteresis.presets import through_zero_trajectory
+from i2ris_calib.hysteresis.registry import SIGNED_KINDS
 
 NOISE = 0.25  # deg
 
@@ -37,14 +38,14 @@ def test_piezo_like_loop_through_zero_picks_one_gpi_and_says_why(tmp_path, capsy
     assert main(["fit", str(tmp_path / "s.csv"), "--axis", "yaw", "--out", str(out)]) == 0
     doc = json.loads((out / "fit.json").read_text())
     choice = doc["model_choice"]
-    assert choice["input"] == "signed" and choice["kinds"] == ["gpi", "agpi"]
+    assert choice["input"] == "signed" and choice["kinds"] == list(SIGNED_KINDS)
     assert choice["prefit_main"] == "agpi" and choice["picked_after_fit"]
     assert choice["main"] == "gpi", choice["why"]
     held = {k: rec["holdout_metrics"]["rmse_deg"] for k, rec in doc["models"].items()}
     assert held["gpi"] <= 1.2 * NOISE < held["agpi"]
     assert choice["held_out_rmse_deg"] == held
     assert "crosses zero" in choice["why"]  # the pre-fit reason stays
-    assert f"picked after fitting: gpi: held-out {held['gpi']:.3g} deg vs agpi" in choice["why"]
+    assert f"picked after fitting: gpi: held-out {held['gpi']:.3g} deg vs " in choice["why"]
     assert f"agpi {held['agpi']:.3g} deg" in choice["why"]
     assert choice["line"].startswith("model: GPI over the signed input")
     err = capsys.readouterr().err.replace("\n", " ")

@@ -10,6 +10,7 @@ import pandas as pd
 from i2ris_calib.cli import main
 from i2ris_calib.data.coupling import motors_together
 from i2ris_calib.fitting.pipeline import choose_model
+from i2ris_calib.hysteresis.registry import SIGNED_KINDS
 from i2ris_calib.simulation.two_motor import simulate_two_motor
 
 NOISE = 0.25  # deg
@@ -52,7 +53,7 @@ def test_other_motor_still_keeps_the_uncoupled_model(tmp_path):
     rec = simulate_two_motor(6, n_samples=900, rate_hz=30.0, noise_deg=NOISE, coupling=0.0)
     doc, _ = fit_doc(tmp_path, rec, still_yaw=True)
     assert doc["model_choice"]["main"] == "agpi"
-    assert set(doc["models"]) == {"gpi", "agpi"}
+    assert set(doc["models"]) == set(SIGNED_KINDS)  # no coupling: the one-loop kinds too
     assert "coupling" not in doc["model_choice"]["line"]
 
 

@@ -31,13 +31,13 @@ from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.registry import (
     COUPLED_DEFAULT,
     DEFAULT_DEADBAND_COUNTS,
-    DEFAULT_N_OPERATORS,
     MODEL_KINDS,
     SIGNED_DEFAULT,
     SIGNED_KINDS,
     fit_order,
     kind_info,
     model_for_kind,
+    signed_kinds,
     start_recipe,
 )
 from i2ris_calib.hysteresis.start import default_deadband, keep_fixed
@@ -243,7 +243,9 @@ def choose_model(
     ``model = "all"``, when the other motor moves while this one does and the recording
     can separate coupling (:attr:`MotorsTogether.coupled`), the two-tendon GPI with
     coupling to the other motor (:data:`COUPLED_DEFAULT`) is fitted too and is the
-    default model; ``why`` says so, or why not.
+    default model, and the one-loop kinds (PI / Maxwell slip, Bouc-Wen: no input of
+    the other motor) are left out (:func:`~i2ris_calib.hysteresis.registry.signed_kinds`);
+    ``why`` says so, or why not.
 
     Raises
     ------
@@ -269,7 +271,9 @@ def choose_model(
     why = why or "default"
     if together is not None and together.moves_together:
         if signed and model == "all" and together.coupled:
-            kinds = (*kinds, COUPLED_DEFAULT)
+            # a tendon axis moved by two motors: the coupled model and its bases (the
+            # one-loop kinds, without the other motor's input, are left out)
+            kinds = (*signed_kinds(coupled=True), COUPLED_DEFAULT)
             why += f"; with coupling: {together.reason}"
         elif together.cannot_separate:
             why += f"; no coupling term: {together.reason}"
@@ -290,10 +294,12 @@ def unfitted_model(
     kind: str, v: np.ndarray, config: FitConfig = FitConfig(), deadband: float | None = None
 ) -> ParametricModel:
     """An unfitted model of ``kind`` set up from ``config`` (``deadband``: the ``v'``
-    dead band in input units, default :func:`deadband_for`)."""
+    dead band in input units, default :func:`deadband_for`; ``[fit] n_operators``
+    thresholds unless the kind has its own number, as the PI / Maxwell-slip kind)."""
     db = deadband_for(v, config) if deadband is None else float(deadband)
-    m = model_for_kind(kind, n=config.n_operators, deadband_counts=db)
-    fixed = set(kind_info(kind).fixed(config))
+    info = kind_info(kind)
+    m = model_for_kind(kind, n=info.n_operators or config.n_operators, deadband_counts=db)
+    fixed = set(info.fixed(config))
     if not config.fit_flag_point and "v_f" in m.names:
         fixed.add("v_f")
     return m.with_fixed(fixed=tuple(fixed), free=tuple(n for n in m.names if n not in fixed))
@@ -302,11 +308,12 @@ def unfitted_model(
 def model_from_params(
     kind: str,
     params: dict[str, float],
-    n_operators: int = DEFAULT_N_OPERATORS,
+    n_operators: int | None = None,
     deadband_counts: float = DEFAULT_DEADBAND_COUNTS,
 ) -> ParametricModel:
     """A fitted model rebuilt from a fit.json record's ``params`` (and its
-    ``n_operators`` / ``deadband_counts``): :func:`~i2ris_calib.hysteresis.registry.model_for_kind`."""
+    ``n_operators`` / ``deadband_counts``; ``n_operators`` None: the kind's default):
+    :func:`~i2ris_calib.hysteresis.registry.model_for_kind`."""
     return model_for_kind(kind, n=n_operators, deadband_counts=deadband_counts, **params)
 
 
@@ -395,18 +402,22 @@ def fit_kind(
                 starts.append(model.vector(other.params))
     if starts is not None:
         starts = [keep_fixed(model, x) for x in starts]
-    return _fit_configured(model, s, theta, holdout, starts, config)
+    return _fit_configured(model, s, theta, holdout, starts, config, kind)
 
 
-def _fit_configured(model, signals, theta, holdout, starts, config: FitConfig) -> FitResult:
-    """:func:`fit_model` with the method, limits and loss of ``config``."""
+def _fit_configured(
+    model, signals, theta, holdout, starts, config: FitConfig, kind: str | None = None
+) -> FitResult:
+    """:func:`fit_model` with the method, limits and loss of ``config`` (the method of
+    ``kind`` when its registry row names one: bounded parameters)."""
+    method = (kind_info(kind).method if kind is not None else None) or config.method
     return fit_model(
         model,
         signals,
         theta,
         holdout_mask=holdout,
         starts=starts,
-        method=config.method,
+        method=method,
         max_nfev=config.max_nfev,
         loss=config.loss,
         f_scale_deg=config.f_scale_deg,
@@ -433,7 +444,7 @@ def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = No
     by it); ``model``: the model to carry the converted values (default: ``res.model``)."""
     names = tuple(res.params)
     unit = {p.name: p.unit for p in res.model.parameters}
-    factor = {"deg/count": 1.0 / scale, "count": scale}
+    factor = {"deg/count": 1.0 / scale, "1/count": 1.0 / scale, "count": scale}
     d = np.array([factor.get(unit.get(k, ""), 1.0) for k in names])
     params = {k: float(x * f) for (k, x), f in zip(res.params.items(), d, strict=True)}
     stderr = {k: float(res.stderr[k] * f) for k, f in zip(names, d, strict=True)}

@@ -21,6 +21,12 @@ from operator import attrgetter
 
 from i2ris_calib._validate import describe
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.bouc_wen import (
+    BoucWenModel,
+    bouc_wen_fixed,
+    bouc_wen_model,
+    bouc_wen_starts,
+)
 from i2ris_calib.hysteresis.coupled import (
     CoupledTwoTendonModel,
     coupled_fixed,
@@ -38,6 +44,7 @@ from i2ris_calib.hysteresis.models import (
     gpi_model,
     i2ris_egpi_model,
 )
+from i2ris_calib.hysteresis.slip import SlipModel, slip_fixed, slip_model, slip_starts
 from i2ris_calib.hysteresis.start import start_values
 from i2ris_calib.hysteresis.two_tendon import (
     TwoTendonGPIModel,
@@ -49,6 +56,10 @@ from i2ris_calib.hysteresis.two_tendon import (
 #: Defaults of :func:`model_for_kind` (those of the model factories)
 DEFAULT_N_OPERATORS = 30
 DEFAULT_DEADBAND_COUNTS = 2.0
+#: Thresholds of the PI / Maxwell-slip kind (its own: one free weight each, so half
+#: GPI's 30 keeps the fit and a diagnosis from it fast; 0.45 / 15 of the input range
+#: apart)
+SLIP_THRESHOLDS = 15
 
 
 @dataclass(frozen=True)
@@ -97,6 +108,18 @@ class ModelKind:
         other motor moves while this one does (:mod:`i2ris_calib.data.coupling`); its
         ``start`` is ``start(model, signals, theta, nested_params, n_starts, rng,
         deadband)`` -> (model, starts).
+    n_operators : int or None
+        Its own number of thresholds in the default path (:func:`model_for_kind`
+        without ``n``, the fitting stage), instead of ``[fit] n_operators`` (GPI's);
+        None: that setting.
+    method : str or None
+        Fit method this kind needs, overriding ``[fit] method`` (``"trf"``: parameters
+        bounded by their physics, e.g. a stiffness >= 0, that the unbounded LM would
+        leave at every fit); None: the configured one.
+    with_coupling : bool
+        Also fitted on a signed input whose other motor moves with this one (then the
+        axis is a tendon axis moved by two motors: a one-element kind over the signed
+        input, without the other motor's input, is left out; :func:`signed_kinds`).
     """
 
     kind: str
@@ -115,6 +138,9 @@ class ModelKind:
     on_signed: bool = False
     uses_deadband: bool = False
     coupled: bool = False
+    with_coupling: bool = True
+    method: str | None = None
+    n_operators: int | None = None
 
 
 #: Every kind, in fitting order (a kind's nested kind comes before it). Tables list
@@ -147,6 +173,16 @@ KINDS: tuple[ModelKind, ...] = (
         n_starts="n_starts_gpi", nested="agpi", signed=True, coupled=True,
         inverse="agpi_coupled",
     ),
+    ModelKind(
+        "maxwell_slip", "PI / Maxwell slip", "Prandtl-Ishlinskii / Maxwell slip",
+        slip_model, SlipModel, start=slip_starts, fixed=slip_fixed, signed=True, on_signed=True,
+        diagnosis_start=True, with_coupling=False, method="trf", n_operators=SLIP_THRESHOLDS,
+    ),
+    ModelKind(
+        "bouc_wen", "Bouc-Wen", "Bouc-Wen (one smooth loop)",
+        bouc_wen_model, BoucWenModel, start=bouc_wen_starts, fixed=bouc_wen_fixed,
+        signed=True, on_signed=True, diagnosis_start=True, with_coupling=False,
+    ),
     ModelKind("diagnosed", "DIAGNOSED", "EGPI + diagnosed effects", None, None),
 )  # fmt: skip
 
@@ -170,9 +206,18 @@ PAPER_KINDS = tuple(k.kind for k in reversed(KINDS) if k.paper)
 INVERSE_KINDS = tuple(k.kind for k in KINDS if k.inverse)
 
 #: Kinds fitted by default on a signed dataset (``"±"``, one model over the whole
-#: signed input of an axis), in fitting order: the two-tendon GPI and, for comparison,
-#: one GPI over the signed input. ``"all"`` on a signed fit means these.
+#: signed input of an axis), in fitting order: one GPI over the signed input, the
+#: two-tendon GPI, and the one-loop kinds (PI / Maxwell slip, Bouc-Wen). ``"all"`` on a
+#: signed fit means these.
 SIGNED_KINDS = tuple(k.kind for k in KINDS if k.on_signed)
+
+
+def signed_kinds(coupled: bool = False) -> tuple[str, ...]:
+    """The kinds fitted by default on a signed dataset: :data:`SIGNED_KINDS`, without
+    those not fitted when the other motor moves with this one (``coupled``; the
+    coupled model, :data:`COUPLED_DEFAULT`, is then added by the model choice)."""
+    return tuple(k.kind for k in KINDS if k.on_signed and (k.with_coupling or not coupled))
+
 
 #: The default model of a signed dataset: the first signed-only kind (two-tendon GPI).
 SIGNED_DEFAULT = next(k.kind for k in KINDS if k.signed)
@@ -230,7 +275,7 @@ def start_recipe(model: object) -> Callable | None:
 
 def model_for_kind(
     kind: str,
-    n: int = DEFAULT_N_OPERATORS,
+    n: int | None = None,
     deadband_counts: float = DEFAULT_DEADBAND_COUNTS,
     **values: float,
 ) -> ParametricModel:
@@ -240,8 +285,9 @@ def model_for_kind(
     ----------
     kind : str
         One of :data:`BUILT_KINDS` (``"gpi"``, ``"egpi"``, ``"egpi_c"``, ...).
-    n : int
-        Number of non-zero thresholds (n + 1 operators, Eq14).
+    n : int, optional
+        Number of non-zero thresholds (n + 1 operators, Eq14); default: the kind's own
+        (:attr:`ModelKind.n_operators`), else :data:`DEFAULT_N_OPERATORS`.
     deadband_counts : float
         ``v'`` dead band (input unit) of the EGPI kinds; GPI has none.
     **values : float
@@ -259,6 +305,8 @@ def model_for_kind(
     info = kind_info(kind)
     if info.factory is None:
         raise CalibError(f"unknown model '{kind}'; use {', '.join(BUILT_KINDS)} or all")
+    if n is None:
+        n = info.n_operators or DEFAULT_N_OPERATORS
     check_settings(func, n, deadband_counts)
     if info.uses_deadband:
         model = info.factory(n=n, deadband_counts=deadband_counts)

@@ -54,10 +54,11 @@ def default_deadband(v: np.ndarray) -> float:
 
 def keep_fixed(model: Model, x: np.ndarray) -> np.ndarray:
     """Start ``x`` (shape (p,)) with the fixed parameters at the model's values, except
-    ``lam`` (the scale gauge, set by the recipe) and ``v_f`` (estimated from the data)."""
+    ``lam`` (the scale gauge, set by the recipe), ``v_f`` (estimated from the data) and
+    ``r_max`` (the threshold grid of the signed PI model, set from the input range)."""
     x = np.array(x, dtype=float)
     for i, p in enumerate(model.parameters):
-        if p.fixed and p.name not in ("lam", "v_f"):
+        if p.fixed and p.name not in ("lam", "v_f", "r_max"):
             x[i] = p.value
     return x
 

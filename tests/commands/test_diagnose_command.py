@@ -123,7 +123,7 @@ def test_bad_csv_is_a_one_line_error(tmp_path, capsys, mutate, needle):
     "args, needle",
     [
         (["--axis", "roll"], "--axis must be yaw or pitch"),
-        (["--axis", "yaw", "--start", "pi"], "--start must be auto, gpi or egpi"),
+        (["--axis", "yaw", "--start", "gip"], "--start must be one of auto, gpi, egpi"),
     ],
 )
 def test_bad_options_are_one_line_errors(tmp_path, capsys, args, needle):

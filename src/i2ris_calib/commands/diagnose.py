@@ -141,7 +141,7 @@ def diagnose_file(
     diagnosis.json ``paths``).
     """
     if start not in STARTS:
-        raise CalibError(f"--start must be auto, gpi or egpi (agpi: signed input), got '{start}'")
+        raise CalibError(f"--start must be one of {', '.join(STARTS)}, got '{start}'")
     cfg = config or PipelineConfig()
     claim_output_dir(Path(out) if out is not None else Path("diagnose_out"), "diagnose",
                      [Path(data)], OUTPUTS)  # fmt: skip

@@ -117,14 +117,15 @@ class _Where:
         ):
             self.fail(key, f"= {show(value)} is not a list of texts", dataset)
 
-    def params(self, params: Any, key: str, kind: Any, dataset: Any = None) -> None:
+    def params(self, params: Any, key: str, kind: Any, dataset: Any = None, n: Any = None) -> None:
         """A model's ``params``: an object of finite numbers; for a built kind, exactly
-        that kind's parameters (a missing one would silently take its default)."""
+        that kind's parameters (a missing one would silently take its default) with ``n``
+        operators when given (a kind whose parameter names depend on it: Maxwell slip)."""
         if not isinstance(params, dict):
             self.fail(key, f"= {show(params)} is not an object of parameter values", dataset)
         self.numbers(params, key, dataset, finite=True)
         if kind in BUILT_KINDS:
-            names = model_for_kind(kind).names
+            names = model_for_kind(kind, **_operators(n)).names
             missing = [n for n in names if n not in params]
             if missing:
                 self.fail(
@@ -241,7 +242,8 @@ def _check_model(at: _Where, kind: str, rec: Any, key: str, label: Any, complete
     if "params" in rec or complete:
         if rec.get("params") is None:
             at.fail(f"{key}.params", "is missing" if "params" not in rec else "is null", label)
-        at.params(rec["params"], f"{key}.params", kind if complete else None, label)
+        at.params(rec["params"], f"{key}.params", kind if complete else None, label,
+                  rec.get("n_operators"))  # fmt: skip
     for part in ("stderr", "metrics", "holdout_metrics"):
         at.numbers(rec.get(part), f"{key}.{part}", label)
     conv = rec.get("converged")
@@ -255,6 +257,14 @@ def _check_model(at: _Where, kind: str, rec: Any, key: str, label: Any, complete
     at.number(rec, "v_f", f"{key}.v_f", label)
     at.texts(rec, "warnings", f"{key}.warnings", label)
     at.texts(rec, "free", f"{key}.free", label)
+
+
+def _operators(n: Any) -> dict[str, int]:
+    """``{"n": n}`` for a whole number ``n >= 1`` (operators of the model), else ``{}``
+    (the kind's default)."""
+    if is_number(n) and n >= 1 and float(n).is_integer():
+        return {"n": int(n)}
+    return {}
 
 
 def check_model_doc(obj: Any, path: str | Path) -> dict[str, Any]:
@@ -281,7 +291,7 @@ def check_model_doc(obj: Any, path: str | Path) -> dict[str, Any]:
         at.fail("base.kind", f"= {show(kind)} is not one of {', '.join(BUILT_KINDS)}")
     if "params" not in base:
         at.fail("base.params", "is missing")
-    at.params(base["params"], "base.params", kind)
+    at.params(base["params"], "base.params", kind, n=base.get("n"))
     n = base.get("n")
     if n is not None and not (is_number(n) and n >= 1 and float(n).is_integer()):
         at.fail("base.n", f"= {show(n)} is not a whole number >= 1")

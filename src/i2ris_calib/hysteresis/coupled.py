@@ -33,7 +33,6 @@ import numpy as np
 
 from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
-    _find_runs,
     _gpi_columns,
     _input,
     check_settings,
@@ -46,7 +45,10 @@ from i2ris_calib.hysteresis.two_tendon import (
     GPI_NAMES,
     SIDES,
     TwoTendonGPIModel,
+    _column_ordered,
     _in_gauge,
+    _put_columns,
+    _sides,
     side_input,
     two_tendon_gpi_model,
 )
@@ -79,16 +81,14 @@ class CoupledTwoTendonModel(TwoTendonGPIModel):
         return {k: val[f"{k}_{side}"] for k in GPI_NAMES}
 
     def _coupling_sides(self, signals: Signals):
+        """``[(coupling side, its input without repeated samples, run index or None)]``
+        of the other input (empty without one); kept for a read-only input as the own
+        sides are (:func:`~.two_tendon._sides`)."""
         vo = getattr(signals, "v_other", None)
         if vo is None:
             return ()
-        vo = np.asarray(vo, dtype=float)
-        out = []
-        for cs, (side, _) in COUPLING_SIDES.items():
-            u = np.ascontiguousarray(side_input(vo, side))
-            runs = _find_runs(u)
-            out.append((cs, *((u, None) if runs is None else runs)))
-        return out
+        sides = _sides(np.asarray(vo, dtype=float))
+        return [(cs, *sides[side]) for cs, (side, _) in COUPLING_SIDES.items()]
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,)."""
@@ -105,16 +105,20 @@ class CoupledTwoTendonModel(TwoTendonGPIModel):
         self, signals: Signals, values: np.ndarray, rows: np.ndarray | None = None
     ) -> np.ndarray:
         """d output / d parameters, shape (n_samples, 35) (or (len(rows), 35)), exact
-        (the held signs' columns are 0)."""
+        (the held signs' columns are 0); column ordered (Fortran), as LM takes it."""
         v = _input(signals)
         sel = np.arange(v.size) if rows is None else np.asarray(rows)
-        jac = super().jacobian(signals, values, rows)  # (n, 35): this axis's 17 filled
+        jac = _column_ordered(sel.size, len(self.parameters))
+        self._own_columns(v, values, sel, jac)  # this axis's 17
+        sides = self._coupling_sides(signals)
+        if not sides:
+            jac[:, 17:] = 0.0  # no other input: the coupling is silent
         val = self.named(values)
-        for k, (cs, u, idx) in enumerate(self._coupling_sides(signals)):
+        for k, (cs, u, idx) in enumerate(sides):
             cols = _gpi_columns(u, self.n, **self.coupling_values(values, cs))
-            at = sel if idx is None else idx[sel]
             sign = COUPLING_SIDES[cs][1] * val[f"sign_{cs}"]
-            jac[:, 17 + 9 * k : 25 + 9 * k] = sign * cols[at]
+            _put_columns(jac, 17 + 9 * k, sign, cols, sel if idx is None else idx[sel])
+            jac[:, 25 + 9 * k] = 0.0  # the held sign
         return jac
 
     def guess(self, v, theta_deg, deadband=None):  # pragma: no cover - needs v_other

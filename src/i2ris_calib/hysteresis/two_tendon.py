@@ -72,7 +72,8 @@ def _sides(v: np.ndarray):
 
     A side's input rests at 0 while the axis is on the other side of zero (about half
     of a recording through zero); a GPI is rate independent, so it is evaluated once per
-    run of equal inputs. Kept for the last read-only input (the fitter's copy)."""
+    run of equal inputs. Kept for the last four read-only inputs (the fitter's copies of
+    this axis's and the other motor's input, with and without a pre-history)."""
     frozen = not v.flags.writeable and v.base is None
     if frozen:
         for key, out in _SIDES_CACHE:
@@ -85,11 +86,32 @@ def _sides(v: np.ndarray):
         out[side] = (u, None) if runs is None else runs
     if frozen:
         _SIDES_CACHE.insert(0, (weakref.ref(v), out))
-        del _SIDES_CACHE[2:]
+        del _SIDES_CACHE[4:]
     return out
 
 
 _SIDES_CACHE: list = []
+
+
+def _side_of(val: dict[str, float], side: str) -> dict[str, float]:
+    """The GPI parameters of one side (suffix ``side``) of named values, by GPI names."""
+    return {k: val[f"{k}_{side}"] for k in GPI_NAMES}
+
+
+def _column_ordered(n_rows: int, n_cols: int) -> np.ndarray:
+    """An uninitialised (n_rows, n_cols) float array in column (Fortran) order: each
+    column contiguous, filled by :func:`_put_columns` without strided writes."""
+    return np.empty((n_cols, n_rows)).T
+
+
+def _put_columns(jac: np.ndarray, first: int, sign: float, cols: np.ndarray, at) -> None:
+    """``jac[:, first:first + q] = sign * cols[at]`` (``cols`` shape (m, q)), one
+    contiguous column at a time (the same values as the fancy-indexed assignment)."""
+    for j in range(cols.shape[1]):
+        out = jac[:, first + j]
+        np.take(cols[:, j], at, out=out)
+        if sign != 1.0:
+            np.multiply(out, sign, out=out)
 
 
 @dataclass(frozen=True)
@@ -106,15 +128,15 @@ class TwoTendonGPIModel(ParametricModel):
 
     def side_values(self, values: np.ndarray, side: str) -> dict[str, float]:
         """The GPI parameters of one tendon (``"p"`` or ``"n"``) by their GPI names."""
-        val = self.named(values)
-        return {k: val[f"{k}_{side}"] for k in GPI_NAMES}
+        return _side_of(self.named(values), side)
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,)."""
         v = _input(signals)
-        y = np.full(v.size, float(self.named(values)["theta0"]))
+        val = self.named(values)  # once (a diagnosis evaluates a model ~50,000 times)
+        y = np.full(v.size, float(val["theta0"]))
         for side, (u, idx) in _sides(v).items():
-            ys = gpi_output(u, n=self.n, **self.side_values(values, side))  # Eq1-3 per tendon
+            ys = gpi_output(u, n=self.n, **_side_of(val, side))  # Eq1-3 per tendon
             y += SIDES[side] * (ys if idx is None else ys[idx])
         return y
 
@@ -122,16 +144,22 @@ class TwoTendonGPIModel(ParametricModel):
         self, signals: Signals, values: np.ndarray, rows: np.ndarray | None = None
     ) -> np.ndarray:
         """d output / d parameters (deg per unit), shape (n_samples, 17) (or (len(rows),
-        17)), exact (each side's GPI Jacobian, :func:`~.kernel.play_jacobian`)."""
+        17)), exact (each side's GPI Jacobian, :func:`~.kernel.play_jacobian`); column
+        ordered (Fortran), as LM takes it."""
         v = _input(signals)
         sel = np.arange(v.size) if rows is None else np.asarray(rows)
-        jac = np.zeros((sel.size, len(self.parameters)))
-        jac[:, 0] = 1.0  # theta0
-        for k, (side, (u, idx)) in enumerate(_sides(v).items()):
-            cols = _gpi_columns(u, self.n, **self.side_values(values, side))
-            at = sel if idx is None else idx[sel]
-            jac[:, 1 + 8 * k : 9 + 8 * k] = SIDES[side] * cols[at]
+        jac = _column_ordered(sel.size, len(self.parameters))
+        self._own_columns(v, values, sel, jac)
         return jac
+
+    def _own_columns(self, v, values, sel, jac) -> None:
+        """Write the 17 columns of this axis's tendons (theta0, then each side's GPI
+        columns) at the samples ``sel`` into ``jac`` (in place)."""
+        jac[:, 0] = 1.0  # theta0
+        val = self.named(values)
+        for k, (side, (u, idx)) in enumerate(_sides(v).items()):
+            cols = _gpi_columns(u, self.n, **_side_of(val, side))
+            _put_columns(jac, 1 + 8 * k, SIDES[side], cols, sel if idx is None else idx[sel])
 
     def guess(
         self, v: np.ndarray, theta_deg: np.ndarray, deadband: float | None = None

@@ -64,3 +64,21 @@ def test_one_frequency_sine_names_no_rate_effect_and_lists_both():
     assert SPEED_EXPERIMENT in note
     listed = {a.effect: a for a in diag.not_excluded}
     assert listed["rate_dependent_thresholds"].experiment == SPEED_EXPERIMENT
+
+
+def test_one_frequency_sine_says_rate_dependence_cannot_be_tested():
+    """A static EGPI driven by a one-frequency sine: no rate effect fits better, and the
+    diagnosis still says the recording could not have shown one, with the recording
+    that would."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 50.0, 1.0 / 30.0)
+    v = np.round(3000.0 - 3000.0 * np.cos(2 * np.pi * 0.2 * t))
+    truth = i2ris_egpi_model(**paper_like_params("yaw+"))
+    sig = Signals(v=v, t_s=t)
+    theta = truth.evaluate(sig, model_values(truth)) + rng.normal(0.0, 0.2, t.size)
+    data = make_dataset("yaw", "+", t, v, theta, bands=input_bands(v), source="sine")
+    cfg = DiagnosisConfig(candidates=("rate_dependent_thresholds",), max_steps=1)
+    diag = diagnose(fit_start_model("egpi", data), data, cfg)
+    assert list(diag.named_effects) == []
+    (note,) = [n for n in diag.notes if "rate dependence cannot be tested" in n]
+    assert "static" in note and note.endswith(SPEED_EXPERIMENT)

@@ -291,6 +291,19 @@ def _rate_or_static(confounded: list[Candidate], current: Model) -> str:
     )
 
 
+def _rate_untestable(current: Model) -> str:
+    """The note of a recording whose input speed is a function of its level when no
+    rate effect fitted better: the static shape stands, but the recording could not
+    have shown rate dependence either."""
+    return (
+        "rate dependence cannot be tested on this recording: the input's speed is a "
+        "function of its level (one speed at each level on each branch, e.g. a "
+        "one-frequency sine), so a static (rate-independent) loop shape and a rate effect "
+        f"would fit it alike; the static shape stands (the model stays {current.name}). "
+        "To test for rate dependence, " + SPEED_EXPERIMENT
+    )
+
+
 def _with_rate_alternatives(not_excluded, confounded, current, d, cfg):
     """``not_excluded`` with the confounded rate candidates (once each), listed with
     the separating recording (:data:`SPEED_EXPERIMENT`)."""
@@ -460,6 +473,8 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
     if confounded:
         notes.append(_rate_or_static(confounded, current))
         not_excluded = _with_rate_alternatives(not_excluded, confounded, current, d, cfg)
+    elif one_speed:
+        notes.append(_rate_untestable(current))
     return Diagnosis(
         start_model=start_polished,
         final_model=current,

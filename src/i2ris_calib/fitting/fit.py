@@ -625,8 +625,11 @@ class _Counter:
 
     def residuals(self, full: np.ndarray) -> np.ndarray:
         self.n += 1
-        y = self.model.evaluate(self.signals, full)
-        r = y[self.used_idx] - self.theta_used
+        # a trial point may overflow (inf - inf): such residuals are replaced below, so
+        # numpy's warning would only reach the user's terminal as noise
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            y = self.model.evaluate(self.signals, full)
+            r = y[self.used_idx] - self.theta_used
         return r if np.isfinite(r).all() else np.where(np.isfinite(r), r, _BIG)
 
     def jacobian(self, full: np.ndarray, cols: np.ndarray | None = None) -> np.ndarray:
@@ -634,15 +637,16 @@ class _Counter:
         model's exact Jacobian; counted as one evaluation); ``cols``: only those
         columns (the free ones, in that order), shape (n_used, len(cols))."""
         self.n += 1
-        if (
-            cols is not None
-            and isinstance(self.model, _FromLevel)
-            and (np.asarray(cols) < len(self.model.parameters) - 1).all()
-        ):
-            # the profiled level's zero column is never asked for: not built
-            jac = self.model.inner_jacobian(self.signals, full, rows=self.used_idx)
-        else:
-            jac = self.jac_fn(self.signals, full, rows=self.used_idx)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # as residuals
+            if (
+                cols is not None
+                and isinstance(self.model, _FromLevel)
+                and (np.asarray(cols) < len(self.model.parameters) - 1).all()
+            ):
+                # the profiled level's zero column is never asked for: not built
+                jac = self.model.inner_jacobian(self.signals, full, rows=self.used_idx)
+            else:
+                jac = self.jac_fn(self.signals, full, rows=self.used_idx)
         if cols is not None and not (
             len(cols) == jac.shape[1] and np.array_equal(cols, np.arange(jac.shape[1]))
         ):

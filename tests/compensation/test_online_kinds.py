@@ -10,6 +10,8 @@ import json
 
 import numpy as np
 import pytest
+import reference_compensator as ref  # the pure-Python port (this folder)
+from online_cases import AGPI_TRUTH
 
 from i2ris_calib.compensation import compensate
 from i2ris_calib.compensation.inverse import forward
@@ -21,25 +23,6 @@ from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.io.online import Compensator
-
-
-def _reference():
-    """tests/compensation/reference_compensator.py, loaded from its path (no package)."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).with_name("reference_compensator.py")
-    spec = importlib.util.spec_from_file_location("reference_compensator", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-ref = _reference()
-AGPI_TRUTH = dict(
-    theta0=0.4, a1_p=0.008, a3_p=0.0072, a4_p=-1.2, lam_p=0.06, sigma_p=0.25, r1_p=0.3,
-    rn_p=3.5, a1_n=0.0065, a3_n=0.006, a4_n=-0.8, lam_n=0.06, sigma_n=0.2, r1_n=0.4, rn_n=3.0,
-)  # fmt: skip
 
 LIM = (-4000.0, 4000.0)
 #: coupling of each axis to the other motor (hysteretic, both sides, opposite signs)

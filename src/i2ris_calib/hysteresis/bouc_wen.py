@@ -49,9 +49,9 @@ from i2ris_calib.hysteresis.models import (
     _input,
     check_settings,
     checked_values,
-    guess_arguments,
+    guessed_model,
 )
-from i2ris_calib.hysteresis.start import _line, keep_fixed, reversal_distance
+from i2ris_calib.hysteresis.start import _line, reversal_distance
 
 __all__ = ["BoucWenModel", "MAX_STEP", "bouc_wen_model", "bouc_wen_output", "bouc_wen_starts"]
 
@@ -156,9 +156,7 @@ class BoucWenModel(ParametricModel):
     ) -> BoucWenModel:
         """A new model whose values are the data-driven start for (v, theta)
         (:func:`bouc_wen_starts`); fixed parameters keep their values."""
-        v, theta, db = guess_arguments(f"{self.name}.guess", v, theta_deg, deadband)
-        x = bouc_wen_starts(self, v, theta, 1, np.random.default_rng(0), db)[0]
-        return self.with_values(keep_fixed(self, x))
+        return guessed_model(self, bouc_wen_starts, v, theta_deg, deadband)
 
 
 def bouc_wen_model(n: int = 30, **values: float) -> BoucWenModel:

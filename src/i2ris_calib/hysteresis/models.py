@@ -184,6 +184,16 @@ class ParametricModel(NamedParameters):
         return self.with_values(keep_fixed(self, x))
 
 
+def guessed_model(model, starts, v, theta_deg, deadband: float | None):
+    """The ``guess`` of a model with a start recipe ``starts`` (the registry's
+    ``starts(model, v, theta, n_starts, rng, deadband) -> list of vectors``): a new model
+    whose values are the recipe's first start for (v, theta_deg), fixed parameters
+    keeping their values; arguments checked by :func:`guess_arguments`."""
+    v, theta, db = guess_arguments(f"{model.name}.guess", v, theta_deg, deadband)
+    x = starts(model, v, theta, 1, np.random.default_rng(0), db)[0]
+    return model.with_values(keep_fixed(model, x))
+
+
 def guess_arguments(
     func: str, v: np.ndarray, theta_deg: np.ndarray, deadband: float | None
 ) -> tuple[np.ndarray, np.ndarray, float]:

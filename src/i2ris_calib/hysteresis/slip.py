@@ -42,9 +42,9 @@ from i2ris_calib.hysteresis.models import (
     _input,
     check_settings,
     checked_values,
-    guess_arguments,
+    guessed_model,
 )
-from i2ris_calib.hysteresis.start import _line, keep_fixed
+from i2ris_calib.hysteresis.start import _line
 
 __all__ = ["SlipModel", "slip_fixed", "slip_model", "slip_operators", "slip_starts"]
 
@@ -168,9 +168,7 @@ class SlipModel(ParametricModel):
     ) -> SlipModel:
         """A new model whose values are the data-driven start for (v, theta)
         (:func:`slip_starts`); fixed parameters keep their values (but ``r_max``)."""
-        v, theta, db = guess_arguments(f"{self.name}.guess", v, theta_deg, deadband)
-        x = slip_starts(self, v, theta, 1, np.random.default_rng(0), db)[0]
-        return self.with_values(keep_fixed(self, x))
+        return guessed_model(self, slip_starts, v, theta_deg, deadband)
 
 
 def slip_model(n: int = 30, **values: float) -> SlipModel:

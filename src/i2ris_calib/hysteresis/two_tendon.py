@@ -41,9 +41,9 @@ from i2ris_calib.hysteresis.models import (
     checked_values,
     gpi_model,
     gpi_output,
-    guess_arguments,
+    guessed_model,
 )
-from i2ris_calib.hysteresis.start import keep_fixed, start_values
+from i2ris_calib.hysteresis.start import start_values
 
 __all__ = [
     "SIDES",
@@ -166,9 +166,7 @@ class TwoTendonGPIModel(ParametricModel):
     ) -> TwoTendonGPIModel:
         """A new model whose values are the data-driven start for (v, theta)
         (:func:`two_tendon_starts`); fixed parameters keep their values."""
-        v, theta, db = guess_arguments(f"{self.name}.guess", v, theta_deg, deadband)
-        x = two_tendon_starts(self, v, theta, 1, np.random.default_rng(0), db)[0]
-        return self.with_values(keep_fixed(self, x))
+        return guessed_model(self, two_tendon_starts, v, theta_deg, deadband)
 
 
 def two_tendon_gpi_model(n: int = 30, **values: float) -> TwoTendonGPIModel:

@@ -17,6 +17,7 @@ import pandas as pd
 from i2ris_calib.data.dataset import AXES, Dataset, direction_datasets, input_bands, other_axis
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.columns import STANDARD_COLUMNS, ColumnsConfig, parse_columns_option
+from i2ris_calib.io.csv_file import read_csv_file
 from i2ris_calib.sync.log import find_glitches, speed_limit
 
 #: a first time at or above this (s) is an epoch clock (1970 + 11.6 days or later, no
@@ -55,7 +56,7 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     if axis not in AXES:
         raise CalibError(f"--axis must be yaw or pitch, got '{axis}'")
     cols = ColumnsConfig() if columns is None else columns
-    raw = _raw_csv(p)
+    raw = read_csv_file(p, "file not found (give a synced CSV, see docs/formats.md)")
     other = other_axis(axis)
     need = ["time_s", f"enc_{axis}", f"{axis}_deg"]
     source = cols.mapping()
@@ -101,19 +102,6 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
         for col in angles:
             df.loc[not_measured, col] = np.nan
     return df
-
-
-def _raw_csv(p: Path) -> pd.DataFrame:
-    """The file as read (header names stripped of spaces); one line when it is missing
-    or not a CSV."""
-    if not p.is_file():
-        raise CalibError(f"{p}: file not found (give a synced CSV, see docs/formats.md)")
-    try:
-        raw = pd.read_csv(p, skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    raw.columns = [str(c).strip() for c in raw.columns]
-    return raw
 
 
 def _numeric_columns(p: Path, df: pd.DataFrame, names: list[str], label: dict) -> dict:

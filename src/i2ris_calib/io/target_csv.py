@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.io.csv_file import read_csv_file
 
 __all__ = ["PLAUSIBLE_TARGET_STEP_S", "read_history", "read_target"]
 
@@ -27,13 +28,7 @@ def read_target(path: str | Path, axes: Sequence[str], time_unit_s: float = 1.0)
     :data:`PLAUSIBLE_TARGET_STEP_S` (naming the ``time_unit_s`` that fits).
     """
     p = Path(path)
-    if not p.is_file():
-        raise CalibError(f"{p}: target file not found (a CSV with time_s and <axis>_deg)")
-    try:
-        df = pd.read_csv(p, skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    df.columns = [str(c).strip() for c in df.columns]
+    df = read_csv_file(p, "target file not found (a CSV with time_s and <axis>_deg)")
     need = ["time_s", *[f"{a}_deg" for a in axes]]
     missing = [c for c in need if c not in df.columns]
     if missing:
@@ -93,11 +88,7 @@ def read_history(path: str | Path, setup: dict) -> dict[str, np.ndarray]:
     One-line CalibError for an unreadable file, a missing column, non-numeric values or
     counts outside the fit's input range (the model is not known there)."""
     p = Path(path)
-    try:
-        df = pd.read_csv(p, skipinitialspace=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CalibError(f"{p}: not a readable CSV ({str(exc).splitlines()[0]})") from None
-    df.columns = [str(c).strip() for c in df.columns]
+    df = read_csv_file(p, "--history file not found (a CSV of the commands sent before)")
     need = [f"enc_{axis}" for axis in setup]
     missing = [c for c in need if c not in df.columns]
     if missing or len(df) == 0:

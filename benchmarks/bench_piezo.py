@@ -51,22 +51,10 @@ from i2ris_calib.diagnosis.stats import RATE_EFFECTS  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
 from i2ris_calib.fitting.pipeline import choose_model, fit_dataset, pick_after_fit  # noqa: E402
+from i2ris_calib.simulation.piezo import bouc_wen_actuator, maxwell_slip_actuator  # noqa: E402
 
 RATE_HZ = 200.0
 SINE_HZ = 1.0
-
-
-def bouc_wen(u: np.ndarray, d: float, a: float, beta: float, gamma: float, sub: int = 20):
-    """Output ``d u - h`` (um), shape (n,), of a Bouc-Wen actuator driven by ``u``."""
-    y = np.empty(u.size)
-    h = 0.0
-    y[0] = d * u[0]
-    for k in range(1, u.size):
-        du = (u[k] - u[k - 1]) / sub
-        for _ in range(sub):
-            h += a * du - beta * abs(du) * h - gamma * du * abs(h)
-        y[k] = d * u[k] - h
-    return y
 
 
 def piezo_input(rng: np.random.Generator, burn_s: float = 2.3):
@@ -89,18 +77,6 @@ def piezo_input(rng: np.random.Generator, burn_s: float = 2.3):
     return t, np.round(u, 2), sine1.size, start
 
 
-def maxwell_slip(u: np.ndarray, d: float, k: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Output ``d u - sum_i k_i F_i`` (um), shape (n,), of a bank of elasto-slip elements
-    (deflection ``F_i = clip(F_i + du, -r_i, r_i)``, relaxed at the start)."""
-    f = np.zeros(r.size)
-    y = np.empty(u.size)
-    y[0] = d * u[0]
-    for t in range(1, u.size):
-        f = np.clip(f + (u[t] - u[t - 1]), -r, r)
-        y[t] = d * u[t] - k @ f
-    return y
-
-
 def draw_maxwell_slip(seed: int):
     """(t, input, measured um, true um, noise sd, end of the first sine) of one
     Maxwell-slip seed."""
@@ -110,7 +86,7 @@ def draw_maxwell_slip(seed: int):
     m = int(rng.integers(4, 9))
     r = np.sort(np.exp(rng.uniform(np.log(5.0), np.log(120.0), m)))
     k = rng.dirichlet(np.ones(m)) * rng.uniform(0.15, 0.35) * d
-    y = maxwell_slip(u, d, k, r)
+    y = maxwell_slip_actuator(u, d, k, r)
     sd = float(rng.uniform(0.03, 0.08))
     cut = slice(start, None)
     y = y[cut]
@@ -127,7 +103,7 @@ def draw(seed: int):
     beta_gamma = rng.uniform(0.01, 0.03)
     a = width * beta_gamma
     frac = rng.uniform(0.4, 0.8)
-    y = bouc_wen(u, d, a, frac * beta_gamma, (1.0 - frac) * beta_gamma)
+    y = bouc_wen_actuator(u, d, a, frac * beta_gamma, (1.0 - frac) * beta_gamma)
     sd = float(rng.uniform(0.03, 0.08))
     cut = slice(start, None)
     y = y[cut]

@@ -13,6 +13,7 @@ from i2ris_calib.data.dataset import direction_datasets
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import choose_model, fit_dataset, pick_after_fit
 from i2ris_calib.hysteresis.registry import COUPLED_DEFAULT, SIGNED_KINDS, signed_kinds
+from i2ris_calib.simulation.piezo import bouc_wen_actuator, maxwell_slip_actuator
 
 RATE = 200.0
 
@@ -31,26 +32,13 @@ def _input(seed: int, n_sine: int = 1600, n_steps: int = 8):
 
 
 def _bouc_wen(u, d=0.1, a=0.027, beta=0.012, gamma=0.006, sub=200):
-    """Classic Bouc-Wen ``d u - h``, explicit Euler in sub-steps (not the model's code)."""
-    y, h = np.empty(u.size), 0.0
-    y[0] = d * u[0]
-    for k in range(1, u.size):
-        du = (u[k] - u[k - 1]) / sub
-        for _ in range(sub):
-            h += a * du - beta * abs(du) * h - gamma * du * abs(h)
-        y[k] = d * u[k] - h
-    return y
+    """Classic Bouc-Wen ``d u - h`` (simulation/piezo.py, not the model's code)."""
+    return bouc_wen_actuator(u, d, a, beta, gamma, sub)
 
 
 def _maxwell_slip(u, d=0.1, k=(0.008, 0.01, 0.006), r=(12.0, 45.0, 90.0)):
-    """Elasto-slip elements: ``d u - sum k_i F_i``, ``F_i = clip(F_i + du, -r_i, r_i)``."""
-    k, r = np.asarray(k), np.asarray(r)
-    f, y = np.zeros(r.size), np.empty(u.size)
-    y[0] = d * u[0]
-    for i in range(1, u.size):
-        f = np.clip(f + (u[i] - u[i - 1]), -r, r)
-        y[i] = d * u[i] - k @ f
-    return y
+    """Elasto-slip elements ``d u - sum k_i F_i`` (simulation/piezo.py)."""
+    return maxwell_slip_actuator(u, d, k, r)
 
 
 def _default(truth, seed=0, noise=0.05):

@@ -25,6 +25,15 @@ INIT, UP, HOLD, DOWN = 2, 1, 0, -1
 OK, ABOVE, BELOW, RATE, GAP = 0, 1, 2, 3, 4
 
 
+def _narrowed(x, fx, target, lo, flo, hi, fhi):
+    """The bracket ``(lo, flo, hi, fhi)`` (ends and their outputs) narrowed by a point
+    ``x`` inside it whose output ``fx`` is not the target: it replaces the end on its
+    side of the target."""
+    if fx < target:
+        return x, fx, hi, fhi
+    return lo, flo, x, fx
+
+
 def _play(w, wo, off, m, al, bl, ar, br, r, p, side, u):
     acc = 0.0
     for i in range(off, off + m):
@@ -189,10 +198,7 @@ class Axis:
                 x, fx = xn, f(xn)
                 if abs(fx - target) <= tol_y:
                     return x
-                if fx < target:
-                    lo, flo = x, fx
-                else:
-                    hi, fhi = x, fx
+                lo, flo, hi, fhi = _narrowed(x, fx, target, lo, flo, hi, fhi)
         bisect = False
         for _ in range(200):
             width = hi - lo
@@ -207,10 +213,7 @@ class Axis:
             fx = f(x)
             if abs(fx - target) <= tol_y:
                 return x
-            if fx < target:
-                lo, flo = x, fx
-            else:
-                hi, fhi = x, fx
+            lo, flo, hi, fhi = _narrowed(x, fx, target, lo, flo, hi, fhi)
             bisect = (hi - lo) > 0.5 * width
         return lo if abs(flo - target) <= abs(fhi - target) else hi
 

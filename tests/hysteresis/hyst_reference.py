@@ -41,3 +41,18 @@ def triangle(levels, step=7.0):
         n = max(2, int(abs(b - a) / step) + 1)
         parts.append(np.linspace(a, b, n)[1:])
     return np.concatenate(parts)
+
+
+def refine(v, rng, max_insert=3):
+    """Insert holds and intermediate points on each monotone step of ``v`` (the same
+    input path, sampled more finely): return (v', the indices of v's samples in v')."""
+    out, kept = [v[0]], [0]
+    for k in range(1, v.size):
+        for _ in range(rng.integers(0, max_insert + 1)):
+            out.append(out[-1])  # hold
+        lo, hi = v[k - 1], v[k]
+        for x in np.sort(rng.uniform(0, 1, rng.integers(0, max_insert + 1))):
+            out.append(lo + x * (hi - lo))  # monotone intermediate value
+        out.append(v[k])
+        kept.append(len(out) - 1)
+    return np.array(out), np.array(kept)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from hyst_reference import refine
 
 from i2ris_calib.hysteresis.kernel import play_operators
 from i2ris_calib.hysteresis.models import (
@@ -38,27 +39,13 @@ def test_operator_stays_in_envelope_band(v, r, slope, gap):
     assert np.all(w <= gr + r + 1e-9)
 
 
-def _refine(v, rng, max_insert=3):
-    """Insert holds and intermediate points on each monotone step; return (v', kept index)."""
-    out, kept = [v[0]], [0]
-    for k in range(1, v.size):
-        for _ in range(rng.integers(0, max_insert + 1)):
-            out.append(out[-1])  # hold
-        lo, hi = v[k - 1], v[k]
-        for x in np.sort(rng.uniform(0, 1, rng.integers(0, max_insert + 1))):
-            out.append(lo + x * (hi - lo))  # monotone intermediate value
-        out.append(v[k])
-        kept.append(len(out) - 1)
-    return np.array(out), np.array(kept)
-
-
 @SETTINGS
 @given(v=inputs, seed=seeds)
 def test_rate_independence(v, seed):
     """Holding the input or adding monotone intermediate samples does not change the
     GPI/EGPI output at the original samples."""
     rng = np.random.default_rng(seed)
-    fine, kept = _refine(v, rng)
+    fine, kept = refine(v, rng)
     for model in (gpi_model(), _egpi(seed)):
         np.testing.assert_allclose(model(fine)[kept], model(v), atol=1e-9)
 
@@ -106,7 +93,7 @@ def test_continuous_egpi_is_rate_independent(v, seed):
     """Holds and monotone intermediate samples (also ones landing near the flag point)
     leave the continuous EGPI's output at the original samples unchanged."""
     rng = np.random.default_rng(seed)
-    fine, kept = _refine(v, rng)
+    fine, kept = refine(v, rng)
     model = _egpi_c(seed)
     np.testing.assert_allclose(model(fine)[kept], model(v), atol=1e-9)
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from hyst_reference import refine
 
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import unfitted_model
@@ -30,20 +31,6 @@ signed_inputs = st.lists(st.integers(-6000, 6000), min_size=2, max_size=50).map(
     lambda x: np.array(x, dtype=float)
 )
 seeds = st.integers(0, 2**31 - 1)
-
-
-def _refine(v, rng, max_insert=3):
-    """Insert holds and intermediate points on each step; return (v', kept index)."""
-    out, kept = [v[0]], [0]
-    for k in range(1, v.size):
-        for _ in range(rng.integers(0, max_insert + 1)):
-            out.append(out[-1])  # hold
-        lo, hi = v[k - 1], v[k]
-        for x in np.sort(rng.uniform(0, 1, rng.integers(0, max_insert + 1))):
-            out.append(lo + x * (hi - lo))
-        out.append(v[k])
-        kept.append(len(out) - 1)
-    return np.array(out), np.array(kept)
 
 
 def _bw(seed, exact=True):
@@ -109,7 +96,7 @@ def test_bouc_wen_rate_independence_and_bounded_state(v, seed, exact):
     output at the original samples unchanged (exactly for n = 1; to the Runge-Kutta
     error, < 1e-3 hs, for another exponent); |h| <= hs."""
     m = _bw(seed, exact)
-    fine, kept = _refine(v, np.random.default_rng(seed))
+    fine, kept = refine(v, np.random.default_rng(seed))
     hs = abs(m.value_dict()["hs"])
     np.testing.assert_allclose(m(fine)[kept], m(v), atol=(1e-9 if exact else 1e-3) * hs)
     val = m.value_dict()
@@ -142,7 +129,7 @@ def test_bouc_wen_has_no_wiping_out_but_pi_has():
 @given(v=signed_inputs, seed=seeds)
 def test_pi_rate_independent_continuous_and_wipes_out(v, seed):
     m = _pi(seed)
-    fine, kept = _refine(v, np.random.default_rng(seed))
+    fine, kept = refine(v, np.random.default_rng(seed))
     np.testing.assert_allclose(m(fine)[kept], m(v), atol=1e-9)
     # no output jump: |dy| <= sum |w| |dv| (every operator is 1-Lipschitz in the input)
     w = np.abs(m.values[1:-1]).sum()

@@ -302,6 +302,16 @@ def _slope(kind, fam, w, c, r, p, kappa, vf, v_prev, u, side):  # pragma: no cov
     return _active_sum(w, 0, m, a, a * u + b, r, p, kr, g1, False)
 
 
+@njit(cache=True)
+def _narrowed(x, fx, target, lo, flo, hi, fhi):  # pragma: no cover
+    """The bracket ``(lo, flo, hi, fhi)`` (ends and their outputs) narrowed by a point
+    ``x`` inside it whose output ``fx`` is not the target: it replaces the end on its
+    side of the target."""
+    if fx < target:
+        return x, fx, hi, fhi
+    return lo, flo, x, fx
+
+
 #: Newton steps :func:`_root` tries before regula falsi
 NEWTON_STEPS = 16
 
@@ -342,10 +352,7 @@ def _root(
             x = xn
             if abs(fx - target) <= tol_y:
                 return x, fx
-            if fx < target:
-                lo, flo = x, fx
-            else:
-                hi, fhi = x, fx
+            lo, flo, hi, fhi = _narrowed(x, fx, target, lo, flo, hi, fhi)
     bisect = False
     x = lo
     fx = flo
@@ -362,10 +369,7 @@ def _root(
         fx = _family(kind, fam, w, scratch, c, r, p, kappa, vf, v_prev, x, side)
         if abs(fx - target) <= tol_y:
             return x, fx
-        if fx < target:
-            lo, flo = x, fx
-        else:
-            hi, fhi = x, fx
+        lo, flo, hi, fhi = _narrowed(x, fx, target, lo, flo, hi, fhi)
         bisect = (hi - lo) > 0.5 * width
     if abs(flo - target) <= abs(fhi - target):
         return lo, flo

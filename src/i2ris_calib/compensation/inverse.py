@@ -503,20 +503,10 @@ def compensate(
     target = np.ascontiguousarray(target_deg, dtype=float)
     t = None if t_s is None else np.ascontiguousarray(t_s, dtype=float)
     _check(target, t)
-    lo, hi = (float(x) for x in v_limits)
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise CalibError(f"v_limits must be finite with lo < hi, got ({lo:g}, {hi:g})")
-    rate = np.inf if max_rate is None else float(max_rate)
-    if not rate > 0:
-        raise CalibError(f"max_counts_per_s must be > 0, got {rate:g}")
-    if np.isfinite(rate) and t is None:
-        raise CalibError("a rate limit needs the target's times (time_s)")
-    if not (quantum >= 0 and np.isfinite(quantum)):
-        raise CalibError(f"quantum must be >= 0, got {quantum:g}")
-    if v_initial is not None and not lo <= float(v_initial) <= hi:
-        raise CalibError(f"the initial input {v_initial:g} is outside v_limits ({lo:g}, {hi:g})")
+    lo, hi, rate = _checked_limits(v_limits, max_rate, quantum, v_initial, t)
     base, delay = _base_and_delay(model)
-    hist, hist_o = _check_history(v_history, v_other_history, v_initial, lo, hi, is_coupled(base))
+    coupled = is_coupled(base)
+    hist, hist_o = _check_history(v_history, v_other_history, v_initial, lo, hi, coupled)
     if hist is not None:
         v_initial = float(hist[-1])
         if hist_o is not None and v_other_initial is None:
@@ -529,21 +519,9 @@ def compensate(
     if not (tol_deg >= 0 and np.isfinite(tol_deg)):
         raise CalibError(f"tol_deg must be >= 0, got {tol_deg:g}")
     goal = np.interp(t + delay, t, target) if delay > 0 else target
-    coupled = is_coupled(base)
+    vo = None
     if coupled:
-        if v_other is None:
-            raise CalibError(
-                f"compensate: the {base.name} model needs the other motor's commands "
-                "(v_other, signed counts per target sample): compensate both axes together"
-            )
-        vo = np.asarray(v_other, dtype=float)
-        if vo.shape != target.shape or not np.all(np.isfinite(vo)):
-            raise CalibError(
-                f"compensate: v_other must be {target.size} finite signed counts (one per "
-                f"target sample), got shape {vo.shape}"
-            )
-        if delay > 0:
-            raise CalibError("compensate: a coupled model with a time delay is not inverted")
+        vo = _checked_other(base, v_other, target, delay)
         with deferred():
             goal = goal - coupling_deg(base, vo, v_other_initial, v_other_history=hist_o)
     tt = np.zeros_like(target) if t is None else t
@@ -552,27 +530,15 @@ def compensate(
         v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
     has_init = v_initial is not None
     first_free = bool(entry and has_init and np.isfinite(rate))
-    hold = np.zeros(target.size, dtype=bool)
-    spikes = np.zeros(0, dtype=int)
-    resume = K.Resume()  # a repair round re-inverts only what its new holds change
     start = None  # from rest at v0, or from the state the history leaves
     if hist is not None:
         start = history_state(code, c, r, p, float(kappa), float(vf), float(db), hist)
-    for _ in range(MAX_REPAIR_ROUNDS if repair_spikes else 1):
-        u, u_real, y_model, status = K.invert(
-            code, c, r, p, float(kappa), float(vf), float(db), goal, tt, lo, hi, rate,
-            float(quantum), v0, has_init, float(tol_deg), hold=hold, first_free=first_free,
-            start_state=start, resume=resume,
-        )  # fmt: skip
-        spikes = find_spikes(u, y_model, goal, float(tol_deg), hi - lo, float(quantum))
-        new = spikes[~hold[spikes]]
-        if not repair_spikes or new.size == 0:
-            break
-        hold[new] = True
-        resume.changed = new
-    spikes_left = int(spikes.size) if not repair_spikes else int((~hold[spikes]).sum())
-    ramp = np.zeros(0)
-    ramp_t = np.zeros(0)
+    kernel = (code, c, r, p, float(kappa), float(vf), float(db))
+    u, u_real, status, hold, spikes_left = _inverted_with_repair(
+        kernel, goal, tt, lo, hi, rate, float(quantum), v0, has_init, float(tol_deg),
+        first_free, start, repair_spikes,
+    )  # fmt: skip
+    ramp, ramp_t = np.zeros(0), np.zeros(0)
     if first_free and t.size > 1:
         dt0 = float(t[1] - t[0])
         ramp = entry_ramp(v0, float(u[0]), rate, dt0, float(quantum))
@@ -582,16 +548,12 @@ def compensate(
         j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
         status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
     nh = 0 if hist is None else hist.size
-    hist_t = np.zeros(0)
-    if nh:
-        dt_h = float(t[1] - t[0]) if t is not None and t.size > 1 else 1.0
-        first_t = ramp_t[0] if ramp.size else (t[0] if t is not None else 0.0)
-        hist_t = first_t - dt_h * np.arange(nh, 0, -1)
+    hist_t = _history_times(nh, t, ramp_t)
+    vo_all = None
+    if coupled:
+        vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
+        vo_all = np.concatenate((np.full(ramp.size, vo_first), vo))
     with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
-        vo_all = None
-        if coupled:
-            vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
-            vo_all = np.concatenate((np.full(ramp.size, vo_first), vo))
         if nh:
             both = forward(
                 model,
@@ -610,12 +572,11 @@ def compensate(
                 v_other_initial=v_other_initial,
             )
     hist_pred, both = both[:nh], both[nh:]
-    predicted = both[ramp.size :]
     kind = base.name + ("+time_delay" if delay > 0 else "")
     return CompensationResult(
         commands=u,
         commands_real=u_real,
-        predicted_deg=predicted,
+        predicted_deg=both[ramp.size :],
         target_deg=target,
         status=status,
         t_s=t,
@@ -634,6 +595,79 @@ def compensate(
         history_t_s=hist_t,
         history_predicted_deg=hist_pred,
     )
+
+
+def _checked_limits(v_limits, max_rate, quantum, v_initial, t) -> tuple[float, float, float]:
+    """(lo, hi, rate): the input range and the rate limit (input unit/s; inf for none),
+    each checked with the quantum and the initial input (one-line CalibError)."""
+    lo, hi = (float(x) for x in v_limits)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise CalibError(f"v_limits must be finite with lo < hi, got ({lo:g}, {hi:g})")
+    rate = np.inf if max_rate is None else float(max_rate)
+    if not rate > 0:
+        raise CalibError(f"max_counts_per_s must be > 0, got {rate:g}")
+    if np.isfinite(rate) and t is None:
+        raise CalibError("a rate limit needs the target's times (time_s)")
+    if not (quantum >= 0 and np.isfinite(quantum)):
+        raise CalibError(f"quantum must be >= 0, got {quantum:g}")
+    if v_initial is not None and not lo <= float(v_initial) <= hi:
+        raise CalibError(f"the initial input {v_initial:g} is outside v_limits ({lo:g}, {hi:g})")
+    return lo, hi, rate
+
+
+def _checked_other(base, v_other, target: np.ndarray, delay: float) -> np.ndarray:
+    """The other motor's signed commands a coupled model needs, shape (n,) like the
+    target, finite; one-line CalibError when missing, misshapen, or with a delay."""
+    if v_other is None:
+        raise CalibError(
+            f"compensate: the {base.name} model needs the other motor's commands "
+            "(v_other, signed counts per target sample): compensate both axes together"
+        )
+    vo = np.asarray(v_other, dtype=float)
+    if vo.shape != target.shape or not np.all(np.isfinite(vo)):
+        raise CalibError(
+            f"compensate: v_other must be {target.size} finite signed counts (one per "
+            f"target sample), got shape {vo.shape}"
+        )
+    if delay > 0:
+        raise CalibError("compensate: a coupled model with a time delay is not inverted")
+    return vo
+
+
+def _inverted_with_repair(
+    kernel, goal, tt, lo, hi, rate, quantum, v0, has_init, tol, first_free, start, repair
+):
+    """(commands, real-valued commands, status, held samples, spikes left) of the
+    kernel inversion (``kernel``: :func:`kernel_params`' arrays), with every up-and-back
+    spike (:func:`~i2ris_calib.compensation.safety.find_spikes`) held and re-inverted
+    when ``repair``, for at most :data:`MAX_REPAIR_ROUNDS` rounds."""
+    code, c, r, p, kappa, vf, db = kernel
+    hold = np.zeros(goal.size, dtype=bool)
+    spikes = np.zeros(0, dtype=int)
+    resume = K.Resume()  # a repair round re-inverts only what its new holds change
+    for _ in range(MAX_REPAIR_ROUNDS if repair else 1):
+        u, u_real, y_model, status = K.invert(
+            code, c, r, p, kappa, vf, db, goal, tt, lo, hi, rate, quantum, v0, has_init, tol,
+            hold=hold, first_free=first_free, start_state=start, resume=resume,
+        )  # fmt: skip
+        spikes = find_spikes(u, y_model, goal, tol, hi - lo, quantum)
+        new = spikes[~hold[spikes]]
+        if not repair or new.size == 0:
+            break
+        hold[new] = True
+        resume.changed = new
+    spikes_left = int(spikes.size) if not repair else int((~hold[spikes]).sum())
+    return u, u_real, status, hold, spikes_left
+
+
+def _history_times(nh: int, t, ramp_t: np.ndarray) -> np.ndarray:
+    """Times (s) of the ``nh`` history inputs, shape (nh,): one target interval apart,
+    ending one interval before the entry ramp (or the first target sample)."""
+    if not nh:
+        return np.zeros(0)
+    dt_h = float(t[1] - t[0]) if t is not None and t.size > 1 else 1.0
+    first_t = ramp_t[0] if ramp_t.size else (t[0] if t is not None else 0.0)
+    return first_t - dt_h * np.arange(nh, 0, -1)
 
 
 def forward(

@@ -465,16 +465,10 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         current, cur_m = best.model, best.metrics
         last = ()
     analysis, sentences = _analysis(current, d)
-    if coupling_note:
-        named = any(st.effect in COUPLING_EFFECTS for st in steps)
-        if named or coupling_note.startswith("coupling cannot"):
-            notes.append(coupling_note)
-    not_excluded = _not_excluded(current, last, d, cfg)
-    if confounded:
-        notes.append(_rate_or_static(confounded, current))
-        not_excluded = _with_rate_alternatives(not_excluded, confounded, current, d, cfg)
-    elif one_speed:
-        notes.append(_rate_untestable(current))
+    more, not_excluded = _closing_notes(
+        current, steps, last, coupling_note, confounded, one_speed, d, cfg
+    )
+    notes += more
     return Diagnosis(
         start_model=start_polished,
         final_model=current,
@@ -489,6 +483,25 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         notes=tuple(notes),
         not_excluded=not_excluded,
     )
+
+
+def _closing_notes(current, steps, last, coupling_note, confounded, one_speed, d, cfg):
+    """(notes, not excluded alternatives) at the end of a diagnosis: the coupling note
+    when coupling was named or cannot be separated; the rate-vs-static note on a
+    recording whose speed is a function of its level (the confounded rate candidates
+    listed as not excluded, with the separating recording)."""
+    notes = []
+    if coupling_note:
+        named = any(st.effect in COUPLING_EFFECTS for st in steps)
+        if named or coupling_note.startswith("coupling cannot"):
+            notes.append(coupling_note)
+    not_excluded = _not_excluded(current, last, d, cfg)
+    if confounded:
+        notes.append(_rate_or_static(confounded, current))
+        not_excluded = _with_rate_alternatives(not_excluded, confounded, current, d, cfg)
+    elif one_speed:
+        notes.append(_rate_untestable(current))
+    return notes, not_excluded
 
 
 def diagnose_from_starts(
@@ -527,26 +540,8 @@ def diagnose_from_starts(
     fit_config = checked_fit_config(func, fit_config, "fit_config")
     fitted: dict = {}  # start fits so far: GPI's is the nested start of EGPI's (fitted once)
     picked = ""
-    other = other_axis(data.axis) if data.axis in ("yaw", "pitch") else "other"
-    together = motors_together(data.enc, data.signals.v_other, other)
-    coupled = together is not None and together.moves_together and together.coupled
-    if starts is None and data.direction == "±" and coupled:
-        # fit's candidates include the coupled two-tendon GPI: start from its base, the
-        # diagnosis tries the coupling (axis_coupling) as an effect
-        starts = (SIGNED_DEFAULT,)
-        picked = "the other motor moves with this one: the coupled model's base"
-    elif starts is None and data.direction == "±":  # the default model fit picks there
-        for kind in fit_order(SIGNED_KINDS):
-            if progress:
-                progress(f"fitting {kind}")
-            with single_threaded_blas():
-                fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
-        choice = ModelChoice(True, tuple(fit_order(SIGNED_KINDS)), "the signed input")
-        choice = pick_after_fit(choice, [(data, fitted)])
-        starts = (choice.main,)
-        picked = choice.why[choice.why.find("picked after fitting") :] if choice.picked else ""
-    elif starts is None:
-        starts = diagnosis_starts(False)
+    if starts is None:
+        starts, picked = _default_starts(data, fit_config, fitted, progress)
     starts = check_choices(func, "starts", starts, DIAGNOSIS_STARTS, repr(DIAGNOSIS_STARTS))
     if not starts:
         raise CalibError(
@@ -568,6 +563,38 @@ def diagnose_from_starts(
             cfg,
             progress=(lambda x, k=kind: progress(f"{k}: {x}")) if progress else None,
         )
+    return _reconciled(paths, picked, data, cfg)
+
+
+def _default_starts(data: Dataset, fit_config, fitted: dict, progress) -> tuple:
+    """(starting kinds, why picked) of ``--start auto``: on a signed dataset where the
+    other motor moves with this one, the coupled model's base; on another signed
+    dataset the model ``fit`` picks after fitting its signed kinds (fitted here, into
+    ``fitted``); on a direction dataset GPI and EGPI."""
+    other = other_axis(data.axis) if data.axis in ("yaw", "pitch") else "other"
+    together = motors_together(data.enc, data.signals.v_other, other)
+    coupled = together is not None and together.moves_together and together.coupled
+    if data.direction == "±" and coupled:
+        # fit's candidates include the coupled two-tendon GPI: start from its base, the
+        # diagnosis tries the coupling (axis_coupling) as an effect
+        return (SIGNED_DEFAULT,), "the other motor moves with this one: the coupled model's base"
+    if data.direction != "±":
+        return diagnosis_starts(False), ""
+    for kind in fit_order(SIGNED_KINDS):  # the default model fit picks there
+        if progress:
+            progress(f"fitting {kind}")
+        with single_threaded_blas():
+            fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
+    choice = ModelChoice(True, tuple(fit_order(SIGNED_KINDS)), "the signed input")
+    choice = pick_after_fit(choice, [(data, fitted)])
+    picked = choice.why[choice.why.find("picked after fitting") :] if choice.picked else ""
+    return (choice.main,), picked
+
+
+def _reconciled(paths: dict, picked: str, data: Dataset, cfg) -> AutoDiagnosis:
+    """One answer from the diagnoses of each start (``paths``: kind -> Diagnosis): the
+    path whose final model has the lower held-out RMSE, the other path's answer
+    excluded or not by the held-out z-test (p < ``cfg.alpha``)."""
     order = sorted(paths, key=lambda k: paths[k].final.holdout_rmse_deg)
     best = order[0]
     diag = paths[best]

@@ -1352,34 +1352,7 @@ def _result(
     n = int(used.sum())
     k = int(is_free.sum())
     rss = float(np.sum(resid[used] ** 2))
-    p = len(names)
-    cov = np.zeros((p, p))
-    stderr = dict.fromkeys(names, 0.0)
-    reasons: dict[str, str] = {}
-    lsq_idx = [int(i) for i in lsq_idx]
-    if lsq_idx and n <= k:
-        for i in lsq_idx:
-            stderr[names[i]] = float("nan")
-            reasons[names[i]] = f"{n} fitted samples for {k} free parameters: no residual variance"
-    if res is not None and lsq_idx and n > k:
-        J = np.asarray(res.jac, dtype=float)
-        s2 = rss / (n - k)
-        # pseudo-inverse of the column-scaled J^T J (p x p, cheap) by eigen-decomposition
-        norm = np.linalg.norm(J, axis=0)
-        d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
-        evals, evecs = np.linalg.eigh((J * d).T @ (J * d))
-        ok = evals > max(evals.max(), 0.0) * 1e-12
-        c = d[:, None] * ((evecs[:, ok] / evals[ok]) @ evecs[:, ok].T) * d[None, :] * s2
-        for a, ia in enumerate(lsq_idx):
-            for b, ib in enumerate(lsq_idx):
-                cov[ia, ib] = c[a, b]
-        # parameters in the Jacobian's null space (unidentified by these data) get NaN
-        unidentified = (np.abs(evecs[:, ~ok]) > 0.1).any(axis=1)
-        for a, ia in enumerate(lsq_idx):
-            stderr[names[ia]] = (
-                float("nan") if unidentified[a] else float(np.sqrt(max(c[a, a], 0.0)))
-            )
-        reasons |= _unidentified_reasons(norm, evecs[:, ~ok], [names[i] for i in lsq_idx])
+    cov, stderr, reasons = _covariance(res, names, lsq_idx, n, k, rss)
     for i in pidx:
         stderr[names[i]] = float("nan")
         reasons[names[i]] = (
@@ -1417,6 +1390,43 @@ def _result(
         extra={"outside_bounds": outside},
         stderr_reasons=reasons,
     )
+
+
+def _covariance(res, names, lsq_idx, n: int, k: int, rss: float):
+    """(covariance (p, p), stderr by name, reasons by name) of the least-squares
+    parameters ``lsq_idx`` from the final Jacobian ``res.jac`` (``n`` fitted samples,
+    ``k`` free parameters, residual sum of squares ``rss``): the pseudo-inverse of the
+    column-scaled ``J^T J`` times ``rss / (n - k)``; a parameter in the Jacobian's null
+    space (unidentified by these data) gets NaN and a reason. Parameters outside
+    ``lsq_idx`` keep stderr 0 (fixed) until the caller says otherwise."""
+    p = len(names)
+    cov = np.zeros((p, p))
+    stderr = dict.fromkeys(names, 0.0)
+    reasons: dict[str, str] = {}
+    lsq_idx = [int(i) for i in lsq_idx]
+    if lsq_idx and n <= k:
+        for i in lsq_idx:
+            stderr[names[i]] = float("nan")
+            reasons[names[i]] = f"{n} fitted samples for {k} free parameters: no residual variance"
+    if res is None or not lsq_idx or n <= k:
+        return cov, stderr, reasons
+    J = np.asarray(res.jac, dtype=float)
+    s2 = rss / (n - k)
+    # pseudo-inverse of the column-scaled J^T J (p x p, cheap) by eigen-decomposition
+    norm = np.linalg.norm(J, axis=0)
+    d = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
+    evals, evecs = np.linalg.eigh((J * d).T @ (J * d))
+    ok = evals > max(evals.max(), 0.0) * 1e-12
+    c = d[:, None] * ((evecs[:, ok] / evals[ok]) @ evecs[:, ok].T) * d[None, :] * s2
+    for a, ia in enumerate(lsq_idx):
+        for b, ib in enumerate(lsq_idx):
+            cov[ia, ib] = c[a, b]
+    # parameters in the Jacobian's null space (unidentified by these data) get NaN
+    unidentified = (np.abs(evecs[:, ~ok]) > 0.1).any(axis=1)
+    for a, ia in enumerate(lsq_idx):
+        stderr[names[ia]] = float("nan") if unidentified[a] else float(np.sqrt(max(c[a, a], 0.0)))
+    reasons |= _unidentified_reasons(norm, evecs[:, ~ok], [names[i] for i in lsq_idx])
+    return cov, stderr, reasons
 
 
 def _unidentified_reasons(norm: np.ndarray, null: np.ndarray, names: list[str]) -> dict[str, str]:

@@ -222,31 +222,8 @@ def diagnosis_markdown(rec: dict) -> str:
         f"![residual of the starting model]({rec['figures'][0]})",
         "",
     ]
-    for i, s in enumerate(rec["steps"], start=1):
-        ev = s["evidence"]
-        lines += [
-            f"### Step {i}: {s['effect']}",
-            "",
-            f"*{s['meaning']}.* Where the disagreement was:",
-            "",
-            *[f"- {x}" for x in s["location_before"]],
-            "",
-            "Fitted effect parameters: "
-            + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in s["params"].items())
-            + ".",
-            "",
-            f"Held-out RMSE {_fmt(s['holdout_rmse_before_deg'])} -> "
-            f"{_fmt(s['holdout_rmse_after_deg'])} deg ({100 * ev['rel_improvement']:.0f}% lower), "
-            f"held-out SSE reduction z = {ev['z']:.1f} (p = {ev['p_value']:.2g}), "
-            f"{ev['units_improved']}/{ev['n_units']} held-out strokes improved, "
-            f"BIC change {s['delta_bic']:.1f}.",
-            "",
-            *([f"{s['verdict']}.", ""] if s.get("verdict") else []),
-            "| candidate | fit | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
-            "|---|---|---|---|---|---|---|",
-        ]
-        lines += _candidate_rows(s["candidates"], s["effect"])
-        lines += ["", f"![residual after {s['effect']}]({s['figures']['after']})", ""]
+    for i, step in enumerate(rec["steps"], start=1):
+        lines += _step_lines(i, step)
     lines += ["### Remaining residual", "", *[f"- {x}" for x in rec["location_final"]], ""]
     if rec["last_candidates"]:
         lines += [
@@ -260,6 +237,35 @@ def diagnosis_markdown(rec: dict) -> str:
     for n in rec.get("notes", []):
         lines.append(f"Note: {n}")
     return "\n".join(lines).rstrip() + "\n"
+
+
+def _step_lines(i: int, s: dict) -> list[str]:
+    """Markdown of one named step ``s`` (a diagnosis.json ``steps`` record): where the
+    disagreement was, the fitted effect, the held-out evidence, the candidates."""
+    ev = s["evidence"]
+    lines = [
+        f"### Step {i}: {s['effect']}",
+        "",
+        f"*{s['meaning']}.* Where the disagreement was:",
+        "",
+        *[f"- {x}" for x in s["location_before"]],
+        "",
+        "Fitted effect parameters: "
+        + ", ".join(f"`{k}` = {_fmt(v)}" for k, v in s["params"].items())
+        + ".",
+        "",
+        f"Held-out RMSE {_fmt(s['holdout_rmse_before_deg'])} -> "
+        f"{_fmt(s['holdout_rmse_after_deg'])} deg ({100 * ev['rel_improvement']:.0f}% lower), "
+        f"held-out SSE reduction z = {ev['z']:.1f} (p = {ev['p_value']:.2g}), "
+        f"{ev['units_improved']}/{ev['n_units']} held-out strokes improved, "
+        f"BIC change {s['delta_bic']:.1f}.",
+        "",
+        *([f"{s['verdict']}.", ""] if s.get("verdict") else []),
+        "| candidate | fit | held-out RMSE (deg) | rel. improvement | z | BIC change | named |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    lines += _candidate_rows(s["candidates"], s["effect"])
+    return lines + ["", f"![residual after {s['effect']}]({s['figures']['after']})", ""]
 
 
 def _paths_table(rec: dict) -> list[str]:

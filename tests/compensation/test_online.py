@@ -122,6 +122,11 @@ def test_refusals_are_one_line(tmp_path):
         c.step(1.0, dt_s=0.0)
     with pytest.raises(CalibError, match="outside the input range"):
         Compensator({"yaw": model}, {"yaw": lim}, start_counts=-5.0)
+    # the batch's checks of the range, rate and quantum, named for the axis
+    with pytest.raises(CalibError, match=r"^Compensator: yaw v_limits must be finite"):
+        Compensator({"yaw": model}, {"yaw": (100.0, 100.0)})
+    with pytest.raises(CalibError, match=r"^Compensator: yaw max_counts_per_s must be > 0"):
+        Compensator({"yaw": model}, {"yaw": lim}, max_counts_per_s=0.0)
     (tmp_path / "bad.json").write_text("{}")
     with pytest.raises(CalibError, match="not a compensator document"):
         Compensator.from_json(tmp_path / "bad.json")

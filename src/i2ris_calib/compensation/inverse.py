@@ -597,19 +597,26 @@ def compensate(
     )
 
 
-def _checked_limits(v_limits, max_rate, quantum, v_initial, t) -> tuple[float, float, float]:
+def checked_limits(v_limits, max_rate, quantum, who: str = "") -> tuple[float, float, float]:
     """(lo, hi, rate): the input range and the rate limit (input unit/s; inf for none),
-    each checked with the quantum and the initial input (one-line CalibError)."""
+    checked with the command quantum; a one-line CalibError starting with ``who``
+    (e.g. ``"Compensator: yaw "``) otherwise. Shared by the batch and the online path."""
     lo, hi = (float(x) for x in v_limits)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise CalibError(f"v_limits must be finite with lo < hi, got ({lo:g}, {hi:g})")
+        raise CalibError(f"{who}v_limits must be finite with lo < hi, got ({lo:g}, {hi:g})")
     rate = np.inf if max_rate is None else float(max_rate)
     if not rate > 0:
-        raise CalibError(f"max_counts_per_s must be > 0, got {rate:g}")
+        raise CalibError(f"{who}max_counts_per_s must be > 0, got {rate:g}")
+    if not (quantum >= 0 and np.isfinite(quantum)):
+        raise CalibError(f"{who}quantum must be >= 0, got {quantum:g}")
+    return lo, hi, rate
+
+
+def _checked_limits(v_limits, max_rate, quantum, v_initial, t) -> tuple[float, float, float]:
+    """:func:`checked_limits`, and a rate limit needs times, the initial input inside."""
+    lo, hi, rate = checked_limits(v_limits, max_rate, quantum)
     if np.isfinite(rate) and t is None:
         raise CalibError("a rate limit needs the target's times (time_s)")
-    if not (quantum >= 0 and np.isfinite(quantum)):
-        raise CalibError(f"quantum must be >= 0, got {quantum:g}")
     if v_initial is not None and not lo <= float(v_initial) <= hi:
         raise CalibError(f"the initial input {v_initial:g} is outside v_limits ({lo:g}, {hi:g})")
     return lo, hi, rate

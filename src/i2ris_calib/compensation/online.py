@@ -37,6 +37,7 @@ from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation.inverse import (
     STATUS_NAMES,
     _base_and_delay,
+    checked_limits,
     coupling_params,
     default_tol,
     is_coupled,
@@ -266,14 +267,7 @@ def _axis_from_model(name, model, v_limits, sign, max_rate, start, quantum, tol_
             "batch nor the online compensator inverts that"
         )
     code, c, r, p, kappa, vf, db = kernel_params(base)
-    lo, hi = (float(x) for x in v_limits)
-    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-        raise CalibError(f"Compensator: {name} v_limits must be finite with lo < hi")
-    rate = math.inf if max_rate is None else float(max_rate)
-    if not rate > 0:
-        raise CalibError(f"Compensator: {name} max_counts_per_s must be > 0, got {rate:g}")
-    if not (quantum >= 0 and math.isfinite(quantum)):
-        raise CalibError(f"Compensator: quantum must be >= 0, got {quantum:g}")
+    lo, hi, rate = checked_limits(v_limits, max_rate, quantum, f"Compensator: {name} ")
     v0 = float(sign) * float(start)
     if quantum > 0 and not exact_start:
         v0 = float(np.round(v0 / quantum) * quantum)

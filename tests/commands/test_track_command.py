@@ -216,3 +216,27 @@ def test_backward_times_are_not_reported_as_dropped_frames(tmp_path, case, dropp
     assert any("dropped" in w for w in warnings) == (dropped > 0)
     if dropped:
         assert any(f"dropped about {dropped} frame(s) in 1 gap(s)" in w for w in warnings)
+
+
+def test_a_moving_reference_window_is_a_warning():
+    """track.json's reference.window_motion -> one terminal warning naming the window
+    and the motion when the tip moved in it, none when it held still."""
+    from i2ris_calib.commands.track import track_warnings, window_motion_record
+    from i2ris_calib.tracking.config import TrackingConfig
+    from i2ris_calib.tracking.reference_window import reference_window_motion
+
+    t = np.arange(0.0, 5.0, 1 / 30)
+    window = t <= 0.8
+    lines = {}
+    for name, yaw in (("still", 0.01 * np.sin(40 * t)), ("moving", 15 * np.sin(t))):
+        motion = reference_window_motion(t, yaw, 0 * t, window)
+        rec = window_motion_record(motion, TrackingConfig())
+        summary = {"cameras": {}, "reference": {"window_motion": rec}}
+        lines[name] = [w for w in track_warnings(summary) if "reference window" in w]
+    assert lines["still"] == []
+    (w,) = lines["moving"]
+    moved = np.ptp(15 * np.sin(t[window]))  # the quadratic's excursion is close to it
+    assert "reference window 0-0.8 s (yaw " in w and ", pitch 0.00 deg)" in w
+    shown = float(w.split("(yaw ")[1].split(",")[0])
+    assert abs(shown - moved) < 0.05 * moved
+    assert "reference_start_s" in w and "\n" not in w

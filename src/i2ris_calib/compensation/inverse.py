@@ -514,65 +514,31 @@ def compensate(
     if delay > 0 and t is None:
         raise CalibError("a model with a time delay needs the target's times (time_s)")
     code, c, r, p, kappa, vf, db = kernel_params(base)
-    if tol_deg is None:
-        tol_deg = default_tol(code, c, p, float(quantum))
-    if not (tol_deg >= 0 and np.isfinite(tol_deg)):
-        raise CalibError(f"tol_deg must be >= 0, got {tol_deg:g}")
-    goal = np.interp(t + delay, t, target) if delay > 0 else target
-    vo = None
-    if coupled:
-        vo = _checked_other(base, v_other, target, delay)
-        with deferred():
-            goal = goal - coupling_deg(base, vo, v_other_initial, v_other_history=hist_o)
-    tt = np.zeros_like(target) if t is None else t
-    v0 = 0.0 if v_initial is None else float(v_initial)
-    if quantum > 0 and v_initial is not None and hist is None:
-        v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
+    kernel = (code, c, r, p, float(kappa), float(vf), float(db))
+    tol_deg = _checked_tol(tol_deg, code, c, p, float(quantum))
+    vo = _checked_other(base, v_other, target, delay) if coupled else None
+    goal = _goal(base, target, t, delay, vo, v_other_initial, hist_o)
+    v0 = _start_command(v_initial, quantum, lo, hi, hist is not None)
     has_init = v_initial is not None
     first_free = bool(entry and has_init and np.isfinite(rate))
-    start = None  # from rest at v0, or from the state the history leaves
-    if hist is not None:
-        start = history_state(code, c, r, p, float(kappa), float(vf), float(db), hist)
-    kernel = (code, c, r, p, float(kappa), float(vf), float(db))
+    # from rest at v0, or from the state the history leaves
+    start = None if hist is None else history_state(*kernel, hist)
     u, u_real, status, hold, spikes_left = _inverted_with_repair(
-        kernel, goal, tt, lo, hi, rate, float(quantum), v0, has_init, float(tol_deg),
-        first_free, start, repair_spikes,
+        kernel, goal, np.zeros_like(target) if t is None else t, lo, hi, rate,
+        float(quantum), v0, has_init, float(tol_deg), first_free, start, repair_spikes,
     )  # fmt: skip
-    ramp, ramp_t = np.zeros(0), np.zeros(0)
-    if first_free and t.size > 1:
-        dt0 = float(t[1] - t[0])
-        ramp = entry_ramp(v0, float(u[0]), rate, dt0, float(quantum))
-        ramp_t = t[0] - dt0 * np.arange(ramp.size, 0, -1)
-    if delay > 0:
-        # command k serves the target at t_k + delay: report status on the target's samples
-        j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
-        status = np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
+    ramp, ramp_t = _entry_commands(first_free, t, v0, float(u[0]), rate, float(quantum))
+    status = _status_on_target(status, t, delay)
     nh = 0 if hist is None else hist.size
     hist_t = _history_times(nh, t, ramp_t)
     vo_all = None
     if coupled:
         vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
         vo_all = np.concatenate((np.full(ramp.size, vo_first), vo))
-    with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
-        if nh:
-            both = forward(
-                model,
-                np.concatenate((hist, ramp, u)),
-                None if t is None else np.concatenate((hist_t, ramp_t, t)),
-                None,
-                v_other=None if vo_all is None else np.concatenate((hist_o, vo_all)),
-            )
-        else:
-            both = forward(
-                model,
-                np.concatenate((ramp, u)),
-                None if t is None else np.concatenate((ramp_t, t)),
-                None if v_initial is None else v0,
-                v_other=vo_all,
-                v_other_initial=v_other_initial,
-            )
-    hist_pred, both = both[:nh], both[nh:]
-    kind = base.name + ("+time_delay" if delay > 0 else "")
+    hist_pred, both = _predicted(
+        model, (hist, hist_t, hist_o), (ramp, ramp_t), (u, t), v0 if has_init else None,
+        vo_all, v_other_initial,
+    )  # fmt: skip
     return CompensationResult(
         commands=u,
         commands_real=u_real,
@@ -580,7 +546,7 @@ def compensate(
         target_deg=target,
         status=status,
         t_s=t,
-        kind=kind,
+        kind=base.name + ("+time_delay" if delay > 0 else ""),
         v_limits=(lo, hi),
         max_rate=rate,
         quantum=float(quantum),
@@ -595,6 +561,84 @@ def compensate(
         history_t_s=hist_t,
         history_predicted_deg=hist_pred,
     )
+
+
+def _checked_tol(tol_deg, code: int, c, p, quantum: float) -> float:
+    """``tol_deg``, or the default of :func:`default_tol` when None; >= 0 and finite."""
+    if tol_deg is None:
+        tol_deg = default_tol(code, c, p, quantum)
+    if not (tol_deg >= 0 and np.isfinite(tol_deg)):
+        raise CalibError(f"tol_deg must be >= 0, got {tol_deg:g}")
+    return tol_deg
+
+
+def _goal(base, target: np.ndarray, t, delay: float, vo, vo_initial, vo_history) -> np.ndarray:
+    """The angle (deg) the base model's own input must produce, shape (n,): the target
+    ``delay`` s ahead, less a coupled model's coupling term (fixed by the other motor's
+    commands ``vo``; None for an uncoupled model)."""
+    goal = np.interp(t + delay, t, target) if delay > 0 else target
+    if vo is None:
+        return goal
+    with deferred():
+        return goal - coupling_deg(base, vo, vo_initial, v_other_history=vo_history)
+
+
+def _start_command(v_initial, quantum: float, lo: float, hi: float, from_history: bool) -> float:
+    """The input before the first sample: ``v_initial`` (0 when None), rounded to the
+    command ``quantum`` and clipped into [lo, hi] unless a history sets it exactly."""
+    v0 = 0.0 if v_initial is None else float(v_initial)
+    if quantum > 0 and v_initial is not None and not from_history:
+        v0 = float(np.clip(np.round(v0 / quantum) * quantum, lo, hi))
+    return v0
+
+
+def _entry_commands(first_free: bool, t, v0: float, u0: float, rate: float, quantum: float):
+    """(ramp, ramp_t): the rate-limited entry from ``v0`` to the first command ``u0`` and
+    its times (s), one target interval apart before ``t[0]``; empty without an entry."""
+    if not (first_free and t.size > 1):
+        return np.zeros(0), np.zeros(0)
+    dt0 = float(t[1] - t[0])
+    ramp = entry_ramp(v0, u0, rate, dt0, quantum)
+    return ramp, t[0] - dt0 * np.arange(ramp.size, 0, -1)
+
+
+def _status_on_target(status: np.ndarray, t, delay: float) -> np.ndarray:
+    """Status codes on the target's samples, shape (n,): with a delay, command k serves
+    the target at ``t_k + delay``, and samples no command reaches are STATUS_DELAY."""
+    if delay <= 0:
+        return status
+    j = np.searchsorted(t, t - delay * (1 + 1e-12), side="right") - 1
+    return np.where(j >= 0, status[np.clip(j, 0, None)], K.STATUS_DELAY).astype(np.int8)
+
+
+def _predicted(model, history, entry, commands, v_initial, vo_all, vo_initial):
+    """(history output, entry + target output) in deg: the forward model over the whole
+    command sequence, so it is exactly what the model predicts for what is sent.
+
+    ``history`` = (inputs, times, other motor's inputs), ``entry`` = (ramp, times),
+    ``commands`` = (commands, target times); with a history the model starts from rest
+    at its first input, else from ``v_initial`` (None: the first command)."""
+    (hist, hist_t, hist_o), (ramp, ramp_t), (u, t) = history, entry, commands
+    nh = 0 if hist is None else hist.size
+    with deferred():  # compiled, returns arrays: a Ctrl-C is raised after it (interrupts.py)
+        if nh:
+            both = forward(
+                model,
+                np.concatenate((hist, ramp, u)),
+                None if t is None else np.concatenate((hist_t, ramp_t, t)),
+                None,
+                v_other=None if vo_all is None else np.concatenate((hist_o, vo_all)),
+            )
+        else:
+            both = forward(
+                model,
+                np.concatenate((ramp, u)),
+                None if t is None else np.concatenate((ramp_t, t)),
+                v_initial,
+                v_other=vo_all,
+                v_other_initial=vo_initial,
+            )
+    return both[:nh], both[nh:]
 
 
 def checked_limits(v_limits, max_rate, quantum, who: str = "") -> tuple[float, float, float]:

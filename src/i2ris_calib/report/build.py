@@ -1021,57 +1021,73 @@ def compensation_verdicts(axes: Mapping[str, Mapping[str, Any]]) -> list[Verdict
     out = []
     for axis, a in axes.items():
         name = a.get("dataset", axis)
-        why = "forced by --model" if a.get("model_choice") == "--model" else "best of the ranking"
-        n_bad, n = a.get("n_unreachable"), a.get("n_samples")
-        main = (
-            f"{name}: {_model_name(a.get('model', '?'))} ({why}): predicted RMSE "
-            f"{fmt_sig(a.get('rmse_deg'), 2, pad=True)} deg, max "
-            f"{fmt_sig(a.get('max_abs_err_deg'), 2, pad=True)} deg"
-        )
-        if n is not None:
-            main += f"; {n_bad or 0} of {n} target samples unreachable"
-        out.append(Verdict(main + ".", "warn" if n_bad else "ok"))
-        rate, seen = tables._finite(a.get("max_counts_per_s")), a.get("max_command_rate_per_s")
-        if rate is None:
-            out.append(Verdict(f"{name}: no rate limit; the commands reach "
-                               f"{fmt_sig(seen, 3)} counts/s.", "warn"))  # fmt: skip
-        else:
-            over = tables._finite(seen) is not None and float(seen) > rate * (1 + 1e-6)
-            out.append(
-                Verdict(
-                    f"{name}: rate limit {fmt_sig(rate, 4)} counts/s "
-                    f"({a.get('max_counts_per_s_source', '?')}); the commands reach "
-                    f"{fmt_sig(seen, 4)} counts/s" + (" (above it)." if over else "."),
-                    "warn" if over else "ok",
-                )
-            )
-        if a.get("n_conditioning"):
-            out.append(
-                Verdict(
-                    f"{name}: conditioning sweep of {a['n_conditioning']} samples "
-                    f"({fmt_sig(a.get('conditioning_s'), 3)} s) over the fitted range first: "
-                    f"{a.get('start_state_reason') or 'the start state set to one the model knows'}.",
-                    "info",
-                )
-            )
-        elif a.get("start_state_reason"):
-            out.append(Verdict(f"{name}: start state: {a['start_state_reason']}.", "info"))
-        if a.get("n_entry"):
-            out.append(
-                Verdict(
-                    f"{name}: entry ramp of {a['n_entry']} samples "
-                    f"({fmt_sig(a.get('entry_s'), 3)} s) from {fmt_sig(a.get('start_counts'), 6)} "
-                    f"counts ({a.get('start_counts_source', '?')}) before the target's first "
-                    "sample.",
-                    "info",
-                )
-            )
+        out += [_model_verdict(name, a), _rate_verdict(name, a), *_start_verdicts(name, a)]
         if a.get("spikes_left"):
             out.append(
                 Verdict(f"{name}: {a['spikes_left']} output spike(s) left in the commands.", "warn")
             )
-        for w in a.get("warnings") or []:
-            out.append(Verdict(str(w), "warn"))
+        out += [Verdict(str(w), "warn") for w in a.get("warnings") or []]
+    return out
+
+
+def _model_verdict(name: str, a: Mapping[str, Any]) -> Verdict:
+    """The model inverted for axis record ``a`` (compensate.json) and why, its predicted
+    error and the target samples it cannot reach."""
+    why = "forced by --model" if a.get("model_choice") == "--model" else "best of the ranking"
+    n_bad, n = a.get("n_unreachable"), a.get("n_samples")
+    main = (
+        f"{name}: {_model_name(a.get('model', '?'))} ({why}): predicted RMSE "
+        f"{fmt_sig(a.get('rmse_deg'), 2, pad=True)} deg, max "
+        f"{fmt_sig(a.get('max_abs_err_deg'), 2, pad=True)} deg"
+    )
+    if n is not None:
+        main += f"; {n_bad or 0} of {n} target samples unreachable"
+    return Verdict(main + ".", "warn" if n_bad else "ok")
+
+
+def _rate_verdict(name: str, a: Mapping[str, Any]) -> Verdict:
+    """The rate limit of axis record ``a`` and where it came from, against the fastest
+    command sent (a warning without a limit or above it)."""
+    rate, seen = tables._finite(a.get("max_counts_per_s")), a.get("max_command_rate_per_s")
+    if rate is None:
+        return Verdict(
+            f"{name}: no rate limit; the commands reach {fmt_sig(seen, 3)} counts/s.", "warn"
+        )
+    over = tables._finite(seen) is not None and float(seen) > rate * (1 + 1e-6)
+    return Verdict(
+        f"{name}: rate limit {fmt_sig(rate, 4)} counts/s "
+        f"({a.get('max_counts_per_s_source', '?')}); the commands reach "
+        f"{fmt_sig(seen, 4)} counts/s" + (" (above it)." if over else "."),
+        "warn" if over else "ok",
+    )
+
+
+def _start_verdicts(name: str, a: Mapping[str, Any]) -> list[Verdict]:
+    """How axis record ``a`` reaches the target: the conditioning sweep (or the start
+    state's reason) and the entry ramp from the start counts."""
+    out = []
+    if a.get("n_conditioning"):
+        reason = a.get("start_state_reason") or "the start state set to one the model knows"
+        out.append(
+            Verdict(
+                f"{name}: conditioning sweep of {a['n_conditioning']} samples "
+                f"({fmt_sig(a.get('conditioning_s'), 3)} s) over the fitted range first: "
+                f"{reason}.",
+                "info",
+            )
+        )
+    elif a.get("start_state_reason"):
+        out.append(Verdict(f"{name}: start state: {a['start_state_reason']}.", "info"))
+    if a.get("n_entry"):
+        out.append(
+            Verdict(
+                f"{name}: entry ramp of {a['n_entry']} samples "
+                f"({fmt_sig(a.get('entry_s'), 3)} s) from {fmt_sig(a.get('start_counts'), 6)} "
+                f"counts ({a.get('start_counts_source', '?')}) before the target's first "
+                "sample.",
+                "info",
+            )
+        )
     return out
 
 

@@ -195,57 +195,70 @@ def clock_view(sync: Mapping[str, Any]) -> ClockView | None:
     clock = stated_clock(sync)
     if clock is None:
         return None
-    ev = sync.get("evidence") if isinstance(sync.get("evidence"), Mapping) else {}
+    ev = _mapping(sync.get("evidence")) or {}
     method = str(sync.get("method", "?"))
     requested = str(sync.get("method_requested", method))
-    why = ev.get("auto") if isinstance(ev.get("auto"), str) else ""
-    if not why:
-        why = METHOD_WHY.get(method, "")
-        if requested not in ("auto", method):
-            why = f"asked for {requested}; {why}"
-        elif requested == method:
-            why = f"requested; {why}"
-    rng = sync.get("camera_time_range_s")
-    if isinstance(rng, list) and len(rng) == 2 and all(math.isfinite(_num(x)) for x in rng):
-        t_range = (_num(rng[0]), _num(rng[1]))
-    else:
-        t_range = (clock.t_ref_s, clock.t_ref_s)
-    others: list[ClockLine] = []
-    comb = ev.get("combination") if isinstance(ev.get("combination"), Mapping) else None
-    event = ev.get("event") if isinstance(ev.get("event"), Mapping) else None
-    if event is not None:
-        line = _line("event alone", event)
-        if line is not None:
-            others.append(line)
-    if comb is not None:
-        line = _line("model alone", comb, "model_")
-        if line is not None:
-            others.append(line)
-    event_ev = ev
-    if event is not None and isinstance(event.get("evidence"), Mapping):
-        event_ev = event["evidence"]
-    edges = _edges(event_ev, clock)
-    profile = None
-    prof = ev.get("profile")
-    if isinstance(prof, Mapping):
-        x = np.asarray(prof.get("offset_at_t_ref_s") or [], dtype=float)
-        y = np.asarray(prof.get("rss_deg2") or [], dtype=float)
-        if x.size >= 2 and x.shape == y.shape:
-            profile = (x, y)
+    comb, event = _mapping(ev.get("combination")), _mapping(ev.get("event"))
+    event_ev = _mapping(event.get("evidence")) if event is not None else None
+    event_ev = ev if event_ev is None else event_ev
     n_cam, n_log = event_ev.get("n_camera_edges"), event_ev.get("n_log_edges")
     return ClockView(
         method=method,
         requested=requested,
-        why=why,
+        why=_method_why(ev, method, requested),
         clock=clock,
-        t_range_s=t_range,
-        others=others,
-        edges=edges,
+        t_range_s=_camera_range(sync, clock),
+        others=_other_estimates(event, comb),
+        edges=_edges(event_ev, clock),
         n_camera_edges=int(n_cam) if isinstance(n_cam, (int, float)) else None,
         n_log_edges=int(n_log) if isinstance(n_log, (int, float)) else None,
         z=_num(comb.get("z")) if comb is not None else float("nan"),
-        profile=profile,
+        profile=_profile(ev.get("profile")),
     )
+
+
+def _mapping(x) -> Mapping[str, Any] | None:
+    """``x`` when it is a mapping (a JSON object), else None."""
+    return x if isinstance(x, Mapping) else None
+
+
+def _method_why(ev: Mapping[str, Any], method: str, requested: str) -> str:
+    """Why the clock's method was used: the automatic choice's reason when sync.json
+    gives one, else the method's description, prefixed by what was asked for."""
+    why = ev.get("auto") if isinstance(ev.get("auto"), str) else ""
+    if why:
+        return why
+    why = METHOD_WHY.get(method, "")
+    if requested not in ("auto", method):
+        return f"asked for {requested}; {why}"
+    return f"requested; {why}" if requested == method else why
+
+
+def _camera_range(sync: Mapping[str, Any], clock: ClockLine) -> tuple[float, float]:
+    """(first, last) camera time (s) of sync.json, else the clock's reference time twice."""
+    rng = sync.get("camera_time_range_s")
+    if isinstance(rng, list) and len(rng) == 2 and all(math.isfinite(_num(x)) for x in rng):
+        return (_num(rng[0]), _num(rng[1]))
+    return (clock.t_ref_s, clock.t_ref_s)
+
+
+def _other_estimates(event, comb) -> list[ClockLine]:
+    """The clocks the combination weighed: the event method's alone, the model's alone."""
+    lines = [
+        _line("event alone", event) if event is not None else None,
+        _line("model alone", comb, "model_") if comb is not None else None,
+    ]
+    return [line for line in lines if line is not None]
+
+
+def _profile(prof) -> tuple[np.ndarray, np.ndarray] | None:
+    """(offsets at t_ref (s), residual sum of squares (deg^2)) of the model method's
+    offset profile, shape (k,) each; None when sync.json has fewer than two points."""
+    if not isinstance(prof, Mapping):
+        return None
+    x = np.asarray(prof.get("offset_at_t_ref_s") or [], dtype=float)
+    y = np.asarray(prof.get("rss_deg2") or [], dtype=float)
+    return (x, y) if x.size >= 2 and x.shape == y.shape else None
 
 
 def _edges(ev: Mapping[str, Any], clock: ClockLine) -> list[Edge]:

@@ -461,57 +461,84 @@ def _type_error(value: object, tp: object) -> str | None:
     not one checked: str, bool, int, float, tuple, dict, Literal, unions, dataclasses)."""
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType):
-        if value is None and type(None) in args:
-            return None
-        errors = [_type_error(value, a) for a in args if a is not type(None)]
-        return None if any(e is None for e in errors) else errors[0]
+        return _union_error(value, args)
     if origin is typing.Literal:
-        return (
-            None
-            if value in args
-            else f"is {_short(value)}, not one of {', '.join(map(repr, args))}"
-        )
+        ok = value in args
+        return None if ok else f"is {_short(value)}, not one of {', '.join(map(repr, args))}"
     if isinstance(tp, type) and dataclasses.is_dataclass(tp):
-        if isinstance(value, tp):
-            return None
-        if value is tp:
-            return f"is the class {tp.__name__}, not a {tp.__name__}; call it: {tp.__name__}()"
-        return f"is {describe(value)}; give a {tp.__name__}"
-    if tp is bool:
-        return (
-            None
-            if isinstance(value, (bool, np.bool_))
-            else f"is {describe(value)}; give True or False"
-        )
-    if tp is int:
-        if isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_)):
-            return None
-        return f"is {describe(value)}; give an integer"
-    if tp is float:
-        if isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_)):
-            return None if not math.isnan(float(value)) else "is NaN; give a number"
-        return f"is {describe(value)}; give a number"
-    if tp is str:
-        return None if isinstance(value, str) else f"is {describe(value)}; give a str"
+        return _dataclass_error(value, tp)
+    if tp in _SCALAR_CHECKS:
+        return _SCALAR_CHECKS[tp](value)
     if origin is tuple or tp is tuple:
-        if isinstance(value, str) or not isinstance(value, (tuple, list)):
-            eg = ", e.g. ('lam',)" if args[:1] == (str,) else ""
-            return f"is {describe(value)}; give a tuple{eg}"
-        if len(args) == 2 and args[1] is Ellipsis:
-            inner = [args[0]] * len(value)
-        elif args:
-            if len(args) != len(value):
-                return f"has {_count(len(value), 'value')}; give {len(args)}"
-            inner = list(args)
-        else:
-            return None
-        for i, (v, a) in enumerate(zip(value, inner, strict=True)):
-            err = _type_error(v, a)
-            if err:
-                return f"[{i}] {err}"
-        return None
+        return _tuple_error(value, args)
     if origin in (dict, Mapping) or tp is dict:
         return None if isinstance(value, Mapping) else f"is {describe(value)}; give a dict"
+    return None
+
+
+def _union_error(value: object, args: tuple) -> str | None:
+    """:func:`_type_error` of a union: None when any member fits, else the first's reason."""
+    if value is None and type(None) in args:
+        return None
+    errors = [_type_error(value, a) for a in args if a is not type(None)]
+    return None if any(e is None for e in errors) else errors[0]
+
+
+def _dataclass_error(value: object, tp: type) -> str | None:
+    """:func:`_type_error` of a dataclass hint (the class itself given is named)."""
+    if isinstance(value, tp):
+        return None
+    if value is tp:
+        return f"is the class {tp.__name__}, not a {tp.__name__}; call it: {tp.__name__}()"
+    return f"is {describe(value)}; give a {tp.__name__}"
+
+
+def _is_bool(value: object) -> bool:
+    return isinstance(value, (bool, np.bool_))
+
+
+def _bool_error(value: object) -> str | None:
+    return None if _is_bool(value) else f"is {describe(value)}; give True or False"
+
+
+def _int_error(value: object) -> str | None:
+    if isinstance(value, numbers.Integral) and not _is_bool(value):
+        return None
+    return f"is {describe(value)}; give an integer"
+
+
+def _float_error(value: object) -> str | None:
+    if isinstance(value, numbers.Real) and not _is_bool(value):
+        return None if not math.isnan(float(value)) else "is NaN; give a number"
+    return f"is {describe(value)}; give a number"
+
+
+def _str_error(value: object) -> str | None:
+    return None if isinstance(value, str) else f"is {describe(value)}; give a str"
+
+
+#: scalar type hint -> its check (a reason, or None when the value fits)
+_SCALAR_CHECKS = {bool: _bool_error, int: _int_error, float: _float_error, str: _str_error}
+
+
+def _tuple_error(value: object, args: tuple) -> str | None:
+    """:func:`_type_error` of a tuple hint: ``tuple[X, ...]``, ``tuple[X, Y]`` or bare
+    ``tuple``; the first wrong member named by its index."""
+    if isinstance(value, str) or not isinstance(value, (tuple, list)):
+        eg = ", e.g. ('lam',)" if args[:1] == (str,) else ""
+        return f"is {describe(value)}; give a tuple{eg}"
+    if len(args) == 2 and args[1] is Ellipsis:
+        inner = [args[0]] * len(value)
+    elif args:
+        if len(args) != len(value):
+            return f"has {_count(len(value), 'value')}; give {len(args)}"
+        inner = list(args)
+    else:
+        return None
+    for i, (v, a) in enumerate(zip(value, inner, strict=True)):
+        err = _type_error(v, a)
+        if err:
+            return f"[{i}] {err}"
     return None
 
 

@@ -442,13 +442,8 @@ def compensate_files(
     datasets, unit, conditioning = _checked_options(
         fit_paths, datasets, model, time_unit_s, conditioning, history, cc
     )
-    out = Path(out)
-    if out.suffix.lower() != ".csv":
-        raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
     extra = [*([model_file] if model_file else []), *([history] if history is not None else [])]
-    claim_output_file(
-        out, [*fit_paths, target, *extra], companions=[out.with_name("compensate.json")]
-    )
+    out = _claimed_output(out, [*fit_paths, target, *extra])
     docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
     if not datasets:
         datasets = _chosen_datasets(docs, target, unit)
@@ -464,19 +459,9 @@ def compensate_files(
     }
     past = None if history is None else _history_start(setup, history, start_counts)
     _prepend_start(setup, start_state(setup, conditioning, history), past, t)
-    mf = None if model_file is None else Path(model_file)
-    for axis, a in setup.items():
-        _add_candidates(a, axis, axes, model, mf, target)
-    if any(a["coupled"] for a in setup.values()):
-        _add_joint_candidates(setup, t, target)
+    _choose_models(setup, t, target, model, None if model_file is None else Path(model_file))
     for a in setup.values():
-        _choose_model(a, model)
-    _reinvert_coupled_choice(setup, t)
-    for a in setup.values():
-        a.update(
-            res=a["candidates"][a["kind"]], model=a["models"][a["kind"]],
-            forced=model is not None, history_file=None if history is None else str(history),
-        )  # fmt: skip
+        a.update(history_file=None if history is None else str(history))
     table, axes_doc = _outputs(setup, frame, t, target, unit)
     inputs = [*(p for p, _ in docs), Path(target), *(Path(x) for x in extra)]
     doc_out = {
@@ -486,12 +471,44 @@ def compensate_files(
         "axes": axes_doc,
         "provenance": provenance(inputs, config),
     }
-    # both files or neither: compensate.json is renamed into place after the CSV
+    _write_outputs(out, table, doc_out)
+    return doc_out
+
+
+def _claimed_output(out, inputs: list) -> Path:
+    """``out`` as a Path after checking it is a .csv the tool may write (not one of the
+    ``inputs``; compensate.json beside it likewise)."""
+    out = Path(out)
+    if out.suffix.lower() != ".csv":
+        raise CalibError(f"--out {out}: give the COMMANDS.csv file to write (ending in .csv)")
+    claim_output_file(out, inputs, companions=[out.with_name("compensate.json")])
+    return out
+
+
+def _choose_models(setup: dict, t: np.ndarray, target, model: str | None, mf) -> None:
+    """Each axis's candidate inversions (jointly for coupled models), the model chosen
+    (``model`` forces one kind) and its result, into ``setup``'s axis records."""
+    axes = list(setup)
+    for axis, a in setup.items():
+        _add_candidates(a, axis, axes, model, mf, target)
+    if any(a["coupled"] for a in setup.values()):
+        _add_joint_candidates(setup, t, target)
+    for a in setup.values():
+        _choose_model(a, model)
+    _reinvert_coupled_choice(setup, t)
+    for a in setup.values():
+        a.update(
+            res=a["candidates"][a["kind"]], model=a["models"][a["kind"]], forced=model is not None
+        )
+
+
+def _write_outputs(out: Path, table, doc: dict) -> None:
+    """COMMANDS.csv and compensate.json beside it, both or neither: compensate.json is
+    renamed into place after the CSV."""
     with atomic_path(out.with_name("compensate.json")) as tmp_json:
-        write_json(tmp_json, doc_out)
+        write_json(tmp_json, doc)
         with atomic_path(out) as tmp_csv:
             table.to_csv(tmp_csv, index=False, float_format="%.10g")
-    return doc_out
 
 
 def _checked_options(fit_paths, datasets, model, time_unit_s, conditioning, history, cc):

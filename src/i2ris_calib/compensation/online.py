@@ -505,55 +505,7 @@ class Compensator:
         use"): per axis the model kind and its parameters, the kernel arrays (``c``,
         ``r``, ``p``), limits, rate, resolution, tolerance, sign, start counts, time
         delay, coupling (or null) and the current state."""
-        axes = {}
-        for name, ax in self._axes.items():
-            kappa, vf, db, lo, hi, rate, quantum, tol = (float(x) for x in ax.cfg)
-            st = ax.get()
-            state = {
-                "operators": [list(row) for row in st.operators],
-                "direction": st.direction,
-                "anchor": st.anchor,
-                "last_input": st.last_input,
-                "last_output_deg": st.last_output_deg,
-                "init": st.init,
-                "last_move_s": st.last_move_s,
-                "time_s": st.time_s,
-            }
-            coupling = None
-            if ax.coupling is not None:
-                cc, cr, cp = ax.coupling
-                coupling = {
-                    "other_axis": _OTHER[name],
-                    "c": [float(x) for x in cc],
-                    "r": [float(x) for x in cr],
-                    "p": [float(x) for x in cp],
-                    "other_start_counts": ax.other_start,
-                }
-                state["coupling"] = {
-                    "operators": list(st.coupling_operators),
-                    "other_counts": st.other_counts,
-                    "coupling_deg": st.coupling_deg,
-                }
-            axes[name] = {
-                "model": ax.kind,
-                "kernel_kind": KIND_NAMES[ax.code],
-                "params": ax.params,
-                "c": [float(x) for x in ax.c],
-                "r": [float(x) for x in ax.r],
-                "p": [float(x) for x in ax.p],
-                "kappa": kappa,
-                "v_f": vf if math.isfinite(vf) else None,
-                "deadband_counts": db,
-                "v_limits": [lo, hi],
-                "max_counts_per_s": rate if math.isfinite(rate) else None,
-                "quantum": quantum,
-                "tol_deg": tol,
-                "sign": ax.sign,
-                "start_counts": ax.start,
-                "delay_s": ax.delay,
-                "coupling": coupling,
-                "state": state,
-            }
+        axes = {name: _axis_dict(name, ax) for name, ax in self._axes.items()}
         return {"schema": SCHEMA, "statuses": {str(k): v for k, v in STATUS_NAMES.items()},
                 "joint_rounds": JOINT_ROUNDS, "axes": axes}  # fmt: skip
 
@@ -630,3 +582,53 @@ def _checked_history(history, models) -> dict[str, np.ndarray]:
     if len({h.size for h in out.values()}) != 1:
         raise CalibError("Compensator: every motor's history needs the same number of counts")
     return out
+
+
+def _floats(a) -> list[float]:
+    return [float(x) for x in a]
+
+
+def _axis_dict(name: str, ax) -> dict:
+    """:meth:`Compensator.to_dict`'s record of axis ``name`` (its ``_Axis`` ``ax``)."""
+    kappa, vf, db, lo, hi, rate, quantum, tol = (float(x) for x in ax.cfg)
+    st = ax.get()
+    state = {
+        "operators": [list(row) for row in st.operators],
+        "direction": st.direction,
+        "anchor": st.anchor,
+        "last_input": st.last_input,
+        "last_output_deg": st.last_output_deg,
+        "init": st.init,
+        "last_move_s": st.last_move_s,
+        "time_s": st.time_s,
+    }
+    coupling = None
+    if ax.coupling is not None:
+        cc, cr, cp = ax.coupling
+        coupling = {"other_axis": _OTHER[name], "c": _floats(cc), "r": _floats(cr),
+                    "p": _floats(cp), "other_start_counts": ax.other_start}  # fmt: skip
+        state["coupling"] = {
+            "operators": list(st.coupling_operators),
+            "other_counts": st.other_counts,
+            "coupling_deg": st.coupling_deg,
+        }
+    return {
+        "model": ax.kind,
+        "kernel_kind": KIND_NAMES[ax.code],
+        "params": ax.params,
+        "c": _floats(ax.c),
+        "r": _floats(ax.r),
+        "p": _floats(ax.p),
+        "kappa": kappa,
+        "v_f": vf if math.isfinite(vf) else None,
+        "deadband_counts": db,
+        "v_limits": [lo, hi],
+        "max_counts_per_s": rate if math.isfinite(rate) else None,
+        "quantum": quantum,
+        "tol_deg": tol,
+        "sign": ax.sign,
+        "start_counts": ax.start,
+        "delay_s": ax.delay,
+        "coupling": coupling,
+        "state": state,
+    }

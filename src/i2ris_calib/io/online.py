@@ -77,42 +77,19 @@ class Compensator(online.Compensator):
             final_model.json of ``--model diagnosed`` (checked against the fit).
         """
         paths = [path] if isinstance(path, (str, Path)) else list(path)
-        names = [dataset] if isinstance(dataset, str) or dataset is None else list(dataset)
-        if len(names) == 1 and len(paths) > 1:
-            names = names * len(paths) if names[0] is None else names
-        if len(names) != len(paths):
-            raise CalibError("Compensator.from_fit: give one dataset per fit.json (or none)")
+        names = _dataset_names(dataset, len(paths))
+        mf = None if model_file is None else Path(model_file)
         models, limits, signs, rates = {}, {}, {}, {}
         for p, name in zip(paths, names, strict=True):
             p = Path(p)
             doc = read_fit_json(p)
-            axis = str(doc.get("axis"))
-            have = [str(d.get("name")) for d in doc.get("datasets", [])]
-            if name is None:
-                name = f"{axis}±" if f"{axis}±" in have else (have[0] if have else f"{axis}+")
-            name = name.replace("+-", "±")
+            name = _dataset_name(doc, name)
             record = dataset_record(doc, name, p)
-            fitted = [k for k in record.get("models", {}) if k in ONLINE_KINDS
-                      and (len(paths) > 1 or k not in _COUPLED)]  # fmt: skip
-            kind = model
-            if kind is None:
-                if not fitted:
-                    raise CalibError(
-                        f"{p} [{name}]: none of its models can be compensated online "
-                        f"({', '.join(ONLINE_KINDS)})"
-                    )
-                kind = min(fitted, key=lambda k: holdout_rmse(record["models"][k]) or np.inf)
-            elif kind not in ONLINE_KINDS and kind != "diagnosed":
-                raise CalibError(
-                    f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "
-                    f"got '{kind}'"
-                )
+            kind = _online_kind(record, model, f"{p} [{name}]", coupled_ok=len(paths) > 1)
             ax = name[:-1]
             if ax in models:
                 raise CalibError(f"Compensator.from_fit: two fits of the {ax} axis")
-            models[ax] = load_model(
-                doc, record, kind, p, None if model_file is None else Path(model_file)
-            )
+            models[ax] = load_model(doc, record, kind, p, mf)
             lo, hi = (float(x) for x in record["input_range_counts"])
             if not name.endswith("±"):
                 lo = min(lo, 0.0)
@@ -146,3 +123,44 @@ class Compensator(online.Compensator):
         except CalibError as exc:
             raise CalibError(f"{p}: {exc}") from None
         return cls._from_axes(base._axes)
+
+
+def _dataset_names(dataset, n_files: int) -> list:
+    """One dataset name (or None) per fit.json: ``dataset`` as given, one None each."""
+    names = [dataset] if isinstance(dataset, str) or dataset is None else list(dataset)
+    if len(names) == 1 and n_files > 1:
+        names = names * n_files if names[0] is None else names
+    if len(names) != n_files:
+        raise CalibError("Compensator.from_fit: give one dataset per fit.json (or none)")
+    return names
+
+
+def _dataset_name(doc: dict, name: str | None) -> str:
+    """``name`` with ``+-`` read as ``±``; None: the fit's signed dataset when it has one,
+    else its first."""
+    if name is None:
+        axis = str(doc.get("axis"))
+        have = [str(d.get("name")) for d in doc.get("datasets", [])]
+        name = f"{axis}±" if f"{axis}±" in have else (have[0] if have else f"{axis}+")
+    return name.replace("+-", "±")
+
+
+def _online_kind(record: dict, model: str | None, where: str, coupled_ok: bool) -> str:
+    """The model kind to invert: ``model`` checked, or the dataset record's fitted online
+    kind with the lowest held-out RMSE (a coupled kind only when ``coupled_ok``)."""
+    if model is not None:
+        if model not in ONLINE_KINDS and model != "diagnosed":
+            raise CalibError(
+                f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "
+                f"got '{model}'"
+            )
+        return model
+    fitted = [
+        k for k in record.get("models", {})
+        if k in ONLINE_KINDS and (coupled_ok or k not in _COUPLED)
+    ]  # fmt: skip
+    if not fitted:
+        raise CalibError(
+            f"{where}: none of its models can be compensated online ({', '.join(ONLINE_KINDS)})"
+        )
+    return min(fitted, key=lambda k: holdout_rmse(record["models"][k]) or np.inf)

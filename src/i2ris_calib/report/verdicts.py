@@ -193,56 +193,68 @@ def tracking_verdicts(
     """Detection, reference roll, lagged camera and view checks, tracker warnings."""
     out: list[Verdict] = []
     if angles is not None and len(angles):
-        status = angles["status"].astype(str)
-        n = len(status)
-        share = float((status == "measured").mean())
-        dur, start = longest_unmeasured(angles)
-        flagged = {s: int(c) for s, c in status[status != "measured"].value_counts().items()}
-        what = ", ".join(f"{c} {s}" for s, c in flagged.items()) or "none flagged"
-        gap = (
-            f"; longest stretch without a measurement {fmt_sig(dur, 2, pad=True)} s from t = "
-            f"{fmt_sig(start, 3)} s"
-            if dur > 0
-            else ""
-        )
-        out.append(
-            Verdict(
-                f"{100 * share:.1f} % of {n} frames measured ({what}){gap}.",
-                "ok" if share >= DETECTION_OK else "warn",
-            )
-        )
+        out.append(_detection_verdict(angles))
     if not isinstance(track, Mapping):
         return out
-    ref = track.get("reference")
-    if isinstance(ref, Mapping) and ref.get("roll_correction_deg") is not None:
-        sd = ref.get("roll_sd_deg")
-        method = ref.get("roll_method", "?")
-        ok = sd is not None and float(sd) <= ROLL_SD_OK_DEG
-        out.append(
-            Verdict(
-                f"Reference roll corrected by {fmt_pm(ref.get('roll_correction_deg'), sd)} deg "
-                f"({method} fit over {ref.get('fit_frames', '?')} frames)"
-                + ("." if ok else f": uncertainty above {ROLL_SD_OK_DEG} deg, check the roll."),
-                "ok" if ok else "warn",
-            )
-        )
+    out += _roll_verdict(track.get("reference"))
     out += _lagged_verdict(track)
-    view = track.get("view_check")
-    if isinstance(view, Mapping) and view.get("verdict"):
-        spread = view.get("rigid_rig_spread_mm") or {}
-        ok = str(view.get("verdict")) == "consistent"
-        out.append(
-            Verdict(
-                f"Camera views: {view.get('verdict')} (rigid-rig spread "
-                f"{fmt_sig(spread.get('as_labelled'), 2)} mm as labelled vs "
-                f"{fmt_sig(spread.get('swapped'), 2)} mm swapped, {view.get('frames', '?')} frames).",
-                "ok" if ok else "warn",
-            )
-        )
+    out += _view_verdict(track.get("view_check"))
     warnings = track.get("warnings") or []
     if warnings:
         out.append(Verdict(f"{len(warnings)} tracker warning(s), listed in the overview.", "warn"))
     return out
+
+
+def _detection_verdict(angles: pd.DataFrame) -> Verdict:
+    """The share of frames measured, the flags of the others and the longest stretch
+    without a measurement (angles.csv's ``status``)."""
+    status = angles["status"].astype(str)
+    share = float((status == "measured").mean())
+    dur, start = longest_unmeasured(angles)
+    flagged = {s: int(c) for s, c in status[status != "measured"].value_counts().items()}
+    what = ", ".join(f"{c} {s}" for s, c in flagged.items()) or "none flagged"
+    gap = (
+        f"; longest stretch without a measurement {fmt_sig(dur, 2, pad=True)} s from t = "
+        f"{fmt_sig(start, 3)} s"
+        if dur > 0
+        else ""
+    )
+    return Verdict(
+        f"{100 * share:.1f} % of {len(status)} frames measured ({what}){gap}.",
+        "ok" if share >= DETECTION_OK else "warn",
+    )
+
+
+def _roll_verdict(ref) -> list[Verdict]:
+    """The reference roll correction of track.json's ``reference`` and its uncertainty."""
+    if not (isinstance(ref, Mapping) and ref.get("roll_correction_deg") is not None):
+        return []
+    sd = ref.get("roll_sd_deg")
+    ok = sd is not None and float(sd) <= ROLL_SD_OK_DEG
+    return [
+        Verdict(
+            f"Reference roll corrected by {fmt_pm(ref.get('roll_correction_deg'), sd)} deg "
+            f"({ref.get('roll_method', '?')} fit over {ref.get('fit_frames', '?')} frames)"
+            + ("." if ok else f": uncertainty above {ROLL_SD_OK_DEG} deg, check the roll."),
+            "ok" if ok else "warn",
+        )
+    ]
+
+
+def _view_verdict(view) -> list[Verdict]:
+    """The camera-view check of track.json's ``view_check`` (views as labelled or swapped)."""
+    if not (isinstance(view, Mapping) and view.get("verdict")):
+        return []
+    spread = view.get("rigid_rig_spread_mm") or {}
+    ok = str(view.get("verdict")) == "consistent"
+    return [
+        Verdict(
+            f"Camera views: {view.get('verdict')} (rigid-rig spread "
+            f"{fmt_sig(spread.get('as_labelled'), 2)} mm as labelled vs "
+            f"{fmt_sig(spread.get('swapped'), 2)} mm swapped, {view.get('frames', '?')} frames).",
+            "ok" if ok else "warn",
+        )
+    ]
 
 
 def _lagged_verdict(track: Mapping[str, Any]) -> list[Verdict]:

@@ -167,23 +167,45 @@ def diagnose_dataset(
     out = claim_output_dir(
         Path(out) if out is not None else Path("diagnose_out"), "diagnose", sources, OUTPUTS
     )
-    # auto: on the signed input the model fit picks after fitting (diagnose_from_starts)
+    auto = _diagnosed(dset, start, cfg, show_progress)
+    diag = auto.diagnosis
+    models = [diag.start_model] + [s.model_after for s in diag.steps]
+    labels = ["start"] + [s.effect for s in diag.steps]
+    figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
+    record = diagnosis_record(diag, figures, auto=auto)
+    record.update(_dataset_fields(dset, axis, start, auto, sources, cfg))
+    with output_dir(out, "diagnose", sources, OUTPUTS) as tmp:
+        for i, (m, name) in enumerate(zip(models, figures, strict=True)):
+            title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
+            _save(_figure(m, dset, dset.holdout, title), tmp / name)
+        write_json(tmp / "diagnosis.json", record)
+        final = model_to_dict(diag.final_model)
+        final.update(
+            axis=axis, dataset=dset.name, direction=dset.direction, abs_input=dset.abs_fitted
+        )
+        write_json(tmp / "final_model.json", final)
+        write_text(tmp / "diagnosis.md", diagnosis_markdown(record))
+    return record
+
+
+def _diagnosed(dset: Dataset, start: str, cfg, show_progress: bool):
+    """:func:`diagnose_from_starts` on ``dset`` (``start`` ``auto``: the model fit picks
+    on the signed input) behind a progress line."""
     starts = None if start == "auto" else (start,)
     with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
         task = bar.add_task(f"diagnose {dset.name}", total=None)
-        auto = diagnose_from_starts(
+        return diagnose_from_starts(
             dset,
             cfg.diagnose,
             cfg.fit,
             starts=starts,
             progress=lambda name: bar.update(task, description=f"diagnose {dset.name}: {name}"),
         )
-    diag = auto.diagnosis
-    models = [diag.start_model] + [s.model_after for s in diag.steps]
-    labels = ["start"] + [s.effect for s in diag.steps]
-    figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
-    record = diagnosis_record(diag, figures, auto=auto)
-    record.update(
+
+
+def _dataset_fields(dset: Dataset, axis: str, start: str, auto, sources: list[Path], cfg) -> dict:
+    """diagnosis.json's fields on the dataset, the starts and the provenance."""
+    return dict(
         schema=SCHEMA,
         axis=axis,
         start=start,
@@ -204,15 +226,3 @@ def diagnose_dataset(
         },
         provenance=provenance(sources, cfg),
     )
-    with output_dir(out, "diagnose", sources, OUTPUTS) as tmp:
-        for i, (m, name) in enumerate(zip(models, figures, strict=True)):
-            title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
-            _save(_figure(m, dset, dset.holdout, title), tmp / name)
-        write_json(tmp / "diagnosis.json", record)
-        final = model_to_dict(diag.final_model)
-        final.update(
-            axis=axis, dataset=dset.name, direction=dset.direction, abs_input=dset.abs_fitted
-        )
-        write_json(tmp / "final_model.json", final)
-        write_text(tmp / "diagnosis.md", diagnosis_markdown(record))
-    return record

@@ -61,26 +61,14 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     need = ["time_s", f"enc_{axis}", f"{axis}_deg"]
     source = cols.mapping()
     _check_mapped_columns(p, raw, cols)
-    missing = [c for c in need if source[c] not in raw.columns]
-    if missing:
-        raise CalibError(
-            f"{p}: missing column(s) {', '.join(missing)} (found: {', '.join(raw.columns)}); "
-            "a synced CSV has time_s, enc_yaw, enc_pitch, yaw_deg, pitch_deg, status "
-            "(docs/formats.md); name your file's columns with --columns or [columns]"
-        )
+    _check_needed(p, raw, [source[c] for c in need], need)
     present = [c for c in STANDARD_COLUMNS if source[c] in raw.columns]
     df = pd.DataFrame({c: raw[source[c]] for c in present})
     label = {c: f"'{c}'" if source[c] == c else f"'{source[c]}' ({c})" for c in present}
     optional = [c for c in (f"enc_{other}", f"{other}_deg") if c in df.columns]
     numeric = _numeric_columns(p, df, [*need, *optional], label)
     encoders = [f"enc_{axis}", *([f"enc_{other}"] if f"enc_{other}" in df else [])]
-    for col in ("time_s", *encoders):
-        bad = np.flatnonzero(~np.isfinite(df[col].to_numpy()))
-        if bad.size:
-            raise CalibError(
-                f"{p}: {bad.size} row(s) with NaN/empty {label[col]} (first at line {bad[0] + 2}); "
-                "drop or interpolate them (only angles may be NaN)"
-            )
+    _check_finite(p, df, ["time_s", *encoders], label)
     where = list(raw.columns).index(source["time_s"])
     t, origin = _seconds(
         numeric["time_s"],
@@ -91,17 +79,44 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     df.attrs["time_origin_s"] = origin
     _check_increasing(p, t, label["time_s"], origin)
     _check_time_unit(p, t, label["time_s"], cols.time_unit_s)
-    angles = [c for c in (f"{axis}_deg", f"{other}_deg") if c in df.columns]
+    for col in encoders:
+        check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
+    _angles_in_deg(df, [c for c in (f"{axis}_deg", f"{other}_deg") if c in df.columns], cols)
+    return df
+
+
+def _check_needed(p: Path, raw: pd.DataFrame, names: list[str], standard: list[str]) -> None:
+    """CalibError naming the ``standard`` columns whose file ``names`` are missing."""
+    missing = [c for c, n in zip(standard, names, strict=True) if n not in raw.columns]
+    if missing:
+        raise CalibError(
+            f"{p}: missing column(s) {', '.join(missing)} (found: {', '.join(raw.columns)}); "
+            "a synced CSV has time_s, enc_yaw, enc_pitch, yaw_deg, pitch_deg, status "
+            "(docs/formats.md); name your file's columns with --columns or [columns]"
+        )
+
+
+def _check_finite(p: Path, df: pd.DataFrame, names: list[str], label: dict) -> None:
+    """CalibError at the first column of ``names`` with a NaN/empty row (line named)."""
+    for col in names:
+        bad = np.flatnonzero(~np.isfinite(df[col].to_numpy()))
+        if bad.size:
+            raise CalibError(
+                f"{p}: {bad.size} row(s) with NaN/empty {label[col]} (first at line {bad[0] + 2}); "
+                "drop or interpolate them (only angles may be NaN)"
+            )
+
+
+def _angles_in_deg(df: pd.DataFrame, angles: list[str], cols: ColumnsConfig) -> None:
+    """The ``angles`` columns of ``df`` in deg (from rad when ``cols.angle_unit`` says so),
+    NaN on rows whose ``status`` (when present) is not ``measured``; in place."""
     if cols.angle_unit == "rad":
         for col in angles:
             df[col] = np.rad2deg(df[col].to_numpy(dtype=float))
-    for col in encoders:
-        check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
     if "status" in df.columns:
         not_measured = df["status"].astype(str).str.strip() != "measured"
         for col in angles:
             df.loc[not_measured, col] = np.nan
-    return df
 
 
 def _numeric_columns(p: Path, df: pd.DataFrame, names: list[str], label: dict) -> dict:

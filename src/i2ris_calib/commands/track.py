@@ -363,6 +363,26 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
     res, status, M = lag.res, lag.status, refit.M
     ang = fz.relative_angles(res.Q, M)
     ang[status != fz.MEASURED] = np.nan
+    df = _angles_table(ta, tb, (a_name, b_name), (va, vb), streams, res, status, ang, ref, cfg)
+    summary = _summary(df, res, streams, names, M, ref, cfg)
+    summary["reference"].update(reference_record(refit))
+    summary["reference"]["window_motion"] = window_motion_record(
+        reference_window_motion(t, ang[:, 0], ang[:, 1], ref), cfg
+    )
+    summary.update(_lagged_record(lag, ta["frame"].to_numpy()))
+    for n in names:
+        summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
+    summary["view_check"] = views
+    return {"angles": df, "summary": summary}
+
+
+def _angles_table(ta, tb, names, views, streams, res, status, ang, ref, cfg) -> pd.DataFrame:
+    """angles.csv's table on the first camera's frames (docs/formats.md): fused angles
+    (deg) and status, reprojection error, each camera's mean grey level (and the second
+    camera's own frame time when it differs), which camera found its marker, and with
+    ``cfg.plain`` each view's own angles."""
+    (a_name, b_name), (va, vb) = names, views
+    t = ta["time_s"].to_numpy()
     df = pd.DataFrame({"frame": ta["frame"].to_numpy(), "time_s": t, "yaw_deg": ang[:, 0],
                        "pitch_deg": ang[:, 1], "status": status, "reproj_err_px": res.rms_px,
                        "roll_deg": ang[:, 2]})  # fmt: skip
@@ -378,16 +398,7 @@ def fuse_session(names, cams, times, streams, intr, spec: SessionSpec, cfg: Trac
             pa = plain_angles(v, ref)
             df[f"yaw_plain_{name}_deg"] = pa[:, 0]
             df[f"pitch_plain_{name}_deg"] = pa[:, 1]
-    summary = _summary(df, res, streams, names, M, ref, cfg)
-    summary["reference"].update(reference_record(refit))
-    summary["reference"]["window_motion"] = window_motion_record(
-        reference_window_motion(t, ang[:, 0], ang[:, 1], ref), cfg
-    )
-    summary.update(_lagged_record(lag, ta["frame"].to_numpy()))
-    for n in names:
-        summary["cameras"][n]["gaps"] = frame_gaps(times[n], cfg)
-    summary["view_check"] = views
-    return {"angles": df, "summary": summary}
+    return df
 
 
 def _session_reference(res: fz.FusionResult, va, vb, ref: np.ndarray, t: np.ndarray, cfg):

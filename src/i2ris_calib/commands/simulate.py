@@ -101,33 +101,12 @@ def build_session(
     plans, frame_tables = [], {}
     seeds = s_render.generate_state(len(cams))
     for i, cam in enumerate(cams):
-        t_all = tj.frame_times(cfg, i, rng_t)
-        keep = tj.kept_frames(cfg, t_all.size, rng_t)
-        t_cam = t_all[keep]
-        rot, yaw, pitch = _exposure_rotations(cfg, truth, t_cam, t0_ctrl)
-        half = cfg.exposure_s / 2
-        flash = tj.interval_overlap(t_cam - half, t_cam + half, flashes)
-        occluded = tj.interval_overlap(t_cam - half, t_cam + half, occl[cam.name]) > 0
-        video = folder / f"{cam.name}.{cfg.video_format}"
-        plans.append(CameraPlan(cam, video, rot, flash, occluded, int(seeds[i])))
-        inside = _marker_inside(cfg, cam, rot[:, rot.shape[1] // 2])
-        frame_tables[cam.name] = pd.DataFrame(
-            {
-                "frame": np.arange(t_cam.size),
-                "time_s": t_cam,
-                "time_ctrl_s": tj.ctrl_from_cam(cfg, t_cam),
-                "yaw_deg": yaw,
-                "pitch_deg": pitch,
-                "visible": (~occluded & inside).astype(int),
-                "occluded": occluded.astype(int),
-                "flash": flash,
-            }
+        plan, table = _camera_plan(
+            folder, cfg, cam, i, truth, t0_ctrl, (flashes, occl[cam.name]), rng_t, int(seeds[i])
         )
-        write_csv(
-            folder / f"{cam.name}_timestamps.csv",
-            frame_tables[cam.name][["frame", "time_s"]],
-            "%.6f",
-        )
+        plans.append(plan)
+        frame_tables[cam.name] = table
+        write_csv(folder / f"{cam.name}_timestamps.csv", table[["frame", "time_s"]], "%.6f")
         if cfg.write_calibration:
             write_camera_yaml(
                 folder / f"{cam.name}.yaml", cam.K, np.zeros(5), cam.width_px, cam.height_px
@@ -137,6 +116,38 @@ def build_session(
     summary = _write_truth(folder, cfg, cams, truth, t0_ctrl, frame_tables)
     write_text(folder / "session.toml", session_toml(cfg, cams, name))
     return summary
+
+
+def _camera_plan(folder, cfg, cam, i: int, truth, t0_ctrl: float, intervals, rng_t, seed: int):
+    """(CameraPlan, frame table) of camera ``i``: its frame times (drawn from ``rng_t``:
+    jitter, dropped frames), the tip's rotation over each exposure, the flash and
+    occlusion (``intervals`` = (flashes, this camera's occlusions)) per frame, and the
+    truth table (frame, camera and controller times, angles in deg, visible, occluded,
+    flash)."""
+    flashes, occlusions = intervals
+    t_all = tj.frame_times(cfg, i, rng_t)
+    keep = tj.kept_frames(cfg, t_all.size, rng_t)
+    t_cam = t_all[keep]
+    rot, yaw, pitch = _exposure_rotations(cfg, truth, t_cam, t0_ctrl)
+    half = cfg.exposure_s / 2
+    flash = tj.interval_overlap(t_cam - half, t_cam + half, flashes)
+    occluded = tj.interval_overlap(t_cam - half, t_cam + half, occlusions) > 0
+    video = folder / f"{cam.name}.{cfg.video_format}"
+    plan = CameraPlan(cam, video, rot, flash, occluded, seed)
+    inside = _marker_inside(cfg, cam, rot[:, rot.shape[1] // 2])
+    table = pd.DataFrame(
+        {
+            "frame": np.arange(t_cam.size),
+            "time_s": t_cam,
+            "time_ctrl_s": tj.ctrl_from_cam(cfg, t_cam),
+            "yaw_deg": yaw,
+            "pitch_deg": pitch,
+            "visible": (~occluded & inside).astype(int),
+            "occluded": occluded.astype(int),
+            "flash": flash,
+        }
+    )
+    return plan, table
 
 
 def _dictionary_id(name: str) -> int:

@@ -886,147 +886,42 @@ def _step(
     v_prev = state[_V_PREV]
     y_prev = state[_Y_PREV]
     init = state[_INIT] != 0.0
-    t_move = state[_T_MOVE]
-    bps = buf[0:3]
-    edges = buf[3:8]
     cand_x = buf[8:24]
     cand_e = buf[24:40]
-    stat = STATUS_OK
+    a_lim, b_lim = _rate_window(lo, hi, v_prev, max_rate, dt, free, quantum, t_k - state[_T_MOVE])
     if init:
         a_lim, b_lim = lo, hi
-    else:
-        step = max_rate * dt
-        if free:
-            step = np.inf
-        if not np.isfinite(step):
-            step = np.inf
-        elif 0 < quantum and step < quantum:
-            # less than a count per sample: one count once the time since the last
-            # move allows it
-            if max_rate * (t_k - t_move) >= quantum * (1.0 - 1e-9):
-                step = quantum
-        a_lim = max(lo, v_prev - step)
-        b_lim = min(hi, v_prev + step)
-        a_lim = min(a_lim, v_prev)
-        b_lim = max(b_lim, v_prev)
     # the search spans the whole input range; a rate limit then slews the command
     # toward the unconstrained inverse (through dead zones and output switches that
     # a myopic choice inside the rate window would never cross)
-    if quantum > 0:
-        qa = np.ceil(a_lim / quantum - 1e-9) * quantum
-        qb = np.floor(b_lim / quantum + 1e-9) * quantum
-        qlo = np.ceil(lo / quantum - 1e-9) * quantum
-        qhi = np.floor(hi / quantum + 1e-9) * quantum
-    else:
-        qa, qb, qlo, qhi = a_lim, b_lim, lo, hi
-    nc = 0
-    if not init:
-        cand_x[0] = v_prev
-        cand_e[0] = abs(y_prev - tk)
-        cand_keep[0] = True
-        nc = 1
-    # breakpoints where the shown family (or the initial boundary) changes; for the
-    # two-tendon GPI the kink at zero input, where the other tendon takes over
-    nb = 0
-    if kind == KIND_EGPI and not init:
-        bps[0] = vf
-        bps[1] = anchor + db
-        bps[2] = anchor - db
-        nb = 3
-    elif kind == KIND_EGPI_C:
-        bps[0] = vf
-        nb = 1
-    elif kind == KIND_AGPI:
-        bps[0] = 0.0
-        nb = 1
+    qa, qb = _on_grid(a_lim, b_lim, quantum)
+    qlo, qhi = _on_grid(lo, hi, quantum)
+    nc = _hold_candidate(v_prev, y_prev, tk, init, cand_x, cand_e, cand_keep)
+    nb = _breakpoints(kind, vf, anchor, db, init, buf[0:3])
     for side_i in range(2):
-        if init:
-            if side_i == 1:
-                break
-            s_lo, s_hi, side = lo, hi, SIDE_INIT
-        elif side_i == 0:
-            if hi <= v_prev:
-                continue
-            if kind != KIND_EGPI and tk <= y_prev:
-                continue
-            s_lo, s_hi, side = v_prev, hi, SIDE_UP
-        else:
-            if lo >= v_prev:
-                continue
-            if kind != KIND_EGPI and tk >= y_prev:
-                continue
-            s_lo, s_hi, side = lo, v_prev, SIDE_DOWN
-        # region edges: side ends plus the breakpoints inside, sorted
-        ne = 0
-        edges[ne] = s_lo
-        ne += 1
-        for j in range(nb):
-            if s_lo < bps[j] < s_hi:
-                edges[ne] = bps[j]
-                ne += 1
-        edges[ne] = s_hi
-        ne += 1
-        edges[:ne].sort()
-        for j in range(ne - 1):
-            e0, e1 = edges[j], edges[j + 1]
-            if e1 <= e0:
-                continue
-            mid = 0.5 * (e0 + e1)
-            fam = _select(kind, dstate, anchor, mid, db, vf, init)
-            x, y = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
-            # an open end (the previous input, a breakpoint) -> just inside the region
-            eps = 1e-9 * max(1.0, abs(x))
-            moved = False
-            if x == e0 and not (init or (side == SIDE_DOWN and j == 0)):
-                x = min(e0 + eps, mid)
-                moved = True
-            elif x == e1 and not (init or (side == SIDE_UP and j == ne - 2)):
-                x = max(e1 - eps, mid)
-                moved = True
-            if moved or kind == KIND_EGPI:
-                # the output the model shows there (the EGPI: maybe the other family);
-                # else the root's own evaluation is that output (same family and side)
-                y = _exact(
-                    kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init
-                )
-            cand_x[nc] = x
-            cand_e[nc] = abs(y - tk)
-            d_new, _ = _direction(dstate, anchor, x, db, init)
-            cand_keep[nc] = init or d_new == dstate
-            nc += 1
+        ok, s_lo, s_hi, side = _side_range(side_i, kind, lo, hi, v_prev, y_prev, tk, init)
+        if not ok:
+            continue
+        ne = _region_edges(s_lo, s_hi, buf[0:3], nb, buf[3:8])
+        nc = _side_candidates(
+            kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, init, tk, side, buf[3:8], ne,
+            w, scratch, cand_x, cand_e, cand_keep, nc,
+        )  # fmt: skip
     best_r, best_r_err = _choose(cand_x, cand_e, cand_keep, nc, v_prev, tk, y_prev, init, tol_deg)
     best_q = best_r
     if quantum > 0:
-        # the whole counts around the chosen input (and the hold)
-        nq = 0
-        if not init:
-            cand_x[0] = v_prev
-            cand_e[0] = abs(y_prev - tk)
-            cand_keep[0] = True
-            nq = 1
-        for qi in range(2):
-            xq = (np.floor(best_r / quantum) if qi == 0 else np.ceil(best_r / quantum)) * quantum
-            xq = min(max(xq, qlo), qhi)
-            yq = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, xq, init)
-            cand_x[nq] = xq
-            cand_e[nq] = abs(yq - tk)
-            d_new, _ = _direction(dstate, anchor, xq, db, init)
-            cand_keep[nq] = init or d_new == dstate
-            nq += 1
-        best_q, _ = _choose(cand_x, cand_e, cand_keep, nq, v_prev, tk, y_prev, init, tol_deg)
+        best_q = _whole_count_choice(
+            kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, y_prev, init, tk, tol_deg,
+            best_r, quantum, qlo, qhi, w, scratch, cand_x, cand_e, cand_keep,
+        )  # fmt: skip
     # status of the real-valued best (unconstrained by the rate limit)
     tol = max(tol_deg, 1e-10 * max(1.0, abs(tk)))
-    near = 1e-6 * max(1.0, abs(best_r))
+    stat = STATUS_OK
     if best_r_err > tol:
         y_best = _exact(
             kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_r, init
         )
-        if tk > y_best and best_r >= hi - near:
-            stat = STATUS_ABOVE
-        elif tk < y_best and best_r <= lo + near:
-            stat = STATUS_BELOW
-        else:
-            stat = STATUS_GAP
+        stat = _unreached_status(tk, y_best, best_r, lo, hi)
     if best_r > b_lim or best_r < a_lim:
         best_r = min(max(best_r, a_lim), b_lim)
         best_q = qb if best_q > qb else qa if best_q < qa else best_q
@@ -1047,6 +942,164 @@ def _step(
     u = best_q
     y_new = _update(kind, c, r, p, kappa, vf, db, u, w, w_new, state)
     if u != v_prev or init:
-        t_move = t_k
-    state[_T_MOVE] = t_move
+        state[_T_MOVE] = t_k
     return u, best_r, y_new, stat
+
+
+@njit(cache=True)
+def _rate_window(lo, hi, v_prev, max_rate, dt, free, quantum, since_move):  # pragma: no cover
+    """(lowest, highest) input reachable from ``v_prev`` in ``dt`` s at ``max_rate``
+    (``free``: no limit), inside [lo, hi] but always including ``v_prev``. Less than a
+    ``quantum`` per sample: one quantum once ``since_move`` (s since the last move)
+    allows it."""
+    step = max_rate * dt
+    if free:
+        step = np.inf
+    if not np.isfinite(step):
+        step = np.inf
+    elif 0 < quantum and step < quantum:
+        if max_rate * since_move >= quantum * (1.0 - 1e-9):
+            step = quantum
+    a_lim = max(lo, v_prev - step)
+    b_lim = min(hi, v_prev + step)
+    return min(a_lim, v_prev), max(b_lim, v_prev)
+
+
+@njit(cache=True)
+def _on_grid(a, b, quantum):  # pragma: no cover - compiled
+    """(first, last) multiple of ``quantum`` inside [a, b]; (a, b) when ``quantum`` is 0."""
+    if quantum > 0:
+        return np.ceil(a / quantum - 1e-9) * quantum, np.floor(b / quantum + 1e-9) * quantum
+    return a, b
+
+
+@njit(cache=True)
+def _hold_candidate(v_prev, y_prev, tk, init, cand_x, cand_e, cand_keep):  # pragma: no cover
+    """Holding the previous input as candidate 0 (none from the initial state); returns
+    the number of candidates."""
+    if init:
+        return 0
+    cand_x[0] = v_prev
+    cand_e[0] = abs(y_prev - tk)
+    cand_keep[0] = True
+    return 1
+
+
+@njit(cache=True)
+def _breakpoints(kind, vf, anchor, db, init, bps):  # pragma: no cover - compiled
+    """Inputs where the shown family (or the initial boundary) changes, into ``bps``
+    (3,); for the two-tendon GPI the kink at zero input, where the other tendon takes
+    over. Returns how many."""
+    if kind == KIND_EGPI and not init:
+        bps[0] = vf
+        bps[1] = anchor + db
+        bps[2] = anchor - db
+        return 3
+    if kind == KIND_EGPI_C:
+        bps[0] = vf
+        return 1
+    if kind == KIND_AGPI:
+        bps[0] = 0.0
+        return 1
+    return 0
+
+
+@njit(cache=True)
+def _side_range(side_i, kind, lo, hi, v_prev, y_prev, tk, init):  # pragma: no cover
+    """(searched, low end, high end, side) of search side ``side_i`` (0: up from the
+    previous input, 1: down; from the initial state one side over [lo, hi]). Not
+    searched: no room that way, or (but for the EGPI, whose output can switch) the
+    target lies the other way."""
+    if init:
+        return side_i == 0, lo, hi, SIDE_INIT
+    if side_i == 0:
+        ok = not (hi <= v_prev) and (kind == KIND_EGPI or not (tk <= y_prev))
+        return ok, v_prev, hi, SIDE_UP
+    ok = not (lo >= v_prev) and (kind == KIND_EGPI or not (tk >= y_prev))
+    return ok, lo, v_prev, SIDE_DOWN
+
+
+@njit(cache=True)
+def _region_edges(s_lo, s_hi, bps, nb, edges):  # pragma: no cover - compiled
+    """The side's ends and the breakpoints strictly inside, sorted into ``edges``;
+    returns how many."""
+    ne = 0
+    edges[ne] = s_lo
+    ne += 1
+    for j in range(nb):
+        if s_lo < bps[j] < s_hi:
+            edges[ne] = bps[j]
+            ne += 1
+    edges[ne] = s_hi
+    ne += 1
+    edges[:ne].sort()
+    return ne
+
+
+@njit(cache=True)
+def _side_candidates(
+    kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, init, tk, side, edges, ne,
+    w, scratch, cand_x, cand_e, cand_keep, nc,
+):  # pragma: no cover - compiled  # fmt: skip
+    """One candidate per region between ``edges`` of a side: the root of the model's
+    output there minus ``tk`` (or the nearest end), with its error and whether it keeps
+    the motion direction; appended after ``nc``, returns the new count."""
+    for j in range(ne - 1):
+        e0, e1 = edges[j], edges[j + 1]
+        if e1 <= e0:
+            continue
+        mid = 0.5 * (e0 + e1)
+        fam = _select(kind, dstate, anchor, mid, db, vf, init)
+        x, y = _root(kind, fam, w[fam], scratch, c, r, p, kappa, vf, v_prev, side, e0, e1, tk)
+        # an open end (the previous input, a breakpoint) -> just inside the region
+        eps = 1e-9 * max(1.0, abs(x))
+        moved = False
+        if x == e0 and not (init or (side == SIDE_DOWN and j == 0)):
+            x = min(e0 + eps, mid)
+            moved = True
+        elif x == e1 and not (init or (side == SIDE_UP and j == ne - 2)):
+            x = max(e1 - eps, mid)
+            moved = True
+        if moved or kind == KIND_EGPI:
+            # the output the model shows there (the EGPI: maybe the other family);
+            # else the root's own evaluation is that output (same family and side)
+            y = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init)
+        cand_x[nc] = x
+        cand_e[nc] = abs(y - tk)
+        d_new, _ = _direction(dstate, anchor, x, db, init)
+        cand_keep[nc] = init or d_new == dstate
+        nc += 1
+    return nc
+
+
+@njit(cache=True)
+def _whole_count_choice(
+    kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, y_prev, init, tk, tol_deg,
+    best_r, quantum, qlo, qhi, w, scratch, cand_x, cand_e, cand_keep,
+):  # pragma: no cover - compiled  # fmt: skip
+    """The whole count (multiple of ``quantum`` in [qlo, qhi]) to send: the best of the
+    two around the real-valued choice ``best_r`` and the hold, by :func:`_choose`."""
+    nq = _hold_candidate(v_prev, y_prev, tk, init, cand_x, cand_e, cand_keep)
+    for qi in range(2):
+        xq = (np.floor(best_r / quantum) if qi == 0 else np.ceil(best_r / quantum)) * quantum
+        xq = min(max(xq, qlo), qhi)
+        yq = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, xq, init)
+        cand_x[nq] = xq
+        cand_e[nq] = abs(yq - tk)
+        d_new, _ = _direction(dstate, anchor, xq, db, init)
+        cand_keep[nq] = init or d_new == dstate
+        nq += 1
+    best_q, _ = _choose(cand_x, cand_e, cand_keep, nq, v_prev, tk, y_prev, init, tol_deg)
+    return best_q
+
+
+@njit(cache=True)
+def _unreached_status(tk, y_best, best_r, lo, hi):  # pragma: no cover - compiled
+    """Why the best input misses the target: above the reach (at the top of the range),
+    below it (at the bottom), or a gap in the model's output."""
+    near = 1e-6 * max(1.0, abs(best_r))
+    if tk > y_best and best_r >= hi - near:
+        return STATUS_ABOVE
+    if tk < y_best and best_r <= lo + near:
+        return STATUS_BELOW
+    return STATUS_GAP

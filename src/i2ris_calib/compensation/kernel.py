@@ -508,32 +508,56 @@ def invert(
     t = np.ascontiguousarray(t, dtype=float)
     c, r, p = (np.ascontiguousarray(a, dtype=float) for a in (c, r, p))
     n = target.size
-    u_out = np.empty(n)
-    u_real = np.empty(n)
-    y_out = np.empty(n)
-    status = np.zeros(n, dtype=np.int8)
     kind, kappa, vf, db = int(kind), float(kappa), float(vf), float(db)
     lo, hi, max_rate, quantum, tol_deg = (float(x) for x in (lo, hi, max_rate, quantum, tol_deg))
     hold = np.zeros(n, np.bool_) if hold is None else np.ascontiguousarray(hold, dtype=np.bool_)
-    if start_state is None:
-        w = np.zeros((2, p.size))
-        state = np.zeros(STATE_SIZE)
-        start(kind, c, r, p, kappa, vf, db, float(v_init), bool(has_init), w, state)
-    else:
-        w = np.array(start_state[0], dtype=float).reshape(2, p.size)
-        state = np.array(start_state[1], dtype=float)[:STATE_SIZE].copy()
+    model = (kind, c, r, p, kappa, vf, db)
+    w, state = _initial_state(model, v_init, has_init, start_state)
     state[_T_MOVE] = (t[0] if n else 0.0) - (t[1] - t[0] if n > 1 else 1.0)
+    run = _ChunkRun(
+        (*model, target, t, lo, hi, max_rate, quantum, tol_deg),
+        (np.empty(n), np.empty(n), np.empty(n), np.zeros(n, dtype=np.int8)),
+        hold,
+        bool(first_free),
+    )
     step = max(1, int(chunk))
-    outs = (u_out, u_real, y_out, status)
     if resume is None:
         for k0 in range(0, n, step):
-            _invert_chunk(
-                kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
-                k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status, hold,
-                bool(first_free),
-            )  # fmt: skip
-        return outs
-    step = min(step, RESUME_GRID)
+            run(k0, min(n, k0 + step), w, state)
+        return run.outs
+    return _resumed(run, n, min(step, RESUME_GRID), w, state, resume)
+
+
+def _initial_state(model, v_init, has_init, start_state) -> tuple[np.ndarray, np.ndarray]:
+    """(operator states ``w`` (2, m), ``state`` (STATE_SIZE,)) to invert from: a copy of
+    ``start_state``, else the model's initial state at ``v_init`` (:func:`start`)."""
+    p = model[3]
+    if start_state is not None:
+        w = np.array(start_state[0], dtype=float).reshape(2, p.size)
+        return w, np.array(start_state[1], dtype=float)[:STATE_SIZE].copy()
+    w = np.zeros((2, p.size))
+    state = np.zeros(STATE_SIZE)
+    start(*model, float(v_init), bool(has_init), w, state)
+    return w, state
+
+
+class _ChunkRun:
+    """One :func:`invert` call's fixed arguments and outputs (``outs``: u, u_real, y,
+    status, shape (n,) each); calling it inverts samples [k0, k1) from ``w``/``state``
+    (updated in place) by one compiled :func:`_invert_chunk` call."""
+
+    def __init__(self, args: tuple, outs: tuple, hold: np.ndarray, first_free: bool):
+        self.args, self.outs, self.hold, self.first_free = args, outs, hold, first_free
+
+    def __call__(self, k0: int, k1: int, w: np.ndarray, state: np.ndarray) -> None:
+        _invert_chunk(*self.args, k0, k1, w, state, *self.outs, self.hold, self.first_free)
+
+
+def _resumed(run: _ChunkRun, n: int, step: int, w, state, resume: Resume):
+    """:func:`invert` with checkpoints every ``step`` samples: where a checkpoint of
+    ``resume`` holds this call's state, the earlier results are copied up to the next
+    changed ``hold`` sample instead of inverted again; ``resume`` then holds this call's
+    checkpoints and results."""
     old, old_res = resume.states, resume.results
     valid = old_res is not None and resume.step == step and old_res[0].size == n
     changed = np.sort(np.asarray(resume.changed, dtype=np.int64)) if valid else None
@@ -545,7 +569,7 @@ def invert(
             j = np.searchsorted(changed, k0)
             k1 = min(n, (int(changed[j]) // step) * step if j < changed.size else n)
             if k1 > k0:
-                for a_new, a_old in zip(outs, old_res, strict=True):
+                for a_new, a_old in zip(run.outs, old_res, strict=True):
                     a_new[k0:k1] = a_old[k0:k1]
                 for kk in range(k0, k1, step):
                     new_states[kk] = old[kk]
@@ -555,15 +579,11 @@ def invert(
                 k0 = k1
                 continue
         new_states[k0] = (w.copy(), state.copy())
-        _invert_chunk(
-            kind, c, r, p, kappa, vf, db, target, t, lo, hi, max_rate, quantum, tol_deg,
-            k0, min(n, k0 + step), w, state, u_out, u_real, y_out, status, hold,
-            bool(first_free),
-        )  # fmt: skip
+        run(k0, min(n, k0 + step), w, state)
         k0 += step
-    resume.states, resume.results, resume.step = new_states, outs, step
+    resume.states, resume.results, resume.step = new_states, run.outs, step
     resume.changed = np.zeros(0, dtype=np.int64)
-    return outs
+    return run.outs
 
 
 def _same(saved, w, state) -> bool:

@@ -129,3 +129,35 @@ def test_holds_are_evaluated_once_per_run(rng):
         (continuous_egpi_model(), continuous_egpi_output, {}),
     ):
         np.testing.assert_array_equal(model(v), output(v, n=30, **extra, **model.value_dict()))
+
+
+def test_gather_rows_is_the_fancy_indexed_assignment():
+    """``jac[:, first:first + q] = sign * cols[at]`` into a column-ordered array, the
+    other columns untouched (the two-tendon and coupled Jacobians' assembly)."""
+    from i2ris_calib.hysteresis.kernel import gather_rows
+
+    rng = np.random.default_rng(0)
+    cols = rng.normal(size=(200, 8))
+    at = rng.integers(0, 200, 150)
+    for sign in (1.0, -1.0, -0.5):
+        jac = np.full((20, 150), 7.0).T  # column-ordered, as LM takes it
+        gather_rows(jac, 3, sign, cols, at)
+        np.testing.assert_array_equal(jac[:, 3:11], sign * cols[at])
+        assert np.all(jac[:, :3] == 7.0) and np.all(jac[:, 11:] == 7.0)
+
+
+def test_run_index_is_the_runs_of_equal_samples():
+    """First value of every run of equal consecutive samples and the run index of each
+    sample, as ``v[new]`` and ``cumsum(new) - 1`` (NaN never equal)."""
+    from i2ris_calib.hysteresis.kernel import run_index
+
+    rng = np.random.default_rng(1)
+    for n in (0, 1, 2, 50, 500):
+        v = np.round(rng.normal(size=n)).cumsum() * (rng.random(n) < 0.6)
+        if n > 10:
+            v[[3, 4]] = np.nan
+        new = np.ones(n, bool)
+        new[1:] = v[1:] != v[:-1]
+        vals, idx = run_index(v)
+        np.testing.assert_array_equal(vals, v[new])
+        np.testing.assert_array_equal(idx, np.cumsum(new) - 1)

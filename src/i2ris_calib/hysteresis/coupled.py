@@ -91,15 +91,32 @@ class CoupledTwoTendonModel(TwoTendonGPIModel):
         return [(cs, *sides[side]) for cs, (side, _) in COUPLING_SIDES.items()]
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
-        """Output angle (deg), shape (n_samples,)."""
+        """Output angle (deg), shape (n_samples,): :meth:`own_output` plus each of
+        :meth:`other_input_terms` in turn."""
         with np.errstate(invalid="ignore", over="ignore"):  # a trial start may overflow
-            y = super().evaluate(signals, values)  # this axis's tendons (of its 35 values)
-            val = self.named(values)
+            y = self.own_output(signals, values)
+            for term in self.other_input_terms(signals, values):
+                y += term
+        return y
+
+    def own_output(self, signals: Signals, values: np.ndarray) -> np.ndarray:
+        """This axis's tendons' output (deg), shape (n_samples,): the output less the
+        coupling; reads ``signals.v`` only."""
+        return super().evaluate(signals, values)  # of its 35 values, the first 17
+
+    def other_input_terms(self, signals: Signals, values: np.ndarray) -> list[np.ndarray]:
+        """Each coupling side's term of the output (deg, shape (n_samples,)), in the
+        order :meth:`evaluate` adds them; empty without the other input. They read the
+        other motor's input only (the fitter computes them once for every initial-state
+        level of this axis: its pre-history holds the other input)."""
+        val = self.named(values)
+        terms = []
+        with np.errstate(invalid="ignore", over="ignore"):  # a trial start may overflow
             for cs, u, idx in self._coupling_sides(signals):
                 ys = gpi_output(u, n=self.n, **self.coupling_values(values, cs))
                 sign = COUPLING_SIDES[cs][1] * val[f"sign_{cs}"]
-                y += sign * (ys if idx is None else ys[idx])
-        return y
+                terms.append(sign * (ys if idx is None else ys[idx]))
+        return terms
 
     def jacobian(
         self, signals: Signals, values: np.ndarray, rows: np.ndarray | None = None

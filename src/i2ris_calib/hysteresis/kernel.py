@@ -429,3 +429,32 @@ def play_jacobian(
             if cols[c] >= 0:
                 jac[k, cols[c]] = d[c]
     return y
+
+
+@njit(cache=True)
+def gather_rows(jac, first, sign, cols, at):  # pragma: no cover - compiled
+    """``jac[:, first:first + q] = sign * cols[at]`` in one pass over ``at`` (``cols``
+    shape (m, q), row-major: each source row read once; ``jac`` any layout, e.g. the
+    column-ordered Jacobian LM takes). The same values as the fancy-indexed assignment."""
+    q = cols.shape[1]
+    for k in range(at.size):
+        src = at[k]
+        for j in range(q):
+            jac[k, first + j] = sign * cols[src, j]
+
+
+@njit(cache=True)
+def run_index(v):  # pragma: no cover - compiled
+    """(the first value of every run of equal consecutive samples, the run index of
+    every sample), one pass over ``v`` (float (n,)): as ``v[new]`` and
+    ``cumsum(new) - 1`` with ``new`` the samples that differ from the one before."""
+    n = v.size
+    idx = np.empty(n, dtype=np.int64)
+    vals = np.empty(n)
+    r = -1
+    for k in range(n):
+        if k == 0 or v[k] != v[k - 1]:
+            r += 1
+            vals[r] = v[k]
+        idx[k] = r
+    return vals[: r + 1].copy(), idx

@@ -55,6 +55,7 @@ from i2ris_calib.hysteresis.kernel import (
     play_numpy,
     play_operators,
     play_switched,
+    run_index,
     select_stage,
     thresholds,
 )
@@ -277,16 +278,14 @@ _RUNS_CACHE: list = []
 
 
 def _find_runs(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """:func:`_held_runs` without the cache."""
-    new = np.empty(v.size, dtype=bool)
+    """:func:`_held_runs` without the cache (one compiled pass,
+    :func:`~.kernel.run_index`)."""
     if v.size == 0:
         return None
-    new[0] = True
-    np.not_equal(v[1:], v[:-1], out=new[1:])
-    n_runs = int(new.sum())
-    if n_runs > 0.9 * v.size:
+    vals, idx = run_index(np.ascontiguousarray(v, dtype=float))
+    if vals.size > 0.9 * v.size:
         return None
-    return np.ascontiguousarray(v[new]), np.cumsum(new) - 1
+    return vals, idx
 
 
 def _per_run(output, v: np.ndarray, **params) -> np.ndarray:

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2ris_calib.hysteresis.kernel import gather_rows
 from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
     ParametricModel,
@@ -105,13 +106,12 @@ def _column_ordered(n_rows: int, n_cols: int) -> np.ndarray:
 
 
 def _put_columns(jac: np.ndarray, first: int, sign: float, cols: np.ndarray, at) -> None:
-    """``jac[:, first:first + q] = sign * cols[at]`` (``cols`` shape (m, q)), one
-    contiguous column at a time (the same values as the fancy-indexed assignment)."""
-    for j in range(cols.shape[1]):
-        out = jac[:, first + j]
-        np.take(cols[:, j], at, out=out)
-        if sign != 1.0:
-            np.multiply(out, sign, out=out)
+    """``jac[:, first:first + q] = sign * cols[at]`` (``cols`` shape (m, q)), compiled
+    (:func:`~.kernel.gather_rows`; the same values as the fancy-indexed assignment)."""
+    gather_rows(
+        jac, int(first), float(sign), np.ascontiguousarray(cols, dtype=float),
+        np.ascontiguousarray(at, dtype=np.int64),
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

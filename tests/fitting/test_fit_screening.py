@@ -185,7 +185,8 @@ def test_bounded_polish_ends_at_a_bounded_minimum_no_worse_than_trf():
     x0 = np.clip(truth, search.lower, search.upper)
     held, _ = F._pushed_out(search, x0)
     assert held == [i]
-    cost, end, res = F._bounded_polish(search, x0, 300)
+    (cost, end, res), how = F._bounded_polish(search, x0, 300)
+    assert how == "LM, sigma_cp held at a bound"
     assert not search.outside(end)
     assert end[i] == 0.0
     assert i in F._pushed_out(search, end)[0]

@@ -1315,8 +1315,8 @@ def _in_bounds_end(search: _Search, best, known, max_nfev):
     and no worse than a point already reached.
 
     ``floor``: the lowest-cost point of ``known`` inside the bounds (None: none). An
-    unbounded LM end outside the bounds is refitted bounded (trf) from it brought into
-    them (:func:`_into_bounds`; measured: ends far better than trf from a
+    unbounded LM end outside the bounds is refitted bounded (:func:`_bounded_polish`) from
+    it brought into them (:func:`_into_bounds`; measured: ends far better than trf from a
     better-scoring start); an end worse
     than the floor is refitted bounded from the floor (trf only accepts steps that lower
     the cost, so it cannot end worse than it). ``notes``: :class:`FitNote` of each refit.
@@ -1328,11 +1328,12 @@ def _in_bounds_end(search: _Search, best, known, max_nfev):
     inside = [(c, x) for c, x in known if np.isfinite(c) and not search.outside(x)]
     floor = min(inside, key=lambda c: c[0]) if inside else None
     if left:
-        cost, full, res = _bounded_polish(search, _into_bounds(search, full, left, max_nfev), max_nfev)  # fmt: skip
+        start = _into_bounds(search, full, left, max_nfev)
+        (cost, full, res), how = _bounded_polish(search, start, max_nfev)
         notes.append(
             FitNote(
                 "left_bounds",
-                f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded (trf)",
+                f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded ({how})",
                 tuple(names[i] for i in left),
             )
         )
@@ -1363,8 +1364,9 @@ def _pushed_out(search: _Search, full: np.ndarray) -> tuple[list[int], np.ndarra
 
 
 def _bounded_polish(search: _Search, x0: np.ndarray, max_nfev):
-    """(cost, end, least_squares result) of the bounded polish (:data:`POLISH_STEPS`)
-    from ``x0`` (inside the bounds).
+    """((cost, end, least_squares result), how) of the bounded polish
+    (:data:`POLISH_STEPS`) from ``x0`` (inside the bounds); ``how``: ``"trf"`` or
+    ``"LM, <names> held at a bound"`` (the method that gave the end, for the fit's note).
 
     Active set first: the parameters on a bound that the cost pushes outward are held
     there and the others polished by (unbounded) LM. Its end is taken when it is inside
@@ -1378,16 +1380,17 @@ def _bounded_polish(search: _Search, x0: np.ndarray, max_nfev):
     end mostly left the bounds again, its time lost).
     """
     if search.counter.jac_fn is None or search.method != "lm" or search.pidx:
-        return search.run(x0, max_nfev, POLISH_STEPS, "trf")
+        return search.run(x0, max_nfev, POLISH_STEPS, "trf"), "trf"
     held, _ = _pushed_out(search, x0)
     others = np.array([i for i in search.lsq_free if i not in held], dtype=int)
     cost, end, res = replace(search, lsq_free=others).run(x0, max_nfev, POLISH_STEPS, "lm")
     if search.outside(end):
-        return search.run(x0, max_nfev, POLISH_STEPS, "trf")
+        return search.run(x0, max_nfev, POLISH_STEPS, "trf"), "trf"
     still, jac = _pushed_out(search, end)
     if res is None or not set(held) <= set(still):
-        return search.run(end, max_nfev, POLISH_STEPS, "trf")
-    return cost, end, OptimizeResult(res, jac=jac)
+        return search.run(end, max_nfev, POLISH_STEPS, "trf"), "trf"
+    how = f"LM, {', '.join(search.names[i] for i in held)} held at a bound" if held else "LM"
+    return (cost, end, OptimizeResult(res, jac=jac)), how
 
 
 #: An LM end outside the bounds whose clipping multiplies the cost by more than this

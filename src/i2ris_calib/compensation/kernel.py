@@ -1084,12 +1084,21 @@ def _side_candidates(
             # the output the model shows there (the EGPI: maybe the other family);
             # else the root's own evaluation is that output (same family and side)
             y = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, x, init)
-        cand_x[nc] = x
-        cand_e[nc] = abs(y - tk)
-        d_new, _ = _direction(dstate, anchor, x, db, init)
-        cand_keep[nc] = init or d_new == dstate
-        nc += 1
+        nc = _add_candidate(x, y, tk, dstate, anchor, db, init, cand_x, cand_e, cand_keep, nc)
     return nc
+
+
+@njit(cache=True)
+def _add_candidate(
+    x, y, tk, dstate, anchor, db, init, cand_x, cand_e, cand_keep, nc
+):  # pragma: no cover
+    """Input ``x`` (output ``y``) as candidate ``nc``: its error to ``tk`` and whether it
+    keeps the motion direction; returns the new count."""
+    cand_x[nc] = x
+    cand_e[nc] = abs(y - tk)
+    d_new, _ = _direction(dstate, anchor, x, db, init)
+    cand_keep[nc] = init or d_new == dstate
+    return nc + 1
 
 
 @njit(cache=True)
@@ -1104,11 +1113,7 @@ def _whole_count_choice(
         xq = (np.floor(best_r / quantum) if qi == 0 else np.ceil(best_r / quantum)) * quantum
         xq = min(max(xq, qlo), qhi)
         yq = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, xq, init)
-        cand_x[nq] = xq
-        cand_e[nq] = abs(yq - tk)
-        d_new, _ = _direction(dstate, anchor, xq, db, init)
-        cand_keep[nq] = init or d_new == dstate
-        nq += 1
+        nq = _add_candidate(xq, yq, tk, dstate, anchor, db, init, cand_x, cand_e, cand_keep, nq)
     best_q, _ = _choose(cand_x, cand_e, cand_keep, nq, v_prev, tk, y_prev, init, tol_deg)
     return best_q
 

@@ -106,3 +106,72 @@ def first_order_lag(y, t, tau):
         a = 1.0 - np.exp(-(t[k] - t[k - 1]) / tau)
         x[k] = x[k - 1] + a * (y[k] - x[k - 1])
     return x
+
+
+def lag_sum(y, t, taus):
+    """Sum over time constants of :func:`first_order_lag` of every column of ``y``.
+
+    ``out[:, c] = sum_j first_order_lag(y[:, c], t, taus[j])``, added in the order of
+    ``taus`` with the same arithmetic, so one column equals ``sum(first_order_lag(y,
+    t, tau) for tau in taus)`` to the last bit.
+
+    Parameters
+    ----------
+    y : ndarray, shape (n, m)
+    t : ndarray, shape (n,)
+        Sample times (s), non-decreasing.
+    taus : ndarray, shape (q,)
+        Time constants (s), > 0.
+
+    Returns
+    -------
+    ndarray, shape (n, m)
+    """
+    return lag_sum_with(y, lag_coefficients(t, taus))
+
+
+@njit(cache=True)
+def lag_coefficients(t, taus):
+    """Step coefficients ``a[k, j] = 1 - exp(-(t[k] - t[k-1]) / taus[j])`` of
+    :func:`first_order_lag` (the same arithmetic), shape (n, q); row 0 is 0.
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        Sample times (s), non-decreasing.
+    taus : ndarray, shape (q,)
+        Time constants (s), > 0.
+    """
+    n = t.shape[0]
+    q = taus.shape[0]
+    a = np.zeros((n, q))
+    for k in range(1, n):
+        for j in range(q):
+            a[k, j] = 1.0 - np.exp(-(t[k] - t[k - 1]) / taus[j])
+    return a
+
+
+@njit(cache=True)
+def lag_sum_with(y, a):
+    """:func:`lag_sum` from its coefficients ``a`` (:func:`lag_coefficients`,
+    shape (n, q)); ``y`` shape (n, m); returns shape (n, m)."""
+    n, m = y.shape
+    q = a.shape[1]
+    out = np.zeros((m, n))  # transposed: each column's loop writes contiguously
+    x = np.empty(q)
+    for c in range(m):
+        if n == 0:
+            break
+        acc = 0.0
+        for j in range(q):
+            x[j] = y[0, c]
+            acc += x[j]
+        out[c, 0] = acc
+        for k in range(1, n):
+            yk = y[k, c]
+            acc = 0.0
+            for j in range(q):  # the q lags are independent chains: run side by side
+                x[j] = x[j] + a[k, j] * (yk - x[j])
+                acc += x[j]
+            out[c, k] = acc
+    return out.T

@@ -29,8 +29,14 @@ import numpy as np
 
 import i2ris_calib._display as _display
 from i2ris_calib._validate import as_real, check_model, check_signals, describe
-from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
+from i2ris_calib.diagnosis._kernels import (
+    lag_coefficients,
+    lag_sum_with,
+    play_varying,
+    staged_backlash,
+)
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.fit import _analytic_jacobian
 from i2ris_calib.fitting.results import decode_model, encode_model, register_model_codec
 from i2ris_calib.hysteresis.model import Model, NamedParameters, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
@@ -70,6 +76,56 @@ class Effect:
         """Angle (deg) returned by the extended model (identity unless overridden)."""
         return y
 
+    def input_side(self) -> bool:
+        """True when the effect transforms the input (then its parameters move the
+        wrapped model's output and every derivative by them re-runs the model)."""
+        return type(self).transform_input is not Effect.transform_input
+
+    def output_pointwise(self) -> bool:
+        """True when output sample k depends on the wrapped model's output at sample
+        k alone (then :meth:`output_jacobian` is only given the rows asked for)."""
+        return type(self).transform_output is Effect.transform_output
+
+    def output_jacobian(
+        self,
+        jac: np.ndarray,
+        y: np.ndarray | None,
+        signals: Signals,
+        p: np.ndarray,
+        rows: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Columns of the wrapped model's Jacobian pushed through :meth:`transform_output`.
+
+        The default is exact for the identity and, for any other transform,
+        central differences along each column (exact for a transform linear in
+        ``y``; no re-run of the wrapped model). Catalogue entries with an output
+        transform override it with its exact derivative.
+
+        Parameters
+        ----------
+        jac : ndarray, shape (k, m)
+            d y / d x (deg per unit) of the wrapped model's output at the samples
+            ``rows`` (every sample, k = n, when ``rows`` is None).
+        y : ndarray, shape (n,), or None
+            The wrapped model's output (deg) at every sample (None when
+            :meth:`transform_output` is not overridden).
+        signals : Signals
+            Signals of the extended model, shape (n,) each.
+        p : ndarray, shape (p_effect,)
+            The effect's parameter values.
+        rows : ndarray of int, shape (k,), optional
+            Sample indices of ``jac``'s rows; given only when
+            :meth:`output_pointwise` is True.
+
+        Returns
+        -------
+        ndarray, shape (k, m)
+            d transform_output / d x (deg per unit).
+        """
+        if type(self).transform_output is Effect.transform_output:
+            return jac
+        return _central_output_columns(self, jac, y, signals, p)
+
     def start_grid(self, signals: Signals, y_deg: np.ndarray) -> list[np.ndarray]:
         """Starting parameter vectors for the candidate fit, scaled to the data.
 
@@ -89,6 +145,53 @@ class Effect:
         if "other" in self.needs and not other_axis_moves(signals):
             return "needs the other axis's input or angle, and it does not move"
         return None
+
+
+def _central_output_columns(effect: Effect, jac, y, signals, p) -> np.ndarray:
+    """``(T(y + h c) - T(y - h c)) / 2h`` for every column ``c`` of ``jac``, shape
+    (n, m), with ``T`` the effect's output transform (every sample)."""
+    y = np.asarray(y, float)
+    out = np.empty(jac.shape, order="F")
+    size = 1.0 + float(np.max(np.abs(y))) if y.size else 1.0
+    for j in range(jac.shape[1]):
+        c = np.asarray(jac[:, j], float)
+        top = float(np.max(np.abs(c))) if c.size else 0.0
+        if not np.isfinite(top) or top == 0.0:
+            out[:, j] = c
+            continue
+        h = 1e-5 * size / top
+        up = effect.transform_output(y + h * c, signals, p)
+        down = effect.transform_output(y - h * c, signals, p)
+        out[:, j] = (up - down) / (2.0 * h)
+    return out
+
+
+def _lagged_columns(jac: np.ndarray, t: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    """Sum over ``taus`` (s) of :func:`~._kernels.first_order_lag` of every column of
+    ``jac`` (shape (n, m)), shape (n, m), to the last bit as the lags one by one."""
+    return lag_sum_with(np.asarray(jac, dtype=float), _coefficients(t, taus))
+
+
+#: The last few lag coefficient tables, by (id(t), taus): a fit holds the creep's time
+#: constants for many evaluations, and the exponentials are most of a lag's cost.
+_COEFFICIENTS: dict = {}
+
+
+def _coefficients(t: np.ndarray, taus) -> np.ndarray:
+    """:func:`~._kernels.lag_coefficients` of ``t`` (s, shape (n,)) and ``taus`` (s),
+    shape (n, q), cached for the same ``t`` object and values."""
+    t = np.ascontiguousarray(t, dtype=float)
+    taus = np.ascontiguousarray(taus, dtype=float)
+    key = (id(t), t.size, taus.tobytes())
+    hit = _COEFFICIENTS.get(key)
+    # the entry holds t itself (so its id is not reused) and a copy to see a change
+    if hit is not None and hit[0] is t and np.array_equal(hit[1], t):
+        return hit[2]
+    a = lag_coefficients(t, taus)
+    if len(_COEFFICIENTS) >= 8:
+        _COEFFICIENTS.pop(next(iter(_COEFFICIENTS)), None)
+    _COEFFICIENTS[key] = (t, t.copy(), a)
+    return a
 
 
 def other_axis_moves(signals: Signals, min_angle_range_deg: float = 1.0) -> bool:
@@ -187,6 +290,12 @@ class AxisCoupling(Effect):
             out = out + p[1] * np.asarray(signals.v_other, float)
         return out
 
+    def output_pointwise(self):
+        return True
+
+    def output_jacobian(self, jac, y, signals, p, rows=None):
+        return jac  # y enters with slope 1
+
     def start_grid(self, signals, y_deg):
         return [self.neutral()]
 
@@ -270,6 +379,12 @@ class RateDependentThresholds(Effect):
         v = np.asarray(signals.v, dtype=float)
         return np.asarray(y, float) + float(p[1]) * (v - self._played(signals, p))
 
+    def output_pointwise(self):
+        return True
+
+    def output_jacobian(self, jac, y, signals, p, rows=None):
+        return jac  # y enters with slope 1
+
     def start_grid(self, signals, y_deg):
         slope = _span(y_deg) / _span(signals.v)
         return [np.array([b, f * slope]) for b in (0.02, 0.05, 0.1, 0.2, 0.4) for f in (0.0, 0.4)]
@@ -300,12 +415,27 @@ class RateDependentWeights(Effect):
     meaning: str = "rate-dependent weights: the output gain changes with the input speed"
     needs: tuple[str, ...] = ("t_s",)
 
-    def transform_output(self, y, signals, p):
+    def factor(self, signals: Signals, p: np.ndarray) -> np.ndarray | None:
+        """Output factor ``1 + g |dv/dt| / S``, shape (n,); None when the input
+        does not move (then the output is unchanged)."""
         s = _speed(signals, RATE_WINDOW_S)
         ref = float(np.quantile(s, 0.95)) if s.size else 0.0
         if ref <= 0:
-            return np.asarray(y, float)
-        return np.asarray(y, float) * (1.0 + float(p[0]) * s / ref)
+            return None
+        return 1.0 + float(p[0]) * s / ref
+
+    def transform_output(self, y, signals, p):
+        f = self.factor(signals, p)
+        return np.asarray(y, float) if f is None else np.asarray(y, float) * f
+
+    def output_pointwise(self):
+        return True
+
+    def output_jacobian(self, jac, y, signals, p, rows=None):
+        f = self.factor(signals, p)
+        if f is None:
+            return jac
+        return jac * (f if rows is None else f[np.asarray(rows)])[:, None]
 
     def start_grid(self, signals, y_deg):
         return [np.array([g]) for g in (-0.1, 0.05, 0.15, 0.3)]
@@ -359,7 +489,12 @@ class Creep(Effect):
     def transform_output(self, y, signals, p):
         y = np.ascontiguousarray(y, dtype=float)
         t = np.ascontiguousarray(signals.t_s, dtype=float)
-        return (1.0 - p[0]) * y + p[0] * first_order_lag(y, t, float(p[1]))
+        lag = _lagged_columns(y[:, None], t, np.array([float(p[1])]))[:, 0]
+        return (1.0 - p[0]) * y + p[0] * lag
+
+    def output_jacobian(self, jac, y, signals, p, rows=None):
+        t = np.ascontiguousarray(signals.t_s, dtype=float)
+        return (1.0 - p[0]) * jac + p[0] * _lagged_columns(jac, t, np.array([float(p[1])]))
 
     def start_grid(self, signals, y_deg):
         return [np.array([g, tau]) for g in (0.05, 0.15, 0.3) for tau in (0.4, 0.8, 1.5, 3.0, 6.0)]
@@ -416,9 +551,18 @@ class LogCreep(Effect):
         gam = float(p[0]) / LOG_CREEP_PER_DECADE
         if gam == 0.0:
             return y
-        lagged = sum(first_order_lag(y, t, float(tau)) for tau in self.taus(float(p[1])))
-        n = self.taus(float(p[1])).size
+        taus = self.taus(float(p[1]))
+        lagged = _lagged_columns(y[:, None], t, taus)[:, 0]  # in the order of taus
+        n = taus.size
         return y - gam * (n * y - lagged)
+
+    def output_jacobian(self, jac, y, signals, p, rows=None):
+        gam = float(p[0]) / LOG_CREEP_PER_DECADE
+        if gam == 0.0:
+            return jac
+        t = np.ascontiguousarray(signals.t_s, dtype=float)
+        taus = self.taus(float(p[1]))
+        return jac - gam * (taus.size * jac - _lagged_columns(jac, t, taus))
 
     def start_grid(self, signals, y_deg):
         return [np.array([g, tau]) for g in (0.01, 0.03, 0.06) for tau in (0.1, 0.3, 1.0)]
@@ -521,6 +665,18 @@ class Saturation(Effect):
         sat = np.where(a > knee, knee + lim * np.tanh(over / lim), a)
         return np.sign(y) * sat
 
+    def output_pointwise(self):
+        return True
+
+    def output_jacobian(self, jac, y, signals, p, rows=None):
+        y = np.asarray(y, dtype=float)
+        if rows is not None:
+            y = y[np.asarray(rows)]
+        knee, lim = float(p[0]), float(p[1])
+        a = np.abs(y)
+        slope = np.where(a > knee, 1.0 - np.tanh(np.maximum(a - knee, 0.0) / lim) ** 2, 1.0)
+        return jac * slope[:, None]
+
     def start_grid(self, signals, y_deg):
         a = np.abs(np.asarray(y_deg, float))
         top = float(np.nanmax(a)) if a.size else 1.0
@@ -615,7 +771,11 @@ class EffectModel(NamedParameters):
         values = np.asarray(values, dtype=float)
         m = self.n_inner
         pin, peff = values[:m], values[m:]
-        y = self.inner.evaluate(self.effect.transform_input(signals, peff), pin)
+        if self.effect.input_side():
+            y = self.inner.evaluate(self.effect.transform_input(signals, peff), pin)
+        else:
+            y = np.asarray(self.inner.evaluate(signals, pin))
+            _remember_inner(self.inner, signals, pin, y)
         return self.effect.transform_output(y, signals, peff)
 
     def with_values(self, values: np.ndarray) -> EffectModel:
@@ -627,6 +787,114 @@ class EffectModel(NamedParameters):
             inner=self.inner.with_values(values[:m]),
             effect_values=tuple(float(x) for x in values[m:]),
         )
+
+    @property
+    def jacobian(self):
+        """The exact Jacobian (:meth:`exact_jacobian`, called as
+        ``jacobian(signals, values, rows=None)``) when the wrapped model has one,
+        else None.
+
+        A property, so that the fitter (:func:`~i2ris_calib.fitting.fit.fit_model`,
+        which takes a model's ``jacobian`` when its class defines it) falls back to
+        finite differences over a base model without an exact Jacobian (e.g. the
+        general EGPI, Bouc-Wen).
+        """
+        return self.exact_jacobian if _analytic_jacobian(self.inner) is not None else None
+
+    def exact_jacobian(
+        self,
+        signals: Signals,
+        values: np.ndarray,
+        rows: np.ndarray | None = None,
+        cols: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """d output / d parameters (deg per unit), shape (n, p), or (len(rows),
+        len(cols)) with ``rows`` / ``cols`` given.
+
+        The wrapped model's columns are its own exact Jacobian on the transformed
+        input, pushed through the output transform
+        (:meth:`Effect.output_jacobian`); the effect's columns are central
+        differences (an input-side effect re-runs the wrapped model twice per
+        parameter, an output-side one only its transform). The wrapped model
+        always runs over the whole signal (its state needs the history).
+
+        Parameters
+        ----------
+        signals : Signals
+            Shape (n,) each.
+        values : ndarray, shape (p,)
+            Parameter vector (wrapped model's, then the effect's).
+        rows : ndarray of int, shape (k,), optional
+            Sample indices to return (default all n).
+        cols : ndarray of int, shape (c,), optional
+            Parameter indices to return, in that order (default all p); the
+            others are not computed.
+
+        Raises
+        ------
+        CalibError
+            When the wrapped model has no exact Jacobian (:attr:`jacobian` is None).
+        """
+        values = np.asarray(values, dtype=float)
+        m = self.n_inner
+        pin, peff = values[:m], values[m:]
+        cols = np.arange(values.size) if cols is None else np.asarray(cols, dtype=int)
+        sel = None if rows is None else np.asarray(rows)
+        k = np.asarray(signals.v).size if sel is None else sel.size
+        out = np.empty((k, cols.size), order="F")
+        sig_in = self.effect.transform_input(signals, peff)
+        y_in = None
+        if type(self.effect).transform_output is not Effect.transform_output:
+            y_in = _recalled_inner(self.inner, sig_in, pin)
+            if y_in is None:
+                y_in = np.asarray(self.inner.evaluate(sig_in, pin), dtype=float)
+        base = np.flatnonzero(cols < m)
+        if base.size:
+            out[:, base] = self._inner_columns(sig_in, y_in, signals, values, sel, cols[base])
+        for pos in np.flatnonzero(cols >= m):
+            out[:, pos] = self._effect_column(signals, values, y_in, int(cols[pos]), sel)
+        return out
+
+    def _inner_columns(self, sig_in, y_in, signals, values, sel, cols) -> np.ndarray:
+        """The wrapped model's columns ``cols`` (all < n_inner) at the rows ``sel``,
+        through the output transform, shape (k, len(cols))."""
+        m = self.n_inner
+        pin, peff = values[:m], values[m:]
+        pointwise = self.effect.output_pointwise()
+        rows_in = sel if pointwise else None
+        if isinstance(self.inner, EffectModel):
+            jac = self.inner.exact_jacobian(sig_in, pin, rows=rows_in, cols=cols)
+        else:
+            jac_fn = _analytic_jacobian(self.inner)
+            if jac_fn is None:
+                raise CalibError(f"{self.name}: the wrapped model has no exact Jacobian")
+            jac = np.asarray(jac_fn(sig_in, pin, rows=rows_in), dtype=float)
+            if not (cols.size == jac.shape[1] and np.array_equal(cols, np.arange(cols.size))):
+                jac = jac[:, cols]
+        jac = self.effect.output_jacobian(jac, y_in, signals, peff, rows_in)
+        return jac if pointwise or sel is None else jac[sel]
+
+    def _effect_column(self, signals, values, y_in, col, sel) -> np.ndarray:
+        """Central difference of the output by parameter ``col`` (an effect
+        parameter), kept inside its declared bounds, at the rows ``sel``."""
+        par = self.parameters[col]
+        x = float(values[col])
+        h = _FD_STEP * max(1.0, abs(x))
+        hi = x + h if x + h <= par.upper else x
+        lo = x - h if x - h >= par.lower else x
+        if hi == lo:  # bounds narrower than the step: step out of them
+            hi, lo = x + h, x - h
+        up, down = values.copy(), values.copy()
+        up[col], down[col] = hi, lo
+        d = (self._output_at(signals, up, y_in) - self._output_at(signals, down, y_in)) / (hi - lo)
+        return d if sel is None else d[sel]
+
+    def _output_at(self, signals, values, y_in) -> np.ndarray:
+        """Output (deg), shape (n,), at ``values`` differing from the Jacobian's
+        point only in effect parameters (an output-side effect reuses ``y_in``)."""
+        if self.effect.input_side() or y_in is None:
+            return self.evaluate(signals, values)
+        return self.effect.transform_output(y_in, signals, values[self.n_inner :])
 
     def __repr__(self) -> str:
         # the effects' values first (what a diagnosis added), then the base model's
@@ -656,6 +924,32 @@ class EffectModel(NamedParameters):
         fixed = np.array(self.fixed or (False,) * len(self.effect.params), dtype=bool)
         tail = np.where(fixed, np.asarray(self.effect_values, float), self.effect.neutral())
         return self.inner, tail
+
+
+#: The wrapped models' last few outputs under output-side effects, by (id(inner),
+#: id(signals), values): a least-squares solver asks for the Jacobian where it has just
+#: evaluated the model, and the Jacobian of an output-side effect needs that output.
+_INNER_OUTPUTS: dict = {}
+
+
+def _remember_inner(inner: Model, signals: Signals, pin: np.ndarray, y: np.ndarray) -> None:
+    """Keep a copy of ``inner``'s output ``y`` (deg, shape (n,)) at ``pin`` on ``signals``."""
+    if len(_INNER_OUTPUTS) >= 4:
+        _INNER_OUTPUTS.pop(next(iter(_INNER_OUTPUTS)), None)
+    # the entry holds inner and signals themselves, so that their ids are not reused
+    _INNER_OUTPUTS[(id(inner), id(signals), pin.tobytes())] = (inner, signals, np.array(y, float))
+
+
+def _recalled_inner(inner: Model, signals: Signals, pin: np.ndarray) -> np.ndarray | None:
+    """The output kept by :func:`_remember_inner` for these objects and values, or None."""
+    hit = _INNER_OUTPUTS.get((id(inner), id(signals), pin.tobytes()))
+    if hit is None or hit[0] is not inner or hit[1] is not signals:
+        return None
+    return hit[2]
+
+
+#: Relative step of the central differences by effect parameters (eps^(1/3)).
+_FD_STEP = float(np.finfo(float).eps ** (1.0 / 3.0))
 
 
 def model_values(model: Model) -> np.ndarray:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from i2ris_calib.fitting.fit import _analytic_jacobian
 from i2ris_calib.hysteresis.model import Model, Signals
 
 
@@ -61,6 +62,49 @@ def sse(model: Model, signals: Signals, theta: np.ndarray, mask: np.ndarray, val
     return s if np.isfinite(s) else np.inf
 
 
+def exact_jacobian(model: Model, signals: Signals, rows: np.ndarray, cols: np.ndarray):
+    """The model's exact Jacobian restricted to ``rows`` and ``cols``, as a function
+    of the full parameter vector, or None when the model has none.
+
+    Parameters
+    ----------
+    model : Model
+    signals : Signals
+        Shape (n,) each.
+    rows : ndarray of int, shape (k,)
+        Samples that enter the cost.
+    cols : ndarray of int, shape (c,)
+        Free parameters, in the order of the fitted vector.
+
+    Returns
+    -------
+    callable or None
+        ``jac(x)`` with ``x`` shape (p,), returning d output / d x[cols] (deg per
+        unit) at ``rows``, shape (k, c), non-finite entries set to 0.
+    """
+    jac_fn = _analytic_jacobian(model)
+    if jac_fn is None:
+        return None
+    if hasattr(model, "exact_jacobian"):  # an EffectModel: only the free columns built
+
+        def some(x):
+            return model.exact_jacobian(signals, x, rows=rows, cols=cols)
+
+    else:
+        whole = cols.size == len(model.parameters)
+
+        def some(x):
+            jac = np.asarray(jac_fn(signals, x, rows=rows), dtype=float)
+            return jac if whole else jac[:, cols]
+
+    def jac(x: np.ndarray) -> np.ndarray:
+        with np.errstate(over="ignore", invalid="ignore"):
+            j = some(x)
+        return j if np.isfinite(j.sum()) else np.where(np.isfinite(j), j, 0.0)
+
+    return jac
+
+
 def refit(
     model: Model,
     signals: Signals,
@@ -89,7 +133,13 @@ def refit(
     free : ndarray of bool, shape (p,), optional
         Parameters to fit; default all not declared ``fixed``.
     max_nfev : int
-        Cap on model evaluations.
+        Cap on model evaluations (the Jacobian's not counted).
+
+    Notes
+    -----
+    A model with an exact Jacobian (:func:`exact_jacobian`: GPI, EGPI, the
+    two-tendon models and effects over them) gives it to the solver; others
+    get forward differences, one evaluation per free parameter.
     """
     x0 = clip_into_bounds(model, x0)
     fixed = np.array([p.fixed for p in model.parameters], dtype=bool)
@@ -100,16 +150,23 @@ def refit(
     base = x0.copy()
     target = theta[mask]
 
-    def resid(xf: np.ndarray) -> np.ndarray:
+    def full(xf: np.ndarray) -> np.ndarray:
         x = base.copy()
         x[free] = xf
-        r = model.evaluate(signals, x)[mask] - target
+        return x
+
+    def resid(xf: np.ndarray) -> np.ndarray:
+        r = model.evaluate(signals, full(xf))[mask] - target
         return np.where(np.isfinite(r), r, 1e6)
+
+    exact = exact_jacobian(model, signals, np.flatnonzero(mask), np.flatnonzero(free))
+    jac = "2-point" if exact is None else (lambda xf: exact(full(xf)))
 
     try:
         sol = least_squares(
             resid,
             x0[free],
+            jac=jac,
             bounds=(lo[free], hi[free]),
             method="trf",
             x_scale="jac",

@@ -251,7 +251,10 @@ def test_conditioning_sweep_is_said_counted_and_not_called_tracking():
         a.update(n_conditioning=n_cond, conditioning_s=0.2, start_state_reason=reason)
     sec = compensation_section(comp, CFG)
     texts = [b.text for b in sec.blocks if isinstance(b, Verdict)]
-    assert f"yaw±: conditioning sweep of 2 samples (0.2 s) over the fitted range first: {reason}." in texts
+    assert (
+        f"yaw±: conditioning sweep of 2 samples (0.2 s) over the fitted range first: {reason}."
+        in texts
+    )
     flag_t = next(b for b in sec.blocks if isinstance(b, Table) and b.header[0] == "flag")
     counts = {r[0]: r[1:] for r in flag_t.rows}
     assert counts["conditioning"][1:] == ("2", "2") and "not tracking" in counts["conditioning"][0]

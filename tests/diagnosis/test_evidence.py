@@ -91,6 +91,22 @@ def test_residual_analysis_locates_branch_rate_and_lag():
     assert "unloading branch" in text and "lag +0.5" in text
 
 
+@pytest.mark.parametrize("n", [1, 2, 40])
+def test_residual_analysis_of_a_series_shorter_than_the_largest_lag(n):
+    """1 kHz for ``n`` samples with a 1 s largest lag: the lags stay inside the series
+    (a lag of the whole series was a shape error), no correlation on one sample."""
+    t = np.arange(n) * 1e-3
+    v = np.sin(40 * t) * 100
+    res = np.random.default_rng(n).normal(0, 0.1, n)
+    a = residual_analysis(res, Signals(v=v, t_s=t), loading_mask(v, 1.0), max_lag_s=1.0)
+    lags = [row["lag_s"] for row in a["xcorr_input"]["lags"]]
+    assert all(abs(lag) < n * 1e-3 for lag in lags)
+    assert 0.0 in lags
+    if n == 1:
+        assert np.isnan(a["xcorr_input"]["peak_rate_corr"])
+    assert concentration_sentences(a)
+
+
 def test_markdown_section_from_a_record():
     m = {"fit_rmse_deg": 0.2, "holdout_rmse_deg": 0.21, "bic": -10.0, "n_free": 12}
     ev = {

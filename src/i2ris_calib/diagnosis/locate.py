@@ -93,37 +93,9 @@ def residual_analysis(
     out["by_branch"] = {
         b: _cell(res[ok], lab[ok] == b, total) for b in ("loading", "unloading", "hold")
     }
-
-    cells = []
-    edges = np.unique(np.quantile(v[ok], np.linspace(0, 1, n_bins + 1))) if ok.any() else []
-    for b in ("loading", "unloading"):
-        for lo, hi in zip(edges[:-1], edges[1:], strict=False):
-            sel = (lab[ok] == b) & (v[ok] >= lo) & (v[ok] <= hi)
-            c = _cell(res[ok], sel, total)
-            c.update(branch=b, v_lo_counts=float(lo), v_hi_counts=float(hi))
-            cells.append(c)
-    out["by_input"] = cells
-
-    tw = np.linspace(t[0], t[-1], n_bins + 1) if n else []
-    windows = []
-    for lo, hi in zip(tw[:-1], tw[1:], strict=False):
-        c = _cell(res[ok], (t[ok] >= lo) & (t[ok] <= hi), total)
-        c.update(t_lo_s=float(lo), t_hi_s=float(hi))
-        windows.append(c)
-    out["by_time"] = windows
-
-    speed = np.abs(rate)
-    qs = np.quantile(speed[ok], [0, 1 / 3, 2 / 3, 1]) if ok.any() else [0, 0, 0, 0]
-    terc = []
-    for i in range(3):
-        c = _cell(res[ok], (speed[ok] >= qs[i]) & (speed[ok] <= qs[i + 1]), total)
-        c.update(speed_lo_counts_per_s=float(qs[i]), speed_hi_counts_per_s=float(qs[i + 1]))
-        terc.append(c)
-    out["by_rate"] = {
-        "terciles": terc,
-        "corr_res_rate": _corr(res, rate),
-        "corr_absres_speed": _corr(np.abs(res), speed),
-    }
+    out["by_input"] = _input_cells(res, v, lab, ok, total, n_bins)
+    out["by_time"] = _time_windows(res, t, ok, total, n_bins)
+    out["by_rate"] = _rate_cells(res, rate, ok, total)
     out["other_axis"] = {
         "corr_res_theta_other": _corr(res, np.asarray(signals.theta_other_deg, float))
         if signals.theta_other_deg is not None
@@ -133,23 +105,73 @@ def residual_analysis(
         else None,
     }
     dt = float(np.median(np.diff(t))) if n > 1 else 1.0
-    lags = {"1": 1, "5": 5, "20": 20, "1s": max(1, round(1.0 / dt))}
-    # pairs with an unmeasured sample (dropouts, the other direction's samples) are
-    # left out rather than zero-filled
-    out["autocorr"] = {
-        f"lag_{k}": _corr(res[m:], res[:-m]) if 0 < m < n else None for k, m in lags.items()
-    }
-    d = np.diff(res)
-    d = d[np.isfinite(d)]
-    out["autocorr"]["durbin_watson"] = float(np.dot(d, d) / total) if total > 0 else None
+    out["autocorr"] = _autocorrelations(res, dt, total)
     out["xcorr_input"] = _xcorr_input(res, v, rate, dt, max_lag_s)
     return out
 
 
+def _input_cells(res, v, lab, ok, total: float, n_bins: int) -> list[dict]:
+    """The residual's cells by branch (loading, unloading) and input quantile bin."""
+    cells = []
+    edges = np.unique(np.quantile(v[ok], np.linspace(0, 1, n_bins + 1))) if ok.any() else []
+    for b in ("loading", "unloading"):
+        for lo, hi in zip(edges[:-1], edges[1:], strict=False):
+            sel = (lab[ok] == b) & (v[ok] >= lo) & (v[ok] <= hi)
+            c = _cell(res[ok], sel, total)
+            c.update(branch=b, v_lo_counts=float(lo), v_hi_counts=float(hi))
+            cells.append(c)
+    return cells
+
+
+def _time_windows(res, t, ok, total: float, n_bins: int) -> list[dict]:
+    """The residual's cells in ``n_bins`` equal time windows (s)."""
+    tw = np.linspace(t[0], t[-1], n_bins + 1) if t.size else []
+    windows = []
+    for lo, hi in zip(tw[:-1], tw[1:], strict=False):
+        c = _cell(res[ok], (t[ok] >= lo) & (t[ok] <= hi), total)
+        c.update(t_lo_s=float(lo), t_hi_s=float(hi))
+        windows.append(c)
+    return windows
+
+
+def _rate_cells(res, rate, ok, total: float) -> dict:
+    """The residual's cells by terciles of the input speed (counts/s), and its
+    correlations with the rate and (absolute) with the speed."""
+    speed = np.abs(rate)
+    qs = np.quantile(speed[ok], [0, 1 / 3, 2 / 3, 1]) if ok.any() else [0, 0, 0, 0]
+    terc = []
+    for i in range(3):
+        c = _cell(res[ok], (speed[ok] >= qs[i]) & (speed[ok] <= qs[i + 1]), total)
+        c.update(speed_lo_counts_per_s=float(qs[i]), speed_hi_counts_per_s=float(qs[i + 1]))
+        terc.append(c)
+    return {
+        "terciles": terc,
+        "corr_res_rate": _corr(res, rate),
+        "corr_absres_speed": _corr(np.abs(res), speed),
+    }
+
+
+def _autocorrelations(res, dt: float, total: float) -> dict:
+    """The residual's autocorrelation at lags of 1, 5, 20 samples and 1 s (pairs with
+    an unmeasured sample left out rather than zero-filled) and the Durbin-Watson
+    statistic."""
+    n = res.size
+    lags = {"1": 1, "5": 5, "20": 20, "1s": max(1, round(1.0 / dt))}
+    out = {f"lag_{k}": _corr(res[m:], res[:-m]) if 0 < m < n else None for k, m in lags.items()}
+    d = np.diff(res)
+    d = d[np.isfinite(d)]
+    out["durbin_watson"] = float(np.dot(d, d) / total) if total > 0 else None
+    return out
+
+
 def _xcorr_input(res, v, rate, dt, max_lag_s, n_lags: int = 11) -> dict:
-    """Correlation of res[k] with v[k - L] and rate[k - L] for lags L in s."""
-    m_max = max(1, round(max_lag_s / dt))
+    """Correlation of res[k] with v[k - L] and rate[k - L] for lags L in s (lags of
+    fewer samples than the series; an empty series: no lags, peak NaN)."""
+    m_max = max(1, min(round(max_lag_s / dt), res.size - 1))
     steps = np.unique(np.round(np.linspace(-m_max, m_max, 2 * n_lags + 1)).astype(int))
+    steps = steps[np.abs(steps) < res.size]
+    if not steps.size:
+        return {"lags": [], "peak_rate_lag_s": float("nan"), "peak_rate_corr": float("nan")}
     rows = []
     for m in steps:
         if m >= 0:

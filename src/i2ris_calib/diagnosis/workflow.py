@@ -409,10 +409,8 @@ def _diagnosis_config(func: str, config: object) -> DiagnosisConfig:
 
 def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
     d, hold_full, step = search_data(data, cfg)
-    names = list(cfg.candidates or CATALOGUE)
     coupling_note = _coupling_note(data)
-    if coupling_note and coupling_note.startswith("coupling cannot"):
-        names = [n for n in names if n not in COUPLING_EFFECTS]  # not identifiable here
+    names = _candidate_names(cfg, coupling_note)
     pol = refit(start, d.signals, d.theta, d.fit, model_values(start), max_nfev=cfg.start_max_nfev)
     current = start.with_values(pol.values)
     cur_m = score_of(current, pol.values, d, n_free_of(current))
@@ -425,17 +423,11 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
     confounded: list[Candidate] = []
     for _ in range(cfg.max_steps):
         analysis, sentences = _analysis(current, d)
-        cands = _round(current, cur_m, names, d, cfg, progress)
-        finals = _finalists(cands, current, cur_m, d, cfg, progress)
-        refitted = {c.effect: c for c in finals}
-        cands = tuple(refitted.get(c.effect, c) for c in cands)
+        cands, finals, passing, rate = _round_result(
+            current, cur_m, names, one_speed, d, cfg, progress
+        )
         last = cands
-        passing = [c for c in finals if c.comparison.significant]
-        if one_speed:
-            # the speed is a function of the level: a rate effect fits as a static shape
-            # would; neither is named, both are listed with the separating recording
-            confounded += [c for c in passing if c.effect in RATE_EFFECTS]
-            passing = [c for c in passing if c.effect not in RATE_EFFECTS]
+        confounded += rate
         if not passing:
             break
         best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
@@ -447,28 +439,13 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
                 current, cur_m = ref
                 continue
         best = _pick(passing, d, cfg)
-        alternatives = _alternatives(best, finals, d, cfg)
-        steps.append(
-            Step(
-                effect=best.effect,
-                model_before=ref[0],
-                model_after=best.model,
-                before=ref[1],
-                after=best.metrics,
-                comparison=compare(ref, (best.model, best.metrics), d, cfg),
-                candidates=cands,
-                analysis_before=analysis,
-                sentences_before=sentences,
-                alternatives=alternatives,
-            )
-        )
+        steps.append(_step_record(best, ref, finals, cands, (analysis, sentences), d, cfg))
         current, cur_m = best.model, best.metrics
         last = ()
     analysis, sentences = _analysis(current, d)
     more, not_excluded = _closing_notes(
         current, steps, last, coupling_note, confounded, one_speed, d, cfg
     )
-    notes += more
     return Diagnosis(
         start_model=start_polished,
         final_model=current,
@@ -480,8 +457,53 @@ def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
         sentences_final=sentences,
         holdout=hold_full,
         decimation=step,
-        notes=tuple(notes),
+        notes=tuple(notes + more),
         not_excluded=not_excluded,
+    )
+
+
+def _candidate_names(cfg, coupling_note: str) -> list[str]:
+    """The catalogue effects to try: ``cfg.candidates`` (default all), without coupling
+    when the recording cannot separate it (:func:`_coupling_note`)."""
+    names = list(cfg.candidates or CATALOGUE)
+    if coupling_note and coupling_note.startswith("coupling cannot"):
+        names = [n for n in names if n not in COUPLING_EFFECTS]  # not identifiable here
+    return names
+
+
+def _round_result(current, cur_m, names, one_speed: bool, d, cfg, progress):
+    """(candidates, finalists, significant finalists, confounded rate finalists) of one
+    round from ``current``: every effect fitted, the finalists refitted globally (the
+    candidates carry their refits). On a recording whose speed is a function of its
+    level a rate effect fits as a static shape would: significant rate finalists are
+    set apart (neither is named; both are listed with the separating recording)."""
+    cands = _round(current, cur_m, names, d, cfg, progress)
+    finals = _finalists(cands, current, cur_m, d, cfg, progress)
+    refitted = {c.effect: c for c in finals}
+    cands = tuple(refitted.get(c.effect, c) for c in cands)
+    passing = [c for c in finals if c.comparison.significant]
+    if not one_speed:
+        return cands, finals, passing, []
+    rate = [c for c in passing if c.effect in RATE_EFFECTS]
+    return cands, finals, [c for c in passing if c.effect not in RATE_EFFECTS], rate
+
+
+def _step_record(best, ref, finals, cands, analysis, d, cfg) -> Step:
+    """The :class:`Step` that adds ``best`` to the reference ``ref`` = (model, metrics),
+    with its comparison, the round's candidates, the alternatives among ``finals`` and
+    the residual ``analysis`` = (numbers, sentences) before it."""
+    alternatives = _alternatives(best, finals, d, cfg)
+    return Step(
+        effect=best.effect,
+        model_before=ref[0],
+        model_after=best.model,
+        before=ref[1],
+        after=best.metrics,
+        comparison=compare(ref, (best.model, best.metrics), d, cfg),
+        candidates=cands,
+        analysis_before=analysis[0],
+        sentences_before=analysis[1],
+        alternatives=alternatives,
     )
 
 

@@ -186,21 +186,10 @@ def _xcorr_input(res, v, rate, dt, max_lag_s, n_lags: int = 11) -> dict:
 def concentration_sentences(a: dict) -> list[str]:
     """One-line statements, with numbers, of where the disagreement is concentrated."""
     out = [f"residual RMSE {a['rmse_deg']:.3g} deg over {a['n']} samples"]
-    br = a["by_branch"]
-    worst = max(br, key=lambda b: br[b]["sse_share"])
-    out.append(
-        f"{100 * br[worst]['sse_share']:.0f}% of the squared residual lies on the {worst} "
-        f"branch ({100 * br[worst]['sample_share']:.0f}% of the samples, "
-        f"RMSE {br[worst]['rmse_deg']:.3g} deg, mean {br[worst]['mean_deg']:+.3g} deg)"
-    )
+    out.append(_branch_sentence(a["by_branch"]))
     cells = [c for c in a["by_input"] if c["n"] > 0]
     if cells:
-        c = max(cells, key=lambda c: c["sse_share"])
-        out.append(
-            f"largest input cell: {c['branch']}, input {c['v_lo_counts']:.4g}-{c['v_hi_counts']:.4g}"
-            f" counts holds {100 * c['sse_share']:.0f}% of the squared residual in "
-            f"{100 * c['sample_share']:.0f}% of the samples (RMSE {c['rmse_deg']:.3g} deg)"
-        )
+        out.append(_input_cell_sentence(max(cells, key=lambda c: c["sse_share"])))
     w = max(a["by_time"], key=lambda c: c["rmse_deg"] if np.isfinite(c["rmse_deg"]) else -1)
     out.append(
         f"worst time window {w['t_lo_s']:.3g}-{w['t_hi_s']:.3g} s: RMSE {w['rmse_deg']:.3g} deg "
@@ -215,14 +204,7 @@ def concentration_sentences(a: dict) -> list[str]:
         + ", ".join(f"{c['rmse_deg']:.3g}" for c in rr["terciles"])
         + " deg"
     )
-    oa = a["other_axis"]
-    if oa["corr_res_theta_other"] is not None or oa["corr_res_v_other"] is not None:
-        parts = []
-        if oa["corr_res_theta_other"] is not None:
-            parts.append(f"other axis angle {oa['corr_res_theta_other']:+.2f}")
-        if oa["corr_res_v_other"] is not None:
-            parts.append(f"other axis input {oa['corr_res_v_other']:+.2f}")
-        out.append("residual correlation with " + ", ".join(parts))
+    out += _other_axis_sentences(a["other_axis"])
     ac = a["autocorr"]
     out.append(
         f"residual autocorrelation {ac['lag_1']:.2f} at lag 1, {ac['lag_1s']:.2f} at 1 s "
@@ -236,3 +218,32 @@ def concentration_sentences(a: dict) -> list[str]:
         f"(r = {xc['peak_rate_corr']:+.2f})"
     )
     return out
+
+
+def _branch_sentence(br: dict) -> str:
+    """Where on the branches (loading, unloading, hold) the squared residual lies."""
+    worst = max(br, key=lambda b: br[b]["sse_share"])
+    return (
+        f"{100 * br[worst]['sse_share']:.0f}% of the squared residual lies on the {worst} "
+        f"branch ({100 * br[worst]['sample_share']:.0f}% of the samples, "
+        f"RMSE {br[worst]['rmse_deg']:.3g} deg, mean {br[worst]['mean_deg']:+.3g} deg)"
+    )
+
+
+def _input_cell_sentence(c: dict) -> str:
+    """The (branch, input bin) cell ``c`` holding the largest share of the residual."""
+    return (
+        f"largest input cell: {c['branch']}, input {c['v_lo_counts']:.4g}-{c['v_hi_counts']:.4g}"
+        f" counts holds {100 * c['sse_share']:.0f}% of the squared residual in "
+        f"{100 * c['sample_share']:.0f}% of the samples (RMSE {c['rmse_deg']:.3g} deg)"
+    )
+
+
+def _other_axis_sentences(oa: dict) -> list[str]:
+    """The residual's correlation with the other axis's angle and input (when known)."""
+    parts = []
+    if oa["corr_res_theta_other"] is not None:
+        parts.append(f"other axis angle {oa['corr_res_theta_other']:+.2f}")
+    if oa["corr_res_v_other"] is not None:
+        parts.append(f"other axis input {oa['corr_res_v_other']:+.2f}")
+    return ["residual correlation with " + ", ".join(parts)] if parts else []

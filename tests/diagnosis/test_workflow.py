@@ -169,3 +169,40 @@ def test_two_direction_case_is_the_minus_truth_over_the_whole_history():
         r = (minus.theta_deg - y)[minus.in_direction]
         assert abs(np.sqrt(np.mean(r**2)) - 0.1) < 0.01  # the noise, nothing else
         assert minus.holdout.any() and not (minus.holdout & plus.in_direction).any()
+
+
+def test_hopeless_finalists_keep_their_warm_fit(monkeypatch):
+    """A finalist whose warm held-out RMSE is more than ``global_refit_ratio`` x the
+    best globally refitted finalist's keeps its warm fit (listed, not refitted);
+    ``inf`` refits every finalist, in the order of their warm held-out RMSE."""
+    from types import SimpleNamespace as NS
+
+    import i2ris_calib.diagnosis.workflow as wf
+    from i2ris_calib.diagnosis.results import Candidate
+
+    calls = []
+
+    def refit_globally(c, d, cfg):
+        calls.append(c.effect)
+        return replace(
+            c, stage="global", metrics=NS(holdout_rmse_deg=0.9 * c.metrics.holdout_rmse_deg)
+        )
+
+    monkeypatch.setattr(wf, "refit_globally", refit_globally)
+    monkeypatch.setattr(wf, "_judged", lambda c, *a: c)
+    promising = NS(z=5.0, rel_improvement=0.5)
+    cands = [
+        Candidate(name, None, NS(holdout_rmse_deg=h), promising)
+        for name, h in [("creep", 9.8), ("axis_coupling", 0.36), ("creep_log", 1.5)]
+    ]
+    out = wf._finalists(cands, None, None, None, DiagnosisConfig(), None)
+    # best refitted 0.324 deg: 1.5 <= 5 x 0.324 is refitted, 9.8 is not
+    assert calls == ["axis_coupling", "creep_log"]
+    assert [(c.effect, c.stage) for c in out] == [
+        ("axis_coupling", "global"), ("creep_log", "global"), ("creep", "warm")
+    ]  # fmt: skip
+    calls.clear()
+    wf._finalists(cands, None, None, None, DiagnosisConfig(global_refit_ratio=np.inf), None)
+    assert calls == ["axis_coupling", "creep_log", "creep"]
+    with pytest.raises(ValueError, match="global_refit_ratio"):
+        DiagnosisConfig(global_refit_ratio=1.0)

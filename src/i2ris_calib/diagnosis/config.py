@@ -47,6 +47,10 @@ class DiagnosisConfig:
         Promising candidates refitted globally (and judged again) before the choice.
     promising_z : float
         Held-out z above which a warm-fitted candidate may become a finalist.
+    global_refit_ratio : float
+        A finalist whose warm held-out RMSE is more than this multiple of the best
+        globally refitted finalist's keeps its warm fit (it is judged, and listed, as
+        warm-fitted); ``inf`` refits every finalist.
     choose_by : str
         ``"holdout"`` (lowest held-out RMSE, unless a finalist with a much lower
         BIC is not significantly worse on the held-out cycles) or ``"bic"``
@@ -70,6 +74,7 @@ class DiagnosisConfig:
     global_max_nfev: int = 400
     n_finalists: int = 3
     promising_z: float = 1.0
+    global_refit_ratio: float = 5.0
     choose_by: str = "holdout"
     seed: int = 0
 
@@ -101,6 +106,8 @@ class DiagnosisConfig:
             raise ValueError("n_finalists must be >= 1")
         if self.n_global_starts < 0:
             raise ValueError("n_global_starts must be >= 0")
+        if not self.global_refit_ratio > 1:
+            raise ValueError("global_refit_ratio must be > 1 (inf: refit every finalist)")
         if (
             min(
                 self.max_nfev,

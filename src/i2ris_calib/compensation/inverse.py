@@ -338,7 +338,11 @@ def coupling_deg(
     return out[n_pre:]
 
 
-def _check(target: np.ndarray, t: np.ndarray | None) -> None:
+def _checked_target(target_deg, t_s) -> tuple[np.ndarray, np.ndarray | None]:
+    """(target, times) as contiguous float arrays, checked: a non-empty finite 1-D
+    target; times (optional) of its shape, finite and strictly increasing."""
+    target = np.ascontiguousarray(target_deg, dtype=float)
+    t = None if t_s is None else np.ascontiguousarray(t_s, dtype=float)
     if target.ndim != 1 or target.size == 0:
         raise CalibError("the target must be a non-empty 1-D array of angles (deg)")
     bad = np.flatnonzero(~np.isfinite(target))
@@ -358,6 +362,7 @@ def _check(target: np.ndarray, t: np.ndarray | None) -> None:
                 f"the target's times must increase strictly; sample {d[0] + 1} "
                 f"(t = {t[d[0] + 1]:g} s) does not"
             )
+    return target, t
 
 
 def history_state(code, c, r, p, kappa, vf, db, v_hist):
@@ -413,6 +418,31 @@ def _check_history(v_history, v_other_history, v_initial, lo, hi, coupled):
             "motor's inputs over the same samples)"
         )
     return h, ho
+
+
+def _initial_inputs(hist, hist_o, v_initial, v_other_initial):
+    """(this motor's, the other motor's input before the first sample): the history's
+    last inputs when a history is given (the other's only where not given), else as
+    given."""
+    if hist is None:
+        return v_initial, v_other_initial
+    if hist_o is not None and v_other_initial is None:
+        v_other_initial = float(hist_o[-1])
+    return float(hist[-1]), v_other_initial
+
+
+def _kernel_of(base) -> tuple:
+    """The compiled inverse's model tuple (code, c, r, p, kappa, v_f, deadband) of
+    ``base`` (:func:`~.kernel.kernel_params`), scalars as floats."""
+    code, c, r, p, kappa, vf, db = kernel_params(base)
+    return (code, c, r, p, float(kappa), float(vf), float(db))
+
+
+def _other_along_ramp(vo: np.ndarray, v_other_initial, n_ramp: int) -> np.ndarray:
+    """The other motor's inputs over the entry ramp (held at its start state, or its
+    first target-time input) and the target's samples."""
+    vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
+    return np.concatenate((np.full(n_ramp, vo_first), vo))
 
 
 def compensate(
@@ -500,22 +530,14 @@ def compensate(
         predicts for the commands sent.
     """
     check_args(model, target_deg, t_s, v_limits, max_rate, quantum, v_initial, tol_deg)
-    target = np.ascontiguousarray(target_deg, dtype=float)
-    t = None if t_s is None else np.ascontiguousarray(t_s, dtype=float)
-    _check(target, t)
+    target, t = _checked_target(target_deg, t_s)
     lo, hi, rate = _checked_limits(v_limits, max_rate, quantum, v_initial, t)
     base, delay = _base_and_delay(model)
     coupled = is_coupled(base)
     hist, hist_o = _check_history(v_history, v_other_history, v_initial, lo, hi, coupled)
-    if hist is not None:
-        v_initial = float(hist[-1])
-        if hist_o is not None and v_other_initial is None:
-            v_other_initial = float(hist_o[-1])
-    if delay > 0 and t is None:
-        raise CalibError("a model with a time delay needs the target's times (time_s)")
-    code, c, r, p, kappa, vf, db = kernel_params(base)
-    kernel = (code, c, r, p, float(kappa), float(vf), float(db))
-    tol_deg = _checked_tol(tol_deg, code, c, p, float(quantum))
+    v_initial, v_other_initial = _initial_inputs(hist, hist_o, v_initial, v_other_initial)
+    kernel = _kernel_of(base)
+    tol_deg = _checked_tol(tol_deg, kernel[0], kernel[1], kernel[3], float(quantum))
     vo = _checked_other(base, v_other, target, delay) if coupled else None
     goal = _goal(base, target, t, delay, vo, v_other_initial, hist_o)
     v0 = _start_command(v_initial, quantum, lo, hi, hist is not None)
@@ -529,12 +551,8 @@ def compensate(
     )  # fmt: skip
     ramp, ramp_t = _entry_commands(first_free, t, v0, float(u[0]), rate, float(quantum))
     status = _status_on_target(status, t, delay)
-    nh = 0 if hist is None else hist.size
-    hist_t = _history_times(nh, t, ramp_t)
-    vo_all = None
-    if coupled:
-        vo_first = vo[0] if v_other_initial is None else float(v_other_initial)
-        vo_all = np.concatenate((np.full(ramp.size, vo_first), vo))
+    hist_t = _history_times(hist, t, ramp_t)
+    vo_all = None if not coupled else _other_along_ramp(vo, v_other_initial, ramp.size)
     hist_pred, both = _predicted(
         model, (hist, hist_t, hist_o), (ramp, ramp_t), (u, t), v0 if has_init else None,
         vo_all, v_other_initial,
@@ -576,6 +594,8 @@ def _goal(base, target: np.ndarray, t, delay: float, vo, vo_initial, vo_history)
     """The angle (deg) the base model's own input must produce, shape (n,): the target
     ``delay`` s ahead, less a coupled model's coupling term (fixed by the other motor's
     commands ``vo``; None for an uncoupled model)."""
+    if delay > 0 and t is None:
+        raise CalibError("a model with a time delay needs the target's times (time_s)")
     goal = np.interp(t + delay, t, target) if delay > 0 else target
     if vo is None:
         return goal
@@ -711,9 +731,11 @@ def _inverted_with_repair(
     return u, u_real, status, hold, spikes_left
 
 
-def _history_times(nh: int, t, ramp_t: np.ndarray) -> np.ndarray:
-    """Times (s) of the ``nh`` history inputs, shape (nh,): one target interval apart,
-    ending one interval before the entry ramp (or the first target sample)."""
+def _history_times(hist, t, ramp_t: np.ndarray) -> np.ndarray:
+    """Times (s) of the history inputs ``hist`` (None: none), shape (nh,): one target
+    interval apart, ending one interval before the entry ramp (or the first target
+    sample)."""
+    nh = 0 if hist is None else hist.size
     if not nh:
         return np.zeros(0)
     dt_h = float(t[1] - t[0]) if t is not None and t.size > 1 else 1.0

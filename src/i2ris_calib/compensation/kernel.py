@@ -934,6 +934,29 @@ def _step(
             kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, y_prev, init, tk, tol_deg,
             best_r, quantum, qlo, qhi, w, scratch, cand_x, cand_e, cand_keep,
         )  # fmt: skip
+    best_r, best_q, stat = _limited(
+        kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, init, tk, tol_deg, lo, hi,
+        (a_lim, b_lim, qa, qb), best_r, best_r_err, best_q, hold_k, w, scratch,
+    )  # fmt: skip
+    # apply the chosen command (the forward recursion, as :func:`advance`)
+    u = best_q
+    y_new = _update(kind, c, r, p, kappa, vf, db, u, w, w_new, state)
+    if u != v_prev or init:
+        state[_T_MOVE] = t_k
+    return u, best_r, y_new, stat
+
+
+@njit(cache=True)
+def _limited(
+    kind, c, r, p, kappa, vf, db, dstate, anchor, v_prev, init, tk, tol_deg, lo, hi,
+    window, best_r, best_r_err, best_q, hold_k, w, scratch,
+):  # pragma: no cover - compiled  # fmt: skip
+    """(real-valued input, command, status) of :func:`_step` after the rate window
+    ``window`` = (a_lim, b_lim, qa, qb) (real and on the command grid) and a hold:
+    the status is that of the real-valued best unconstrained by the rate limit
+    (unreached), else ``STATUS_RATE`` when the clamp leaves the target missed, else
+    ``STATUS_GAP`` when a held command misses it."""
+    a_lim, b_lim, qa, qb = window
     # status of the real-valued best (unconstrained by the rate limit)
     tol = max(tol_deg, 1e-10 * max(1.0, abs(tk)))
     stat = STATUS_OK
@@ -958,12 +981,7 @@ def _step(
         y_f = _exact(kind, w, scratch, c, r, p, kappa, vf, db, dstate, anchor, v_prev, best_q, init)
         if abs(y_f - tk) > tol and stat == STATUS_OK:
             stat = STATUS_GAP
-    # apply the chosen command (the forward recursion, as :func:`advance`)
-    u = best_q
-    y_new = _update(kind, c, r, p, kappa, vf, db, u, w, w_new, state)
-    if u != v_prev or init:
-        state[_T_MOVE] = t_k
-    return u, best_r, y_new, stat
+    return best_r, best_q, stat
 
 
 @njit(cache=True)

@@ -79,51 +79,64 @@ def accumulate_quads(S, C, quads, values, covers, x_origin, y_origin):
     ea = np.empty(4)
     eb = np.empty(4)
     ec = np.empty(4)
-    ax = np.empty(16)
-    ay = np.empty(16)
-    bx = np.empty(16)
-    by = np.empty(16)
+    scratch = (np.empty(16), np.empty(16), np.empty(16), np.empty(16))
     for q in range(quads.shape[0]):
-        area2 = 0.0
-        for k in range(4):
-            qx[k] = quads[q, k, 0] - x_origin
-            qy[k] = quads[q, k, 1] - y_origin
-        for k in range(4):
-            j = (k + 1) % 4
-            area2 += qx[k] * qy[j] - qx[j] * qy[k]
-        sgn = 1.0 if area2 > 0 else -1.0
-        for k in range(4):
-            j = (k + 1) % 4
-            dx = qx[j] - qx[k]
-            dy = qy[j] - qy[k]
-            L = np.sqrt(dx * dx + dy * dy)
-            if L == 0.0:
-                L = 1e-12
-            # inside is to the left for positive orientation: n = (-dy, dx)
-            ea[k] = -dy / L * sgn
-            eb[k] = dx / L * sgn
-            ec[k] = -(ea[k] * qx[k] + eb[k] * qy[k])
+        _inner_edges(quads[q], x_origin, y_origin, qx, qy, ea, eb, ec)
         c0 = max(0, int(np.floor(min(qx.min(), 1e9) + 0.5)))
         c1 = min(w - 1, int(np.floor(qx.max() + 0.5)))
         r0 = max(0, int(np.floor(qy.min() + 0.5)))
         r1 = min(h - 1, int(np.floor(qy.max() + 0.5)))
-        val = values[q]
-        cov = covers[q]
-        for r in range(r0, r1 + 1):
-            for c in range(c0, c1 + 1):
-                dmin = 1e30
-                for k in range(4):
-                    d = ea[k] * c + eb[k] * r + ec[k]
-                    if d < dmin:
-                        dmin = d
-                if dmin <= -_HALF_DIAG:
+        _add_coverage(S, C, (r0, r1, c0, c1), values[q], covers[q], qx, qy, ea, eb, ec, scratch)
+
+
+@njit(cache=True)
+def _inner_edges(quad, x_origin, y_origin, qx, qy, ea, eb, ec):  # pragma: no cover - compiled
+    """One quad's corners relative to the region's origin (``qx``, ``qy``) and its edge
+    lines ``ea x + eb y + ec`` (unit normals pointing inside: the signed distance of a
+    point to each edge, positive inside), written in place."""
+    area2 = 0.0
+    for k in range(4):
+        qx[k] = quad[k, 0] - x_origin
+        qy[k] = quad[k, 1] - y_origin
+    for k in range(4):
+        j = (k + 1) % 4
+        area2 += qx[k] * qy[j] - qx[j] * qy[k]
+    sgn = 1.0 if area2 > 0 else -1.0
+    for k in range(4):
+        j = (k + 1) % 4
+        dx = qx[j] - qx[k]
+        dy = qy[j] - qy[k]
+        L = np.sqrt(dx * dx + dy * dy)
+        if L == 0.0:
+            L = 1e-12
+        # inside is to the left for positive orientation: n = (-dy, dx)
+        ea[k] = -dy / L * sgn
+        eb[k] = dx / L * sgn
+        ec[k] = -(ea[k] * qx[k] + eb[k] * qy[k])
+
+
+@njit(cache=True)
+def _add_coverage(S, C, box, val, cov, qx, qy, ea, eb, ec, scratch):  # pragma: no cover
+    """Add one quad's pixel coverage x ``val`` to ``S`` (and the coverage to ``C`` when
+    ``cov``) over the pixel ``box`` = (r0, r1, c0, c1): whole pixels farther inside than
+    half a diagonal count 1, those farther outside 0, the rest their exact area."""
+    ax, ay, bx, by = scratch
+    r0, r1, c0, c1 = box
+    for r in range(r0, r1 + 1):
+        for c in range(c0, c1 + 1):
+            dmin = 1e30
+            for k in range(4):
+                d = ea[k] * c + eb[k] * r + ec[k]
+                if d < dmin:
+                    dmin = d
+            if dmin <= -_HALF_DIAG:
+                continue
+            if dmin >= _HALF_DIAG:
+                a = 1.0
+            else:
+                a = _pixel_area(qx, qy, c - 0.5, r - 0.5, ax, ay, bx, by)
+                if a <= 0.0:
                     continue
-                if dmin >= _HALF_DIAG:
-                    a = 1.0
-                else:
-                    a = _pixel_area(qx, qy, c - 0.5, r - 0.5, ax, ay, bx, by)
-                    if a <= 0.0:
-                        continue
-                S[r, c] += a * val
-                if cov:
-                    C[r, c] += a
+            S[r, c] += a * val
+            if cov:
+                C[r, c] += a

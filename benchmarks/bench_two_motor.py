@@ -32,7 +32,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from i2ris_calib.commands.diagnose import diagnosis_dataset  # noqa: E402
-from i2ris_calib.commands.fit import datasets_for_fit, fit_datasets  # noqa: E402
+from i2ris_calib.commands.fit import datasets_for_fit, fit_every_kind  # noqa: E402
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
@@ -55,7 +55,7 @@ def one_draw(seed: int, rate: float, n: int, folder: Path, diagnose: bool):
     for axis, truth in (("yaw", rec.yaw_true_deg), ("pitch", rec.pitch_true_deg)):
         t0 = time.perf_counter()
         datasets, choice = datasets_for_fit([csv], axis, config)
-        ((d, res),) = fit_datasets(datasets, choice.kinds, config)
+        ((d, res),) = fit_every_kind(datasets, choice.kinds, config)
         dt = time.perf_counter() - t0
         r = res[choice.main]
         ratio = r.holdout_metrics.rmse_deg / rec.noise_deg

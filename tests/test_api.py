@@ -192,6 +192,10 @@ def test_dir_lists_the_public_names():
     ).stdout.split()  # fmt: skip
     assert set(i2ris_calib.__all__) <= set(out)
     assert set(i2ris_calib.__all__) <= set(dir(i2ris_calib))
+    # nothing public beside the API (the face's own imports are private aliases)
+    assert {n for n in out if not n.startswith("_")} == {
+        n for n in i2ris_calib.__all__ if not n.startswith("_")
+    }
 
 
 def test_public_signatures_are_the_real_ones():

@@ -65,6 +65,57 @@ def test_option_values_are_named(capsys):
     assert "--target TARGET.csv" in out and "-o, --out COMMANDS.csv" in out
 
 
+def _option_help(out: str, option: str) -> str:
+    """The help text of ``option`` (its line and the wrapped lines after it), one line."""
+    lines = out.splitlines()
+    start = next(i for i, line in enumerate(lines) if re.match(rf"\s+{option}\b", line))
+    block = [lines[start]]
+    for line in lines[start + 1 :]:
+        if re.match(r"\s+-", line) or not line.strip():
+            break
+        block.append(line)
+    return " ".join(" ".join(block).split())
+
+
+def test_kind_lists_are_the_registrys():
+    """The CLI's kind lists (written out so that --help does not import the models)
+    are the registry's, in its order."""
+    from i2ris_calib import cli
+    from i2ris_calib.hysteresis import registry as r
+
+    assert cli._DIRECTION_KINDS == r.MODEL_KINDS
+    assert cli._SIGNED_ONLY_KINDS == tuple(k.kind for k in r.KINDS if k.factory and k.signed)
+    assert cli._FIT_MODELS == r.BUILT_KINDS
+    assert cli._INVERSE_MODELS == r.INVERSE_KINDS
+    assert cli._DIAGNOSIS_STARTS == r.DIAGNOSIS_STARTS
+
+
+def _accepted(command: str) -> tuple[str, ...]:
+    """The values the command's model option accepts, from the command itself."""
+    if command == "fit":
+        from i2ris_calib.hysteresis.registry import BUILT_KINDS
+
+        return (*BUILT_KINDS, "all")  # commands.fit.fit_files checks these
+    if command == "compensate":
+        from i2ris_calib.commands.compensate import KINDS
+
+        return KINDS
+    from i2ris_calib.commands.diagnose import STARTS
+
+    return STARTS
+
+
+@pytest.mark.parametrize(
+    "command, option", [("fit", "--model"), ("compensate", "--model"), ("diagnose", "--start")]
+)
+def test_help_names_every_kind_the_option_accepts(capsys, command, option):
+    text = _option_help(_help(capsys, command), option)
+    missing = [
+        k for k in _accepted(command) if not re.search(rf"(?<![\w-]){re.escape(k)}(?![\w-])", text)
+    ]
+    assert not missing, (command, option, text)
+
+
 def test_brackets_in_help_survive(capsys):
     out = _help(capsys, "simulate")
     assert "[simulate] seed" in " ".join(out.split())

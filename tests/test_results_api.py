@@ -298,3 +298,22 @@ def test_compensation_result_repr_and_html():
     r = repr(c)
     assert len(r) <= MAX_REPR and "egpi" in r and "50 samples" in r and "0.1 deg" in r
     assert "rmse_deg" in c._repr_html_()
+
+
+def test_compensator_repr_and_html():
+    from i2ris_calib import Compensator
+
+    c = Compensator({"yaw": model_for_kind("egpi")}, {"yaw": (0.0, 4000.0)},
+                    signs={"yaw": -1}, max_counts_per_s=2000.0)  # fmt: skip
+    assert repr(c) == "<Compensator yaw egpi at 0 counts>"
+    h = c._repr_html_()
+    assert h.startswith("<p><b>Compensator</b> yaw</p><table>")
+    for cell in ("egpi", "-1", "0 .. 4000", "2000", "0"):
+        assert f"<td>{cell}</td>" in h, cell
+    cmd = c.step(target_yaw_deg=-0.5, dt_s=0.01)["yaw"]
+    h = c._repr_html_()
+    assert f"<td>{cmd.counts:.6g}</td>" in h and "<td>0.01</td>" in h  # the state stepped
+    assert (
+        "<td>none</td>"
+        in Compensator({"yaw": model_for_kind("gpi")}, {"yaw": (0.0, 4000.0)})._repr_html_()
+    )  # no rate limit

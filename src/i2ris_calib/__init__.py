@@ -20,12 +20,13 @@ pattern; ``tests/test_api.py`` keeps the stub, ``_API`` and ``__all__`` in step)
     print(res.fit_report())
 """
 
-from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
+from importlib import import_module as _import_module
+from importlib.metadata import PackageNotFoundError as _PackageNotFoundError
+from importlib.metadata import version as _version
 
 try:
-    __version__ = version("i2ris-calib")
-except PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = _version("i2ris-calib")
+except _PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
 #: public name -> module that defines it
@@ -84,14 +85,14 @@ def __getattr__(name: str):
 
 def _load(name: str):
     if name in _API:
-        return getattr(import_module(_API[name]), name)
+        return getattr(_import_module(_API[name]), name)
     if name in _IO:
         mod, attr = _IO[name]
-        obj = getattr(import_module(mod), attr)
-        v = import_module("i2ris_calib._validate")
+        obj = getattr(_import_module(mod), attr)
+        v = _import_module("i2ris_calib._validate")
         if name == "load_synced":
-            checked_fit_config = import_module("i2ris_calib.fitting.pipeline").checked_fit_config
-            checked_directions = import_module("i2ris_calib.data.dataset").checked_directions
+            checked_fit_config = _import_module("i2ris_calib.fitting.pipeline").checked_fit_config
+            checked_directions = _import_module("i2ris_calib.data.dataset").checked_directions
 
             def load_synced(path, axis, config=None, directions=None, columns=None):  # .pyi
                 """Motion-direction datasets of ``axis`` in a synced CSV (whole history);

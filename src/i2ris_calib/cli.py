@@ -25,6 +25,25 @@ _BOOL_WORDS = frozenset({"true", "false", "yes", "no", "on", "off", "1", "0"})
 # Value placeholders for options declared without metavar= (click's own names).
 _TYPE_METAVARS = {"int": "INTEGER", "float": "FLOAT", "str": "TEXT", "Path": "PATH"}
 
+# The model kinds the options accept, as the registry (i2ris_calib.hysteresis.registry)
+# lists them, in its order. Written out here: the registry imports the models (numpy,
+# numba) and --help stays fast; tests/test_cli_help.py keeps them equal to the registry.
+#: Kinds of a motion-direction dataset (registry ``MODEL_KINDS``).
+_DIRECTION_KINDS = ("gpi", "egpi", "egpi_c")
+#: Kinds that need the whole signed input of an axis (registry rows with ``signed``).
+_SIGNED_ONLY_KINDS = ("agpi", "agpi_coupled", "maxwell_slip", "bouc_wen")
+#: ``fit --model`` (registry ``BUILT_KINDS``; or ``all``).
+_FIT_MODELS = (*_DIRECTION_KINDS, *_SIGNED_ONLY_KINDS)
+#: ``compensate --model`` (registry ``INVERSE_KINDS``; or ``diagnosed``).
+_INVERSE_MODELS = ("gpi", "egpi", "egpi_c", "agpi", "agpi_coupled")
+#: ``diagnose --start`` (registry ``DIAGNOSIS_STARTS``; or ``auto``).
+_DIAGNOSIS_STARTS = ("gpi", "egpi", "agpi", "maxwell_slip", "bouc_wen")
+
+
+def _one_of(names: tuple[str, ...]) -> str:
+    """``"a, b or c"``."""
+    return f"{', '.join(names[:-1])} or {names[-1]}" if len(names) > 1 else names[0]
+
 
 class _Command(TyperCommand):
     """Help in the usual notation: ``SESSION...`` for a required argument, ``[OUT]``
@@ -221,7 +240,7 @@ def fit(
         "all",
         "--model",
         metavar="MODEL",
-        help="gpi, egpi, egpi_c, agpi (two-tendon GPI, signed input) or all.",
+        help=f"{_one_of((*_FIT_MODELS, 'all'))} ({', '.join(_SIGNED_ONLY_KINDS)}: signed input).",
     ),
     out: Path = typer.Option(Path("fit_out"), "--out", "-o", metavar="DIR", help="Output folder."),
     config: Path | None = ConfigOpt,
@@ -280,7 +299,7 @@ def compensate(
         None,
         "--model",
         metavar="MODEL",
-        help="egpi, egpi_c, gpi or diagnosed (default: best held-out).",
+        help=f"{_one_of((*_INVERSE_MODELS, 'diagnosed'))} (default: best held-out).",
     ),
     max_counts_per_s: float | None = typer.Option(
         None, "--max-counts-per-s", metavar="RATE", help="Motor rate limit (counts/s)."
@@ -355,8 +374,9 @@ def diagnose(
         "auto",
         "--start",
         metavar="MODEL",
-        help="Starting model: auto (agpi on a signed input; else gpi and egpi, one reconciled "
-        "answer), gpi, egpi or agpi.",
+        help="Starting model: auto (on a signed input the model fit picks, agpi when the other "
+        "motor moves with it; else gpi and egpi, one reconciled answer), "
+        f"{_one_of(_DIAGNOSIS_STARTS)}.",
     ),
     out: Path = typer.Option(
         Path("diagnose_out"), "--out", "-o", metavar="DIR", help="Output folder."

@@ -197,3 +197,17 @@ def test_agpi_coupled_needs_the_other_axis_one_line(tmp_path):
     res = compensate(agpi, target, np.arange(200) * 0.01, v_limits=(-4000, 4000), v_initial=0.0,
                      v_other=vo, v_other_initial=0.0)  # fmt: skip
     assert res.summary()["rmse_deg"] < 0.01
+
+
+def test_online_kinds_are_the_registrys_inverse_kinds():
+    """io.online's kinds come from the registry: every kind the batch inverts, each on
+    its own kernel kind or (a coupled kind) its nested kind's plus the coupling."""
+    from i2ris_calib.compensation.online import KIND_NAMES
+    from i2ris_calib.hysteresis.registry import INVERSE_KINDS, kind_info
+    from i2ris_calib.io import online as io_online
+
+    assert io_online.ONLINE_KINDS == INVERSE_KINDS == (*KIND_NAMES.values(), "agpi_coupled")
+    assert io_online._COUPLED == ("agpi_coupled",)
+    for k in io_online.ONLINE_KINDS:
+        info = kind_info(k)
+        assert (info.nested if info.coupled else info.inverse) in KIND_NAMES.values()

@@ -157,3 +157,11 @@ def test_registry_builds_every_kind_with_the_same_defaults():
         model_for_kind("pgi")
     with pytest.raises(CalibError, match="model 'gpi'"):
         model_for_kind("gpi", kappa=3.0)
+
+
+def test_only_the_paper_egpi_steps_at_its_flag_point():
+    """Registry ``output_steps`` (the report prefers EGPI_C over such a kind, compensate
+    says its output steps at v_f): the paper's EGPI alone, not its continuous form."""
+    from i2ris_calib.hysteresis.registry import KINDS
+
+    assert [k.kind for k in KINDS if k.output_steps] == ["egpi"]

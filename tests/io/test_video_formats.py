@@ -28,7 +28,7 @@ from i2ris_calib.config import PipelineConfig
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io import frames
 from i2ris_calib.io.session import load_session
-from i2ris_calib.io.video import describe, iter_frames, open_reader, open_writer
+from i2ris_calib.io.video import iter_frames, open_reader, open_writer, video_info
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.tracking.config import TrackingConfig
 
@@ -151,7 +151,7 @@ def _same_frames(base: Path, video_of: dict[str, Path]) -> None:
 
 def test_ffv1_avi_is_lossless(base, tmp_path):
     s = write_video(base, tmp_path / "s", ".avi", "FFV1")
-    assert describe(s / "top.avi")["grey"]  # grey FFV1: one channel straight from FFmpeg
+    assert video_info(s / "top.avi")["grey"]  # grey FFV1: one channel straight from FFmpeg
     _same_frames(base, {c: s / f"{c}.avi" for c in ("top", "side")})
 
 
@@ -196,7 +196,7 @@ def _check_lossy(sc: dict, ref: dict) -> None:
 @pytest.mark.parametrize("suffix,codec", [(".avi", "MJPG"), (".mp4", "mp4v")])
 def test_lossy_formats_track_within_tolerance(base, lossless, tmp_path, suffix, codec):
     s = write_video(base, tmp_path / "s", suffix, codec)
-    assert not describe(s / f"top{suffix}")["grey"]  # YUV stream: converted by OpenCV
+    assert not video_info(s / f"top{suffix}")["grey"]  # YUV stream: converted by OpenCV
     _check_lossy(run_and_score(s), lossless)
 
 

@@ -309,6 +309,8 @@ def _other_hist(setup: dict, axis: str):
 
 #: Kinds that read the other motor's input (inverted only when both axes are compensated)
 COUPLED_KINDS = tuple(k.kind for k in KIND_ROWS if k.coupled and k.inverse)
+#: Kinds whose output steps at their flag point v_f (registry ``output_steps``)
+STEP_AT_VF_KINDS = tuple(k.kind for k in KIND_ROWS if k.output_steps)
 #: Gauss-Seidel rounds of the joint two-motor solve (each coupled axis re-inverted with
 #: the other axis's latest commands)
 JOINT_ROUNDS = 3
@@ -757,7 +759,7 @@ def output_step_warning(a: dict, summ: dict, stepped: np.ndarray | None = None) 
     if n <= STEP_SHARE * summ["n_samples"]:
         return None
     kind = a["kind"]
-    where = " at v_f" if kind == "egpi" else ""
+    where = " at v_f" if kind in STEP_AT_VF_KINDS else ""
     res = a["res"]
     miss = ""
     if stepped is not None and stepped.any():

@@ -44,7 +44,7 @@ def fit_saved(model, data: Dataset, fit_config):
     )
 
 
-def fit_datasets(
+def fit_every_kind(
     datasets: Sequence[Dataset], kinds: Sequence[str], fit_config, progress=None, saved=None
 ):
     """Fit every model kind to every dataset: list of (dataset, {kind: FitResult}).
@@ -171,7 +171,7 @@ def fit_files(
         def step(label: str) -> None:
             bar.update(task, description=f"fitting {label}", advance=1)
 
-        fitted = fit_datasets(datasets, kinds, fit_config, progress=step, saved=saved)
+        fitted = fit_every_kind(datasets, kinds, fit_config, progress=step, saved=saved)
     choice = pick_after_fit(choice, fitted)  # the default model: from the held-out errors
     doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice)
     with output_dir(out, "fit", inputs, OUTPUTS) as tmp:

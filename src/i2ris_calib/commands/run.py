@@ -126,7 +126,9 @@ def run_stage(stage: Stage, force: bool) -> str:
     return "ran"
 
 
-def session_inputs(session: Path, spec: SessionSpec | None = None) -> dict[str, tuple[Path, ...]]:
+def stage_input_files(
+    session: Path, spec: SessionSpec | None = None
+) -> dict[str, tuple[Path, ...]]:
     """The files of a session that the ``track`` and ``sync`` stages read, by stage.
 
     Only files session.toml names: per camera its video (an image sequence: its
@@ -236,7 +238,7 @@ def _track_sync_stages(session: Path, run_dir: Path, config: PipelineConfig) -> 
     track_dir, sync_dir = run_dir / "track", run_dir / "sync"
     angles = track_dir / "angles.csv"
     spec = load_session(session)
-    named, settings = session_inputs(session, spec), session_settings(spec)
+    named, settings = stage_input_files(session, spec), session_settings(spec)
     return [
         Stage(
             "track",
@@ -439,7 +441,7 @@ def session_record(session: Path) -> dict[str, Any]:
     """What a run folder's ``.session.json`` records of its session.
 
     ``settings`` (:func:`session_settings`) and, per file the pipeline reads
-    (:func:`session_inputs`, named relative to the session folder), its ``stage``,
+    (:func:`stage_input_files`, named relative to the session folder), its ``stage``,
     ``size`` and ``sha256``; ``identity`` is the SHA-256 of the settings and the files'
     names and sizes: the same for the session moved to another folder, different for
     another recording. Comments, ``notes`` and files session.toml does not name are
@@ -447,7 +449,7 @@ def session_record(session: Path) -> dict[str, Any]:
     """
     spec = load_session(session)
     files: dict[str, dict[str, Any]] = {}
-    for stage, paths in session_inputs(session, spec).items():
+    for stage, paths in stage_input_files(session, spec).items():
         for p in paths:
             try:
                 key = p.relative_to(session).as_posix()

@@ -31,7 +31,7 @@ CLOCK = "t_ctrl = offset_s + (1 + drift_ppm*1e-6) * t_cam"
 OUTPUTS = ("synced.csv", "sync.json")
 
 
-def input_files(session: Path, log_path: Path, angles_path: Path) -> list[Path]:
+def provenance_files(session: Path, log_path: Path, angles_path: Path) -> list[Path]:
     """Files whose hashes go into the provenance (a ROS2 bag folder: all its files)."""
     logs = (
         sorted(p for p in log_path.rglob("*") if p.is_file()) if log_path.is_dir() else [log_path]
@@ -100,7 +100,7 @@ def sync_session(
     angles_path = Path(angles) if angles is not None else root / "track" / "angles.csv"
     out_dir = Path(out) if out is not None else root / "sync"
     log_path = encoder_log_path(root, spec.encoder)
-    inputs = input_files(root, log_path, angles_path)
+    inputs = provenance_files(root, log_path, angles_path)
     claim_output_dir(out_dir, "sync", [root, *inputs], OUTPUTS)
     log = read_encoder_log(root, spec.encoder, cfg.sync.max_gap_s)
     log = replace(log, interpolation=cfg.sync.encoder_interpolation)

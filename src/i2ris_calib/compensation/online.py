@@ -33,6 +33,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+import i2ris_calib._display as _display
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation.inverse import (
     STATUS_NAMES,
@@ -562,6 +563,24 @@ class Compensator:
             f"{n} {a.kind} at {a.sign * a.state[2] + 0.0:g} counts" for n, a in self._axes.items()
         ]
         return f"<Compensator {', '.join(parts)}>"
+
+    def _repr_html_(self) -> str:
+        """Notebook display: per axis its model kind, sign, input limits (the model's
+        convention), rate limit, delay, the other motor it reads, and its state (the last
+        command and angle in the robot's sign, the time stepped)."""
+        rows = []
+        for name, a in self._axes.items():
+            lo, hi, rate = (float(x) for x in a.cfg[3:6])
+            rows.append((
+                name, a.kind, f"{a.sign:+g}", f"{_display.num(lo)} .. {_display.num(hi)}",
+                _display.num(rate) if math.isfinite(rate) else "none", a.delay,
+                _OTHER[name] if a.coupling is not None else "",
+                a.sign * a.state[2] + 0.0, a.sign * a.out[2] + 0.0, float(a.state[K.STATE_SIZE]),
+            ))  # fmt: skip
+        header = ("axis", "model", "sign", "input limits (counts)", "max rate (counts/s)",
+                  "delay (s)", "reads", "command (counts)", "angle (deg)", "time (s)")  # fmt: skip
+        title = f"<b>Compensator</b> {_display.esc(', '.join(self._axes))}"
+        return _display.table(header, rows, title)
 
 
 def _checked_history(history, models) -> dict[str, np.ndarray]:

@@ -83,11 +83,6 @@ class FittedParameter:
     meaning: str = ""
     stderr_reason: str = ""
 
-    @property
-    def rel_stderr(self) -> float:
-        """``stderr / |value|`` (NaN for a zero value)."""
-        return self.stderr / abs(self.value) if self.value else float("nan")
-
     def __repr__(self) -> str:
         se = "(fixed)" if self.fixed else f"+/- {_display.num(self.stderr, 3)}"
         unit = f" {self.unit}" if self.unit and self.unit != "1" else ""

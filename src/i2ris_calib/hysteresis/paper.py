@@ -54,7 +54,7 @@ def run_paper_sim(rate_hz: float = PAPER_SIM_RATE_HZ) -> PaperSim:
 
 
 @dataclass(frozen=True)
-class DeadZone:
+class DeadZoneInterval:
     """An input interval of one monotone branch where the output does not follow.
 
     Attributes
@@ -75,7 +75,7 @@ class DeadZone:
 
 def dead_zones(
     v: np.ndarray, y: np.ndarray, rel_slope: float = 0.25, min_width_frac: float = 0.02
-) -> list[DeadZone]:
+) -> list[DeadZoneInterval]:
     """Dead zones of ``y`` against ``v`` on every monotone branch of ``v``.
 
     A dead zone is a maximal run of samples within a branch where
@@ -97,7 +97,7 @@ def dead_zones(
     jump = np.abs(dy) > 10 * step_ref + 1e-12
     seg = np.concatenate(([0], np.cumsum(d[1:] != d[:-1])))
     width = min_width_frac * float(np.ptp(v))
-    zones: list[DeadZone] = []
+    zones: list[DeadZoneInterval] = []
     k = 0
     n = dv.size
     while k < n:
@@ -109,7 +109,7 @@ def dead_zones(
             j += 1
         if abs(v[j + 1] - v[k]) >= width:
             zones.append(
-                DeadZone(int(seg[k + 1]), bool(d[k + 1] > 0), float(v[k]), float(v[j + 1]))
+                DeadZoneInterval(int(seg[k + 1]), bool(d[k + 1] > 0), float(v[k]), float(v[j + 1]))
             )
         k = j + 1
     return zones

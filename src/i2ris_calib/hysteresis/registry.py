@@ -120,6 +120,10 @@ class ModelKind:
         Also fitted on a signed input whose other motor moves with this one (then the
         axis is a tendon axis moved by two motors: a one-element kind over the signed
         input, without the other motor's input, is left out; :func:`signed_kinds`).
+    output_steps : bool
+        Its output steps at its flag point ``v_f`` (the paper's EGPI switches envelope
+        families there): the report prefers the continuous EGPI_C within a margin, and
+        compensate says where a stepping output misses the target.
     """
 
     kind: str
@@ -141,6 +145,7 @@ class ModelKind:
     with_coupling: bool = True
     method: str | None = None
     n_operators: int | None = None
+    output_steps: bool = False
 
 
 #: Every kind, in fitting order (a kind's nested kind comes before it). Tables list
@@ -154,7 +159,7 @@ KINDS: tuple[ModelKind, ...] = (
     ModelKind(
         "egpi", "EGPI", "EGPI", i2ris_egpi_model, I2RISEGPIModel,
         start=start_values, fixed=attrgetter("fixed_egpi"), nested="gpi",
-        inverse="egpi", paper=True, diagnosis_start=True, uses_deadband=True,
+        inverse="egpi", paper=True, diagnosis_start=True, uses_deadband=True, output_steps=True,
     ),
     ModelKind(
         "egpi_c", "EGPI_C", "EGPI_C", continuous_egpi_model, ContinuousEGPIModel,

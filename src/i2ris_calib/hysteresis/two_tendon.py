@@ -126,10 +126,6 @@ class TwoTendonGPIModel(ParametricModel):
 
     n: int = 30
 
-    def side_values(self, values: np.ndarray, side: str) -> dict[str, float]:
-        """The GPI parameters of one tendon (``"p"`` or ``"n"``) by their GPI names."""
-        return _side_of(self.named(values), side)
-
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,)."""
         v = _input(signals)

@@ -12,14 +12,17 @@ import numpy as np
 
 from i2ris_calib.compensation import online
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.registry import KINDS
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import read_fit_json
 from i2ris_calib.io.fit_records import dataset_record, holdout_rmse, load_model, rate_limit
 
-#: Kinds the online compensator inverts (``diagnosed``: with ``model_file``)
-ONLINE_KINDS = (*online.KIND_NAMES.values(), "agpi_coupled")
+#: Kinds the online compensator inverts (``diagnosed``: with ``model_file``): every kind
+#: with an inverse in the registry, as the batch (a coupled kind: its kernel kind and its
+#: coupling to the other motor)
+ONLINE_KINDS = tuple(k.kind for k in KINDS if k.inverse)
 #: Kinds that read the other motor (chosen by default only with both axes' fits)
-_COUPLED = ("agpi_coupled",)
+_COUPLED = tuple(k.kind for k in KINDS if k.inverse and k.coupled)
 
 
 class Compensator(online.Compensator):

@@ -144,7 +144,7 @@ def stream_is_grey(cap) -> bool:
     return fourcc_text(cap.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT)) in GREY_PIXEL_FORMATS
 
 
-def describe(path: Path) -> dict:
+def video_info(path: Path) -> dict:
     """Codec, pixel format, size and header frame count of a video file or sequence."""
     p = Path(path)
     if p.is_dir():

@@ -30,6 +30,9 @@ from i2ris_calib.report.tables import (
 
 CONTINUOUS_MARGIN = 0.10
 """EGPI_C is recommended over EGPI when its held-out RMSE is at most this much higher (relative)."""
+CONTINUOUS_KIND = "egpi_c"
+"""The continuous EGPI: recommended over a kind whose output steps at its flag point
+(registry ``output_steps``: EGPI) within :data:`CONTINUOUS_MARGIN`."""
 
 LABELS = dict(FIT_MODELS)
 
@@ -154,18 +157,18 @@ def _preferred_model(cands: Mapping[str, float], choice: Mapping | None) -> tupl
         text = str(choice.get("why", ""))
         at = text.find("picked after fitting")
         why = [text[at:] if at >= 0 else f"the fit's default model ({best})"]
-    elif best == "egpi" and "egpi_c" in cands:
-        c, e = cands["egpi_c"], cands["egpi"]
+    elif kind_info(best).output_steps and CONTINUOUS_KIND in cands:
+        c, e, label = cands[CONTINUOUS_KIND], cands[best], LABELS[best]
         if c <= e * (1 + CONTINUOUS_MARGIN):
-            best = "egpi_c"
+            best = CONTINUOUS_KIND
             why = [
                 f"held-out RMSE {fmt_sig(c, 2, pad=True)} deg, within "
-                f"{100 * CONTINUOUS_MARGIN:.0f} % of EGPI's {fmt_sig(e, 2, pad=True)} deg, and "
-                "no output step at the flag point (EGPI jumps there)"
+                f"{100 * CONTINUOUS_MARGIN:.0f} % of {label}'s {fmt_sig(e, 2, pad=True)} deg, "
+                f"and no output step at the flag point ({label} jumps there)"
             ]
         else:
-            why.append("EGPI's output steps at the flag point (mind it when inverting)")
-    elif best == "egpi":
+            why.append(f"{label}'s output steps at the flag point (mind it when inverting)")
+    elif kind_info(best).output_steps:
         why.append("its output steps at the flag point (mind it when inverting)")
     return best, why
 

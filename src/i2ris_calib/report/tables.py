@@ -791,17 +791,6 @@ def flatten(
     return out
 
 
-def key_value_table(
-    obj: Mapping[str, Any], caption: str, skip: Iterable[str] = ("provenance",)
-) -> Table:
-    """Every scalar of a JSON mapping as a (key, value) row."""
-    return Table(
-        header=("key", "value"),
-        rows=tuple((k, fmt(v)) for k, v in flatten(obj, skip=skip)),
-        caption=caption,
-    )
-
-
 def find_stderr(obj: Mapping[str, Any], name: str) -> Any:
     """Standard error recorded beside ``name`` in a JSON mapping, or None.
 

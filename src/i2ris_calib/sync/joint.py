@@ -64,7 +64,7 @@ REST_KEEP_S = 0.5
 
 
 @dataclass(frozen=True)
-class Block:
+class DirectionBlock:
     """One axis and motion direction over the axis's whole frame history.
 
     Attributes
@@ -128,7 +128,7 @@ def model_blocks(
     margin_s: float,
     fit_config,
     min_range_counts: float,
-) -> list[Block]:
+) -> list[DirectionBlock]:
     """Motion-direction blocks of each moving axis, each over the axis's whole history.
 
     Per axis ONE sequence of frames: every frame whose mapped time stays inside the
@@ -161,7 +161,7 @@ def model_blocks(
 
     Returns
     -------
-    list of Block
+    list of DirectionBlock
     """
     lo, hi = log.time_range()
     blocks = []
@@ -193,7 +193,9 @@ def model_blocks(
             if np.isfinite(theta).sum() < 16:
                 continue
             other_ch = other if coupled else None
-            block = Block(ds.name, s.channel, ds.direction, t, theta, ds.in_direction, bands)
+            block = DirectionBlock(
+                ds.name, s.channel, ds.direction, t, theta, ds.in_direction, bands
+            )
             blocks.append(replace(block, kind=kind, other_channel=other_ch, why=choice.line))
     return blocks
 
@@ -248,7 +250,7 @@ class OffsetProfile:
         self.cold = seeds is None
         self.seeds = seeds or {}
 
-    def inputs(self, block: Block, offset_c_s: float, drift_ppm: float | None = None):
+    def inputs(self, block: DirectionBlock, offset_c_s: float, drift_ppm: float | None = None):
         """The direction's input (counts), shape (m,), of ``block`` at a candidate clock;
         for a coupled block the :class:`Signals` with the other motor's input too."""
         d = self.drift if drift_ppm is None else drift_ppm
@@ -258,7 +260,7 @@ class OffsetProfile:
             return v
         return Signals(v=v, v_other=self.log.interpolate(block.other_channel, tc))
 
-    def kind_of(self, block: Block) -> str:
+    def kind_of(self, block: DirectionBlock) -> str:
         """The model kind fitted to ``block``."""
         return block.kind or self.kind
 
@@ -806,7 +808,7 @@ def block_bias_cov(
     t_g, o_g, sd_g : ndarray, shape (G,)
         Cycle times (camera clock, s), offsets (s) and their sd (s).
     block : ndarray of int, shape (G,)
-        Block of each cycle.
+        DirectionBlock of each cycle.
     t_c, offset_c_s, drift_ppm : float
         The clock: offset at camera time ``t_c`` (s) and drift (ppm).
     fit_drift : bool
@@ -947,7 +949,7 @@ def profile_minimum(
     window: tuple[float, float, float, float],
     d0: float,
     extend: bool,
-) -> tuple[OffsetProfile, list[Block], float]:
+) -> tuple[OffsetProfile, list[DirectionBlock], float]:
     """The offset profile at drift ``d0``, its blocks and its minimum (offset at ``t_c``).
 
     The profile is scanned over ``window`` (:func:`search_window`; beyond it when
@@ -957,7 +959,7 @@ def profile_minimum(
     """
     o_x, halfwidth, step, margin = window
 
-    def blocks_at(offset: float) -> list[Block]:
+    def blocks_at(offset: float) -> list[DirectionBlock]:
         return model_blocks(
             series, log, offset, t_c, margin, fit_config, cfg.min_axis_range_counts,
         )  # fmt: skip
@@ -1003,7 +1005,7 @@ class DriftRounds:
 
 def drift_by_rounds(
     profile: OffsetProfile,
-    blocks: list[Block],
+    blocks: list[DirectionBlock],
     log: EncoderLog,
     cfg: SyncConfig,
     fit_config,
@@ -1093,7 +1095,7 @@ def clock_covariance(sd_c: float, drift_sd: float, t_c: float) -> np.ndarray:
 
 def model_evidence(
     profile: OffsetProfile,
-    blocks: list[Block],
+    blocks: list[DirectionBlock],
     cfg: SyncConfig,
     t_c: float,
     o_x: float,

@@ -2,7 +2,8 @@
 
 Run: ``NUMBA_NUM_THREADS=1 python benchmarks/bench_speed.py`` (``--repeats N``: timed
 runs per figure, the median printed, default 3; ``--only fit|diagnose``; ``--cases``
-a comma list of split,signed,coupled).
+a comma list of split,signed,coupled; ``--draws K``: K recordings per case, from
+the case's own seed up; default 1).
 
 Three recordings of 50,000 samples, each fitted by the default path (the model choice
 of :func:`~i2ris_calib.fitting.pipeline.choose_model` and its kinds in fitting order,
@@ -27,6 +28,7 @@ after a change of the fitter.
 from __future__ import annotations
 
 import argparse
+import inspect
 import os
 import time
 
@@ -154,6 +156,10 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--only", choices=("fit", "diagnose"))
     ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument(
+        "--draws", type=int, default=1,
+        help="recordings per case: the case's own seed and the next ones (default 1)",
+    )  # fmt: skip
     args = ap.parse_args()
     config = FitConfig()
     # compile the kernels (and warm the caches) on small recordings first
@@ -164,12 +170,14 @@ def main() -> None:
             done[k] = fit_dataset(k, ds[0], config, done)
     fits_ok = diag_ok = True
     for name in args.cases.split(","):
-        (d, *_), choice = datasets_and_choice(CASES[name](), config)
-        print(f"# {name}: {choice.line}", flush=True)
-        if args.only != "diagnose":
-            fits_ok &= bench_fit(name, d, choice, config, args.repeats)
-        if args.only != "fit":
-            diag_ok &= bench_diagnose(name, d, config, args.repeats)
+        seed0 = inspect.signature(CASES[name]).parameters["seed"].default
+        for seed in range(seed0, seed0 + max(args.draws, 1)):
+            (d, *_), choice = datasets_and_choice(CASES[name](seed=seed), config)
+            print(f"# {name} (seed {seed}): {choice.line}", flush=True)
+            if args.only != "diagnose":
+                fits_ok &= bench_fit(name, d, choice, config, args.repeats)
+            if args.only != "fit":
+                diag_ok &= bench_diagnose(name, d, config, args.repeats)
     if args.only != "diagnose":
         print(f"fit targets (each <= {FIT_TARGET_S:.0f} s):", "met" if fits_ok else "MISSED")
     if args.only != "fit":

@@ -104,6 +104,37 @@ def test_into_bounds_is_inside_and_never_worse_than_clipping():
     np.testing.assert_array_equal(start, np.clip(full, search.lower, search.upper))
 
 
+def test_into_bounds_holds_what_the_held_lm_pushes_out(monkeypatch):
+    """When the held LM pushes another parameter out of its bounds, that one is held at
+    its bound too and the rest refitted: the start is inside and no worse than clipping."""
+    m = _coupled()
+    s = _signals(seed=1)
+    theta = m.evaluate(s, m.values) + np.random.default_rng(2).normal(0, 0.1, s.v.size)
+    search = _search(m, s, theta)
+    full = m.values.copy()
+    i, j = m.names.index("sigma_cp"), m.names.index("sigma_cn")
+    full[i] = -0.8
+    real, runs = F._lsq, []
+
+    def lsq(counter, x0, free, *args):
+        runs.append(set(free.tolist()))
+        end, res = real(counter, x0, free, *args)
+        if len(runs) == 1:  # the first held run pushes sigma_cn out
+            end = end.copy()
+            end[j] = -0.5
+        return end, res
+
+    monkeypatch.setattr(F, "_lsq", lsq)
+    monkeypatch.setattr(F, "CLIP_COST_RATIO", 0.0)  # the held LM runs whatever clipping costs
+    start = F._into_bounds(search, full, [i], 50)
+    assert len(runs) == 2
+    assert i not in runs[0] and j in runs[0]
+    assert i not in runs[1] and j not in runs[1]
+    assert not search.outside(start)
+    c = search.counter
+    assert c.cost(start) <= c.cost(np.clip(full, search.lower, search.upper))
+
+
 def test_loss_samples_and_start_vectors():
     theta = np.array([1.0, np.nan, 2.0, 3.0, 4.0])
     hold, used = F._loss_samples(

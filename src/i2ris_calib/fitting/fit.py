@@ -1398,6 +1398,9 @@ def _bounded_polish(search: _Search, x0: np.ndarray, max_nfev):
 #: (:func:`_into_bounds`); measured ratios: 1.1-1.7 on GPI, EGPI_C and the two-tendon
 #: GPI (clipping alone is the better trf start there), 275 on the coupled one.
 CLIP_COST_RATIO = 2.0
+#: Largest number of held LM runs in :func:`_into_bounds` (each holds the parameters the
+#: one before pushed out of their bounds).
+INTO_BOUNDS_ROUNDS = 3
 
 
 def _into_bounds(search: _Search, full: np.ndarray, left: list[int], max_nfev) -> np.ndarray:
@@ -1411,14 +1414,30 @@ def _into_bounds(search: _Search, full: np.ndarray, left: list[int], max_nfev) -
     cost x275, and trf took ~100 iterations, each with an SVD of the Jacobian, back); the
     held LM brings it back in fewer, cheaper iterations, so the bounded refit starts
     near its end. The refit is the same trf search from a point no worse than the
-    clipped one.
+    clipped one. When the held LM pushes other parameters out of their bounds, they are
+    held at those bounds too and the rest refitted from there, up to
+    :data:`INTO_BOUNDS_ROUNDS` LM runs (measured on a 50,000-sample coupled recording:
+    the coupling's ``sigma_cn`` and ``r1_cn`` left with the first three held, the
+    bounded refit then fell back to trf from the clipped point: 7.4 -> 5.7 s, the same
+    cost to 1e-4). A model with a profiled flag point takes one run (its bounded refit
+    is trf from here; measured on the continuous EGPI: a start after three runs led trf
+    to a 2 % higher RMSE).
     """
     clipped = np.clip(full, search.lower, search.upper)
-    others = np.array([i for i in search.lsq_free if i not in left], dtype=int)
     c = search.counter
-    if others.size == 0 or not c.cost(clipped) > CLIP_COST_RATIO * c.cost(full):
+    if not c.cost(clipped) > CLIP_COST_RATIO * c.cost(full):
         return clipped
-    held, _ = _lsq(c, clipped, others, search.lower, search.upper, "lm", max_nfev, search.ftol)
+    held, at = clipped, list(left)
+    for _ in range(1 if search.pidx else INTO_BOUNDS_ROUNDS):
+        others = np.array([i for i in search.lsq_free if i not in at], dtype=int)
+        if others.size == 0:
+            return clipped
+        held, _ = _lsq(c, held, others, search.lower, search.upper, "lm", max_nfev, search.ftol)
+        escaped = search.outside(held)
+        if not escaped:
+            break
+        at += escaped  # held at the bounds they crossed, the rest refitted from there
+        held = np.clip(held, search.lower, search.upper)
     if search.outside(held) or not c.cost(held) <= c.cost(clipped):
         return clipped
     return held

@@ -10,7 +10,7 @@ import numpy as np
 from i2ris_calib.fitting import fit as F
 from i2ris_calib.hysteresis.coupled import coupled_two_tendon_model
 from i2ris_calib.hysteresis.model import Signals
-from i2ris_calib.hysteresis.models import gpi_model
+from i2ris_calib.hysteresis.models import continuous_egpi_model, gpi_model
 from i2ris_calib.hysteresis.two_tendon import two_tendon_gpi_model
 
 
@@ -133,6 +133,25 @@ def test_into_bounds_holds_what_the_held_lm_pushes_out(monkeypatch):
     assert not search.outside(start)
     c = search.counter
     assert c.cost(start) <= c.cost(np.clip(full, search.lower, search.upper))
+
+
+def test_into_bounds_of_a_flag_point_model_is_the_clipped_point(monkeypatch):
+    """A model with a profiled flag point (the continuous EGPI) starts its bounded refit
+    (trf) at the clipped point: no held LM, whatever clipping costs."""
+    m = continuous_egpi_model()
+    s = Signals(v=np.abs(_signals(seed=3, other=False).v))
+    theta = m.evaluate(s, m.values) + np.random.default_rng(4).normal(0, 0.1, s.v.size)
+    search = _search(m, s, theta)
+    assert search.pidx
+    full = m.values.copy()
+    i = m.names.index("sigma")
+    full[i] = -0.5
+    runs = []
+    monkeypatch.setattr(F, "_lsq", lambda *a: runs.append(a) or (a[1], None))
+    monkeypatch.setattr(F, "CLIP_COST_RATIO", 0.0)
+    start = F._into_bounds(search, full, search.outside(full), 50)
+    assert not runs
+    np.testing.assert_array_equal(start, np.clip(full, search.lower, search.upper))
 
 
 def test_loss_samples_and_start_vectors():

@@ -93,7 +93,7 @@ class MarkdownFragment:
     images: dict[str, tuple[str, bytes]] = field(default_factory=dict)
 
 
-Block = Paragraph | Note | Verdict | Table | Figure | Code | MarkdownFragment
+DocBlock = Paragraph | Note | Verdict | Table | Figure | Code | MarkdownFragment
 
 
 @dataclass(frozen=True)
@@ -102,7 +102,7 @@ class Section:
 
     anchor: str
     title: str
-    blocks: tuple[Block, ...] = ()
+    blocks: tuple[DocBlock, ...] = ()
     subsections: tuple[Section, ...] = ()
 
 

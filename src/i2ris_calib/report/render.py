@@ -20,8 +20,8 @@ from string import Template
 from markdown_it import MarkdownIt
 
 from i2ris_calib.report.document import (
-    Block,
     Code,
+    DocBlock,
     Document,
     Figure,
     MarkdownFragment,
@@ -96,7 +96,7 @@ def _html_section(sec: Section, level: int) -> str:
     return "\n".join(parts)
 
 
-def _html_block(b: Block) -> str:
+def _html_block(b: DocBlock) -> str:
     e = html.escape
     if isinstance(b, Paragraph):
         return f"<p>{e(b.text)}</p>"
@@ -243,7 +243,7 @@ def _figure_file(name: str, png: bytes, fdir: str, files: dict[str, bytes]) -> s
     return path
 
 
-def _md_block(b: Block, fdir: str, files: dict[str, bytes]) -> list[str]:
+def _md_block(b: DocBlock, fdir: str, files: dict[str, bytes]) -> list[str]:
     if isinstance(b, Paragraph):
         return [_md_text(b.text)]
     if isinstance(b, Note):

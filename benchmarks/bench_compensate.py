@@ -44,6 +44,10 @@ Also printed (no target): case 2 with a motor rate limit of 5000 counts/s.
    through every row of COMMANDS.csv from a state the tool does not know (virgin rest
    at 0 counts, and after the recording's own history then back to 0): tracking RMSE
    on the target's rows per axis <= 1.5 x the recording's noise, from both.
+7. The fit's floor (no target; ``--floor-draws N``, default 0, ``--floor-only``):
+   whether check 5's excess over the ideal inverse without a rate limit is the fit's
+   statistical error (its standard error on the compensator's commands), over N
+   recordings of the EGPI plant; see :func:`fit_floor`.
 """
 
 from __future__ import annotations
@@ -372,6 +376,62 @@ def safety(config: FitConfig, n_targets: int) -> bool:
     return ok
 
 
+def fit_floor(config: FitConfig, draws: int, n_targets: int = 50) -> None:
+    """Check 7 (no target): is check 5's excess over the ideal inverse, without a rate
+    limit on the EGPI plant, the fit's own statistical error?
+
+    ``draws`` recordings of the true EGPI (seeds 3000, 3001, ...: trajectory and noise
+    drawn anew), each fitted (the best held-out kind) and ``n_targets`` random smooth
+    targets compensated without a rate limit. Per target: the true plant against the
+    fitted model on the compensator's commands (``e_model``, the fit's actual error
+    there), the fit's standard error of its output on the same commands
+    (``FitResult.eval_uncertainty``, ``e_band``: the error the recording's noise
+    implies, the Cramér-Rao scale; it leaves out the profiled flag point's share),
+    the tracking RMSE on the true plant and the ideal inverse's. Printed: RMS e_model
+    against RMS e_band (equal for a fit that extracts all the recording holds), the
+    tracking / ideal ratio, and ``sqrt(ideal^2 + e_band^2) / ideal``: what a
+    compensator fitted from such a recording can reach on average.
+    """
+    print(f"\n== 7. the fit's floor: {draws} EGPI recordings x {n_targets} targets, no rate limit")
+    rng = np.random.default_rng(11)
+    targets = [smooth_target(rng) for _ in range(n_targets)]
+    sq = dict(model=[], band=[], track=[], ideal=[])
+    for seed in range(3000, 3000 + draws):
+        _, plant, data = recording(seed, kind="egpi")
+        fits = fit_dataset_all(data, config, KINDS)
+        kind = min(KINDS, key=lambda k: fits[k].holdout_metrics.rmse_deg)
+        hi = float(np.max(data.v))
+        row = dict(model=[], band=[], track=[], ideal=[])
+        for t, target in targets:
+            kw = dict(v_limits=(0.0, hi), max_rate=None, v_initial=0.0)
+            r = compensate(fits[kind].model, target, t, **kw)
+            ideal = compensate(plant, target, t, **kw)
+            u = np.concatenate((r.entry_commands, r.commands))
+            tt = np.concatenate((r.entry_t_s, t))
+            k0 = r.entry_commands.size
+            y = forward(plant, u, tt, 0.0)[k0:]
+            row["model"].append(rmse(y - r.predicted_deg))
+            row["band"].append(rmse(fits[kind].eval_uncertainty(u)[k0:]))
+            row["track"].append(rmse(y - target))
+            row["ideal"].append(rmse(ideal.predicted_deg - target))
+        ms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in row.items()}
+        print(
+            f"seed {seed}: {kind:>6}  fit error on the commands {ms['model']:.4f} deg, its "
+            f"standard error {ms['band']:.4f} deg; tracking {ms['track']:.4f} vs ideal "
+            f"{ms['ideal']:.4f} deg ({ms['track'] / ms['ideal']:.2f}x)"
+        )
+        for k, v in row.items():
+            sq[k] += v
+    ms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in sq.items()}
+    floor = float(np.sqrt(ms["ideal"] ** 2 + ms["band"] ** 2))
+    print(
+        f"all: fit error {ms['model']:.4f} deg vs standard error {ms['band']:.4f} deg "
+        f"({ms['model'] / ms['band']:.2f}x); tracking {ms['track'] / ms['ideal']:.2f}x ideal; "
+        f"the recording's floor sqrt(ideal^2 + standard error^2) = {floor / ms['ideal']:.2f}x "
+        f"ideal (noise {NOISE_DEG} deg, {N_SAMPLES} samples)"
+    )
+
+
 def two_axis(seeds) -> bool:
     import contextlib
     import io
@@ -488,11 +548,16 @@ def main() -> None:
     ap.add_argument("--safety-only", action="store_true", help="run check 5 alone")
     ap.add_argument("--two-axis-draws", type=int, default=3, help="draws of check 6 (0: skip)")
     ap.add_argument("--two-axis-only", action="store_true", help="run check 6 alone")
+    ap.add_argument("--floor-draws", type=int, default=0, help="recordings of check 7 (0: skip)")
+    ap.add_argument("--floor-only", action="store_true", help="run check 7 alone")
     args = ap.parse_args()
     config = FitConfig()
     seeds = range(1, 1 + args.two_axis_draws)
     if args.two_axis_only:
         print(f"\noverall: {verdict(two_axis(seeds))}")
+        return
+    if args.floor_only:
+        fit_floor(config, max(args.floor_draws, 1))
         return
     if args.safety_only:
         print(f"\noverall: {verdict(safety(config, args.safety_targets))}")
@@ -505,6 +570,8 @@ def main() -> None:
         oks.append(safety(config, args.safety_targets))
     if args.two_axis_draws > 0:
         oks.append(two_axis(seeds))
+    if args.floor_draws > 0:
+        fit_floor(config, args.floor_draws)
     print(f"\noverall: {verdict(all(oks))}")
 
 

@@ -165,3 +165,37 @@ def test_loss_samples_and_start_vectors():
     (x0,) = F._start_vectors(m, None)
     np.testing.assert_array_equal(x0, m.values)
     assert F._start_vectors(m, [[1] * 17])[0].dtype == float
+
+
+def test_bounded_polish_holds_what_the_held_lm_pushes_out(monkeypatch):
+    """When the active-set LM of the bounded polish pushes a parameter out of its
+    bounds, that one is held at the bound it crossed and the rest refitted from there
+    by LM (not trf from the start again); a trf that may follow (a held parameter
+    pulled inward) starts at that held end."""
+    m = _coupled()
+    s = _signals(seed=1)
+    theta = m.evaluate(s, m.values) + np.random.default_rng(2).normal(0, 0.1, s.v.size)
+    search = _search(m, s, theta)
+    x0 = m.values.copy()
+    assert not search.outside(x0)
+    j = m.names.index("sigma_cn")
+    real, runs = F._lsq, []
+
+    def lsq(counter, start, free, lower, upper, method, *args):
+        runs.append((method, set(free.tolist()), start.copy()))
+        end, res = real(counter, start, free, lower, upper, method, *args)
+        if len(runs) == 1:  # the first held run pushes sigma_cn out
+            end = end.copy()
+            end[j] = -0.5
+        return end, res
+
+    monkeypatch.setattr(F, "_lsq", lsq)
+    (cost, end, _), how = F._bounded_polish(search, x0, 50)
+    assert runs[0][0] == "lm" and j in runs[0][1]
+    assert runs[1][0] == "lm" and j not in runs[1][1]
+    assert runs[1][2][j] == search.lower[j]  # held at the bound it crossed
+    assert all(not np.array_equal(r[2], x0) for r in runs[2:])  # no trf from x0
+    assert not search.outside(end)
+    assert cost <= search.counter.cost(x0)
+    if how != "trf":
+        assert "sigma_cn" in how

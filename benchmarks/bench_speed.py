@@ -2,7 +2,7 @@
 
 Run: ``NUMBA_NUM_THREADS=1 python benchmarks/bench_speed.py`` (``--repeats N``: timed
 runs per figure, the median printed, default 3; ``--only fit|diagnose``; ``--cases``
-a comma list of split,signed,coupled; ``--draws K``: K recordings per case, from
+a comma list of split,signed,coupled,piezo; ``--draws K``: K recordings per case, from
 the case's own seed up; default 1).
 
 Three recordings of 50,000 samples, each fitted by the default path (the model choice
@@ -16,7 +16,10 @@ before and passed in, as ``fit`` does):
 * ``signed``: a two-tendon axis driven through zero at 30 Hz, starting mid-loop
   (bench_two_tendon's draw): GPI and the two-tendon GPI over the signed input;
 * ``coupled``: the pitch axis of a two-motor recording (bench_two_motor's simulator,
-  30 Hz): GPI, the two-tendon GPI and the coupled two-tendon GPI.
+  30 Hz): GPI, the two-tendon GPI and the coupled two-tendon GPI;
+* ``piezo``: a piezo-like actuator driven through zero at 200 Hz (bench_piezo's
+  Bouc-Wen and elasto-slip generators, a 1 Hz sine, steps and holds, starting
+  mid-loop): GPI, the two-tendon GPI and the one-loop kinds over the signed input.
 
 ``diagnose`` (default settings, ``diagnose_from_starts``: its starting fits on the
 whole recording included) on each. Targets: every fit <= 5 s, every diagnose <= 15 s
@@ -51,6 +54,7 @@ from i2ris_calib.hysteresis.presets import (  # noqa: E402
 )
 from i2ris_calib.hysteresis.registry import model_for_kind  # noqa: E402
 from i2ris_calib.simulation import trajectory as tj  # noqa: E402
+from i2ris_calib.simulation.piezo import bouc_wen_actuator, maxwell_slip_actuator  # noqa: E402
 from i2ris_calib.simulation.presets import preset_config  # noqa: E402
 from i2ris_calib.simulation.truth import whole_history_angle  # noqa: E402
 from i2ris_calib.simulation.two_motor import simulate_two_motor  # noqa: E402
@@ -94,7 +98,36 @@ def coupled_case(n: int = N, seed: int = 200):
     return rec.t_s, rec.enc_pitch, rec.pitch_deg, rec.enc_yaw, rec.yaw_deg
 
 
-CASES = {"split": split_case, "signed": signed_case, "coupled": coupled_case}
+def piezo_case(n: int = N, seed: int = 300):
+    """A piezo-like actuator driven through zero at 200 Hz (bench_piezo's generators,
+    none of the project's forms: the Bouc-Wen actuator for even seeds, the elasto-slip
+    bank for odd ones): a 1 Hz sine of amplitude 120-150 (60 % of the samples), steps
+    between random levels held 0.4-1.2 s (25 %), the sine again; noise U(0.03, 0.08)
+    um; the recording starts mid-loop (after a 2.3 s burn-in)."""
+    rng = np.random.default_rng(seed)
+    burn = 460
+    k = np.arange(n + burn)
+    u = rng.uniform(120.0, 150.0) * np.sin(2.0 * np.pi * k / 200.0 + rng.uniform(0, 2 * np.pi))
+    i, end = int(0.6 * k.size), int(0.85 * k.size)
+    while i < end:
+        hold = int(rng.uniform(0.4, 1.2) * 200.0)
+        u[i : min(i + hold, end)] = rng.uniform(-150.0, 150.0)
+        i += hold
+    u = np.round(u, 2)
+    d = rng.uniform(0.08, 0.12)
+    if seed % 2 == 0:
+        bg, frac = rng.uniform(0.01, 0.03), rng.uniform(0.4, 0.8)
+        width = rng.uniform(0.08, 0.15) * d * 150.0
+        y = bouc_wen_actuator(u, d, width * bg, frac * bg, (1.0 - frac) * bg)
+    else:
+        m = int(rng.integers(4, 9))
+        r = np.sort(np.exp(rng.uniform(np.log(5.0), np.log(120.0), m)))
+        y = maxwell_slip_actuator(u, d, rng.dirichlet(np.ones(m)) * rng.uniform(0.15, 0.35) * d, r)
+    y = y[burn:] + rng.normal(0.0, rng.uniform(0.03, 0.08), n)
+    return k[:n] / 200.0, u[burn:], y, None, None
+
+
+CASES = {"split": split_case, "signed": signed_case, "coupled": coupled_case, "piezo": piezo_case}
 
 
 def datasets_and_choice(case, config: FitConfig):

@@ -86,13 +86,28 @@ def _line(v: np.ndarray, theta: np.ndarray, sel: np.ndarray, min_samples: int = 
     sel = sel & np.isfinite(theta)
     if sel.sum() < min_samples or np.ptp(v[sel]) <= 0:
         return None
-    slope, intercept = np.polyfit(v[sel], theta[sel], 1)
+    slope, intercept = _least_squares_line(v[sel], theta[sel])
     res = theta[sel] - (slope * v[sel] + intercept)
     scale = 1.4826 * np.median(np.abs(res - np.median(res)))
     keep = np.abs(res) <= 3.0 * scale if scale > 0 else np.ones(res.size, bool)
     if min_samples <= keep.sum() < res.size and np.ptp(v[sel][keep]) > 0:
-        slope, intercept = np.polyfit(v[sel][keep], theta[sel][keep], 1)
+        slope, intercept = _least_squares_line(v[sel][keep], theta[sel][keep])
     return float(slope), float(intercept)
+
+
+def _least_squares_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """(slope, intercept) of the least-squares line y = slope x + intercept.
+
+    Solved about the mean of ``x``, so inputs far from zero with a small spread (a
+    short stretch at 5,000 counts) are well conditioned, unlike a Vandermonde fit
+    (``np.polyfit`` warned there). ``x`` must not be constant.
+    """
+    x = np.asarray(x, dtype=float)
+    y = np.asarray(y, dtype=float)
+    xm, ym = float(x.mean()), float(y.mean())
+    dx = x - xm
+    slope = float(dx @ (y - ym)) / float(dx @ dx)
+    return slope, ym - slope * xm
 
 
 def _trimmed_mean(x: np.ndarray) -> float:

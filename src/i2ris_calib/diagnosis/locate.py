@@ -124,8 +124,10 @@ def _input_cells(res, v, lab, ok, total: float, n_bins: int) -> list[dict]:
 
 
 def _time_windows(res, t, ok, total: float, n_bins: int) -> list[dict]:
-    """The residual's cells in ``n_bins`` equal time windows (s)."""
-    tw = np.linspace(t[0], t[-1], n_bins + 1) if t.size else []
+    """The residual's cells in ``n_bins`` equal time windows (s) over the counted
+    samples (``ok``; not a pre-history or burn-in before them)."""
+    span = t[ok] if np.any(ok) else t
+    tw = np.linspace(span[0], span[-1], n_bins + 1) if span.size else []
     windows = []
     for lo, hi in zip(tw[:-1], tw[1:], strict=False):
         c = _cell(res[ok], (t[ok] >= lo) & (t[ok] <= hi), total)

@@ -50,7 +50,12 @@ from i2ris_calib.data.dataset import Dataset, checked_dataset, other_axis
 from i2ris_calib.diagnosis.blas import single_threaded_blas
 from i2ris_calib.diagnosis.candidates import fit_candidate, refit_globally
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.data import SearchData, check_dataset, search_data
+from i2ris_calib.diagnosis.data import (
+    SearchData,
+    check_dataset,
+    search_data,
+    start_rule,
+)
 from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of, model_values
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
 from i2ris_calib.diagnosis.refit import refit
@@ -75,6 +80,7 @@ from i2ris_calib.diagnosis.stats import (
 )
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
+from i2ris_calib.fitting.fit import InitialState
 from i2ris_calib.fitting.pipeline import (
     ModelChoice,
     checked_fit_config,
@@ -369,6 +375,7 @@ def diagnose(
     data: Dataset,
     config: DiagnosisConfig | None = None,
     progress=None,
+    initial_state: InitialState | None = None,
 ) -> Diagnosis:
     """Run locate -> name -> add until no candidate effect helps.
 
@@ -387,6 +394,12 @@ def diagnose(
     config : DiagnosisConfig, optional
     progress : callable, optional
         ``progress(text)`` called before each candidate fit (for a progress bar).
+    initial_state : InitialState, optional
+        The state the fit estimated at the first sample of a recording that does not
+        start at rest (:attr:`FitResult.initial_state`): every model runs after its
+        pre-history. Without it such a recording's burn-in (the samples until the
+        input has reached both ends of its range) is left out of the loss. Ignored
+        on a recording that starts at rest. ``notes`` says which.
 
     Returns
     -------
@@ -404,8 +417,11 @@ def diagnose(
     checked_dataset(func, "data", data)
     config = _diagnosis_config(func, config)
     check_callable(func, "progress", progress)
+    if initial_state is not None:
+        check_instance(func, "initial_state", initial_state, InitialState,
+                       hint="the fit's FitResult.initial_state, or None")  # fmt: skip
     with single_threaded_blas():
-        return _diagnose(start, data, config, progress)
+        return _diagnose(start, data, config, progress, initial_state)
 
 
 def _diagnosis_config(func: str, config: object) -> DiagnosisConfig:
@@ -418,15 +434,16 @@ def _diagnosis_config(func: str, config: object) -> DiagnosisConfig:
     )  # fmt: skip
 
 
-def _diagnose(start, data: Dataset, cfg, progress) -> Diagnosis:
-    d, hold_full, step = search_data(data, cfg)
+def _diagnose(start, data: Dataset, cfg, progress, initial_state=None) -> Diagnosis:
+    d, hold_full, step = search_data(data, cfg, initial_state)
     coupling_note = _coupling_note(data)
     names = _candidate_names(cfg, coupling_note)
     current, cur_m = _polished(start, d, cfg)
     baseline, start_polished = cur_m, current
     steps: list[Step] = []
     last: tuple[Candidate, ...] = ()
-    notes: list[str] = []
+    start_note = start_rule(data, initial_state)[1]
+    notes: list[str] = [start_note] if start_note else []
     one_speed = speed_follows_level(d.signals, d.fit | d.hold)
     confounded: list[Candidate] = []
     for _ in range(cfg.max_steps):
@@ -596,21 +613,31 @@ def diagnose_from_starts(
             f"{', '.join(repr((k,)) for k in DIAGNOSIS_STARTS)} or both"
         )
     check_callable(func, "progress", progress)
-    paths = {}
     for kind in starts:
         if kind not in fitted:
             if progress:
                 progress(f"fitting {kind}")
             with single_threaded_blas():
                 fitted[kind] = fit_dataset(kind, data, fit_config, dict(fitted))
-        base = fitted[kind].model
+    state = recording_start_state([fitted[k] for k in starts])
+    paths = {}
+    for kind in starts:
         paths[kind] = diagnose(
-            base,
+            fitted[kind].model,
             data,
             cfg,
             progress=(lambda x, k=kind: progress(f"{k}: {x}")) if progress else None,
+            initial_state=state,
         )
-    return _reconciled(paths, picked, data, cfg)
+    return _reconciled(paths, picked, data, cfg, state)
+
+
+def recording_start_state(fits) -> InitialState | None:
+    """The start state of the recording for every path of a diagnosis: the one the
+    best-fitting start (lowest fitted RMSE) estimated (None: it starts at rest). One
+    state for all paths, so their final models are compared on the same samples."""
+    best = min(fits, key=lambda r: r.metrics.rmse_deg)
+    return best.initial_state
 
 
 def _default_starts(data: Dataset, fit_config, fitted: dict, progress) -> tuple:
@@ -638,7 +665,7 @@ def _default_starts(data: Dataset, fit_config, fitted: dict, progress) -> tuple:
     return (choice.main,), picked
 
 
-def _reconciled(paths: dict, picked: str, data: Dataset, cfg) -> AutoDiagnosis:
+def _reconciled(paths: dict, picked: str, data: Dataset, cfg, state=None) -> AutoDiagnosis:
     """One answer from the diagnoses of each start (``paths``: kind -> Diagnosis): the
     path whose final model has the lower held-out RMSE, the other path's answer
     excluded or not by the held-out z-test (p < ``cfg.alpha``)."""
@@ -656,7 +683,7 @@ def _reconciled(paths: dict, picked: str, data: Dataset, cfg) -> AutoDiagnosis:
         return AutoDiagnosis(best, diag, paths, True, float("nan"), f"{how}: {said(best)}")
     other = order[1]
     with single_threaded_blas():
-        d, _, _ = search_data(data, cfg)
+        d, _, _ = search_data(data, cfg, state)
         a, b = paths[best].final_model, paths[other].final_model
         ma = score_of(a, model_values(a), d, n_free_of(a))
         mb = score_of(b, model_values(b), d, n_free_of(b))

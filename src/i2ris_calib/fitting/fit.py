@@ -140,6 +140,65 @@ def starts_at_rest(v: np.ndarray) -> bool:
     return abs(v0) <= tol or v0 - float(v.min()) <= tol or float(v.max()) - v0 <= tol
 
 
+def prehistory_step(v: np.ndarray) -> float:
+    """Input step of the synthetic pre-history (:class:`InitialState`): the median
+    non-zero step of ``v`` (its typical speed), or 1 % of its range."""
+    v = np.asarray(v, dtype=float)
+    steps = np.abs(np.diff(v))
+    moving = steps[steps > 0]
+    return float(np.median(moving)) if moving.size else float(np.ptp(v)) / 100
+
+
+def _ramped(v: np.ndarray, u: float, step: float) -> tuple[np.ndarray, int]:
+    """(the input ``v`` after a ramp from ``u`` in steps of about ``step``, read-only;
+    the ramp's length)."""
+    n_pre = int(np.clip(np.ceil(abs(v[0] - u) / step), 2, MAX_PREHISTORY))
+    vv = np.concatenate([np.linspace(u, v[0], n_pre + 1)[:-1], v])
+    vv.flags.writeable = False  # the models keep what they derive from a frozen input
+    return vv, n_pre
+
+
+def prehistory_signals(
+    signals: Signals, v_from: float, step: float | None = None
+) -> tuple[Signals, int]:
+    """(``signals`` with the synthetic pre-history of :class:`InitialState` prepended,
+    its length): the input ramps from ``v_from`` to ``v[0]`` in steps of ``step``
+    (default :func:`prehistory_step` of ``v``); the times run back from ``t[0]`` at the
+    median interval; the other motor's input and angle and every per-sample extra
+    hold their first value. A model run on the result and cut by the length starts
+    in the state the fit estimated (:meth:`FitResult.predict` does this)."""
+    v = np.asarray(signals.v, dtype=float)
+    vv, n_pre = _ramped(v, float(v_from), prehistory_step(v) if step is None else step)
+
+    def pad(a):
+        a = np.asarray(a)
+        out = np.concatenate([np.full(n_pre, a[0], dtype=a.dtype), a])
+        out.flags.writeable = False  # as the input: what the models derive is kept
+        return out
+
+    t = None
+    if signals.t_s is not None:
+        t0 = np.asarray(signals.t_s, dtype=float)
+        dt = float(np.median(np.diff(t0))) if t0.size > 1 else 1.0
+        t = np.concatenate([t0[0] - dt * np.arange(n_pre, 0, -1), t0])
+    extra = {
+        k: pad(a) if isinstance(a, np.ndarray) and a.shape == v.shape else a
+        for k, a in signals.extra.items()
+    }
+    other = signals.v_other
+    angle = signals.theta_other_deg
+    return (
+        Signals(
+            v=vv,
+            t_s=t,
+            v_other=None if other is None else pad(other),
+            theta_other_deg=None if angle is None else pad(angle),
+            extra=extra,
+        ),
+        n_pre,
+    )
+
+
 class _FromLevel:
     """``model`` run after a synthetic pre-history: the input ramps from the level
     ``v_from`` (the last parameter; operators relaxed there) to ``v[0]``; the
@@ -158,9 +217,7 @@ class _FromLevel:
             Parameter(self.PARAM, float(v[0]), lo, hi, unit="input",
                       doc="level the input came from before the recording"),
         )  # fmt: skip
-        steps = np.abs(np.diff(v))
-        moving = steps[steps > 0]
-        self.step = float(np.median(moving)) if moving.size else float(np.ptp(v)) / 100
+        self.step = prehistory_step(v)
         self.jac_inner = _analytic_jacobian(model, "jacobian")
         self.families_inner = _analytic_jacobian(model, "flag_point_families")
         self._cache: dict = {}
@@ -170,36 +227,7 @@ class _FromLevel:
         key = (id(signals.v), float(u))
         if key in self._cache:
             return self._cache[key]
-        v = np.asarray(signals.v, dtype=float)
-        vv, n_pre = self.ramped(v, u)
-
-        def pad(a):
-            a = np.asarray(a)
-            out = np.concatenate([np.full(n_pre, a[0], dtype=a.dtype), a])
-            out.flags.writeable = False  # as the input: what the models derive is kept
-            return out
-
-        t = None
-        if signals.t_s is not None:
-            t0 = np.asarray(signals.t_s, dtype=float)
-            dt = float(np.median(np.diff(t0))) if t0.size > 1 else 1.0
-            t = np.concatenate([t0[0] - dt * np.arange(n_pre, 0, -1), t0])
-        extra = {
-            k: pad(a) if isinstance(a, np.ndarray) and a.shape == v.shape else a
-            for k, a in signals.extra.items()
-        }
-        out = (
-            Signals(
-                v=vv,
-                t_s=t,
-                v_other=None if signals.v_other is None else pad(signals.v_other),
-                theta_other_deg=None
-                if signals.theta_other_deg is None
-                else pad(signals.theta_other_deg),
-                extra=extra,
-            ),
-            n_pre,
-        )
+        out = prehistory_signals(signals, u, self.step)
         if len(self._cache) > 4:
             self._cache.pop(next(iter(self._cache)))
         self._cache[key] = out
@@ -207,10 +235,7 @@ class _FromLevel:
 
     def ramped(self, v: np.ndarray, u: float) -> tuple[np.ndarray, int]:
         """(the input ``v`` after the ramp from ``u``, read-only; the ramp's length)."""
-        n_pre = int(np.clip(np.ceil(abs(v[0] - u) / self.step), 2, MAX_PREHISTORY))
-        vv = np.concatenate([np.linspace(u, v[0], n_pre + 1)[:-1], v])
-        vv.flags.writeable = False  # the models keep what they derive from a frozen input
-        return vv, n_pre
+        return _ramped(v, u, self.step)
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         sig, n_pre = self.prehistory(signals, float(values[-1]))

@@ -123,3 +123,17 @@ def test_diagnose_without_the_start_state_leaves_a_burn_in_out():
     assert list(diag.named_effects) == []
     assert any("left out of the loss" in n for n in diag.notes)
     assert diag.baseline.holdout_rmse_deg < 1.2 * sd
+
+
+def test_one_start_state_for_every_path_from_the_best_fit():
+    from types import SimpleNamespace
+
+    from i2ris_calib.diagnosis.workflow import recording_start_state
+
+    def fit(rmse, v_from):
+        state = None if v_from is None else InitialState(v_from, 10, 0.0, "")
+        return SimpleNamespace(metrics=SimpleNamespace(rmse_deg=rmse), initial_state=state)
+
+    assert recording_start_state([fit(0.3, 5.0), fit(0.2, 7.0)]).v_from == 7.0
+    assert recording_start_state([fit(float("nan"), 5.0), fit(0.4, 9.0)]).v_from == 9.0
+    assert recording_start_state([fit(0.1, None), fit(0.4, 9.0)]) is None

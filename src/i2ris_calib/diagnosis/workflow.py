@@ -636,8 +636,12 @@ def recording_start_state(fits) -> InitialState | None:
     """The start state of the recording for every path of a diagnosis: the one the
     best-fitting start (lowest fitted RMSE) estimated (None: it starts at rest). One
     state for all paths, so their final models are compared on the same samples."""
-    best = min(fits, key=lambda r: r.metrics.rmse_deg)
-    return best.initial_state
+
+    def rmse(r) -> float:
+        x = float(r.metrics.rmse_deg)
+        return x if np.isfinite(x) else float("inf")
+
+    return min(fits, key=rmse).initial_state
 
 
 def _default_starts(data: Dataset, fit_config, fitted: dict, progress) -> tuple:

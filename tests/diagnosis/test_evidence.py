@@ -107,6 +107,18 @@ def test_residual_analysis_of_a_series_shorter_than_the_largest_lag(n):
     assert concentration_sentences(a)
 
 
+def test_time_windows_cover_only_the_counted_samples():
+    # a pre-history (or burn-in) before the recording: NaN residual, times before 0
+    t = np.linspace(-5.0, 10.0, 1501)
+    v = 100.0 * np.sin(t)
+    res = np.where(t < 0.0, np.nan, 0.1 * np.sin(3.0 * t))
+    a = residual_analysis(res, Signals(v=v, t_s=t), loading_mask(v, 1.0))
+    windows = a["by_time"]
+    assert windows[0]["t_lo_s"] == pytest.approx(0.0, abs=0.01)
+    assert windows[-1]["t_hi_s"] == pytest.approx(10.0)
+    assert all(w["n"] > 0 for w in windows)
+
+
 def test_markdown_section_from_a_record():
     m = {"fit_rmse_deg": 0.2, "holdout_rmse_deg": 0.21, "bic": -10.0, "n_free": 12}
     ev = {

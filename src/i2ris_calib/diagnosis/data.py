@@ -181,7 +181,7 @@ def search_data(
     estimated pre-history (``initial_state``), prepended to the search signals with
     nothing counted there; without one its burn-in is left out of the loss.
     """
-    n_burn = start_rule(data, initial_state)[0]
+    n_burn, note = start_rule(data, initial_state)
     check_dataset(data, cfg, n_burn)
     theta_full = np.asarray(data.theta_deg, float)
     counted = np.arange(data.n_samples) >= n_burn
@@ -202,7 +202,7 @@ def search_data(
     units = holdout_units(dataset_cycles(data.v)[idx], hold)
     loading = loading_mask(data.v, data.bands.deadband)[idx]
     d = SearchData(sig, np.where(ok, th, 0.0), fit, hold, units, loading)
-    if initial_state is not None and start_rule(data, initial_state)[1]:
+    if initial_state is not None and note:
         d = _after_prehistory(d, initial_state.v_from)
     return d, hold_full, step
 

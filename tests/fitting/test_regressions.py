@@ -86,6 +86,18 @@ def test_not_a_minimum_is_flagged(rendered_yaw_plus, monkeypatch):
         full[1] += 20.0  # a2: loading envelope 20 deg too high, inside the bounds
         return full, res
 
+    real_search = fit_module._global_search
+
+    def worse_search(search, starts, max_nfev, steps, hops, spent=0.0):
+        # every polished end 20 deg too high too (the global search would otherwise
+        # find a point below the start through the bounded refit's clipping)
+        found = real_search(search, starts, max_nfev, steps, 0)
+        worse = found.best()[1].copy()
+        worse[1] += 20.0
+        found.polished = [(search.counter.cost(worse), worse, None, ())]
+        return found
+
     monkeypatch.setattr(fit_module, "_lsq", always_worse)
+    monkeypatch.setattr(fit_module, "_global_search", worse_search)
     res = fit_model(model, v, theta, starts=[x0])
     assert not res.converged and "NOT a minimum" in res.message

@@ -203,13 +203,18 @@ def search_data(
     loading = loading_mask(data.v, data.bands.deadband)[idx]
     d = SearchData(sig, np.where(ok, th, 0.0), fit, hold, units, loading)
     if initial_state is not None and note:
-        d = _after_prehistory(d, initial_state.v_from)
+        d = _after_prehistory(
+            d, initial_state.v_from, initial_state.cycle_samples, initial_state.v_turn
+        )
     return d, hold_full, step
 
 
-def _after_prehistory(d: SearchData, v_from: float) -> SearchData:
-    """``d`` with the pre-history from ``v_from`` prepended (nothing counted there)."""
-    sig, n_pre = prehistory_signals(d.signals, v_from)
+def _after_prehistory(
+    d: SearchData, v_from: float, cycle: int = 0, v_turn: float | None = None
+) -> SearchData:
+    """``d`` with the pre-history from ``v_turn`` via ``v_from`` (and the replayed
+    first ``cycle`` samples) prepended (nothing counted there)."""
+    sig, n_pre = prehistory_signals(d.signals, v_from, cycle=cycle, v_turn=v_turn)
 
     def pad(a: np.ndarray, value) -> np.ndarray:
         return np.concatenate([np.full(n_pre, value, dtype=a.dtype), a])

@@ -18,9 +18,16 @@ class FitConfig:
     method : str
         ``"lm"`` (unbounded Levenberg-Marquardt, as the paper) or ``"trf"`` (bounded).
     n_starts : int
-        Data-driven starts per EGPI fit (the first is the plain data-driven one).
+        Data-driven starts per EGPI fit (the first is the plain data-driven one); 0
+        (default): by the data's size (:func:`i2ris_calib.fitting.pipeline.search_starts`:
+        8 up to 5,000 fitted samples, fewer on longer recordings, at least 2).
     n_starts_gpi : int
-        Starts per GPI fit.
+        Starts per fit of the other kinds (GPI, two-tendon, coupled, Bouc-Wen); 0: as
+        ``n_starts``.
+    max_restarts : int
+        Most restarts from perturbations of the best end (basin hopping) while fewer
+        than two starts reached the best cost (docs/fit.md, "the global search"); 0:
+        a local search (only the best screened start polished, no restarts).
     seed : int
         Seed of the start variations.
     max_nfev : int
@@ -64,8 +71,9 @@ class FitConfig:
     """
 
     method: str = "lm"
-    n_starts: int = 2
-    n_starts_gpi: int = 2
+    n_starts: int = 0
+    n_starts_gpi: int = 0
+    max_restarts: int = 4
     seed: int = 0
     max_nfev: int = 300
     n_operators: int = 30
@@ -90,8 +98,10 @@ class FitConfig:
         """Raise ValueError on inconsistent settings."""
         if self.method not in _METHODS:
             raise ValueError(f"method '{self.method}' is not one of {', '.join(_METHODS)}")
-        if self.n_starts < 1 or self.n_starts_gpi < 1:
-            raise ValueError("n_starts and n_starts_gpi must be >= 1")
+        if self.n_starts < 0 or self.n_starts_gpi < 0:
+            raise ValueError("n_starts and n_starts_gpi must be >= 1, or 0 for the data's size")
+        if self.max_restarts < 0:
+            raise ValueError("max_restarts must be >= 0")
         if self.max_nfev < 10:
             raise ValueError("max_nfev must be >= 10")
         if self.n_operators < 1:

@@ -73,6 +73,115 @@ class FitNote:
     params: tuple[str, ...] = ()
 
 
+#: A next minimum within this relative difference of the best is named as a flat
+#: valley in the certificate's warning (about as good a fit).
+NEAR_MINIMUM = 0.01
+#: Two costs within this relative difference are the same minimum: a start whose
+#: polished end is within it of the best cost "reached the best" (the certificate).
+SAME_MINIMUM = 1e-3
+
+
+def _ratio_text(r: float) -> str:
+    """``r`` as "1.004x" / "12x": enough digits to tell it from 1."""
+    return f"{r:.4g}x" if r < 1.1 else f"{r:.3g}x"
+
+
+@dataclass(frozen=True)
+class SearchCertificate:
+    """How well the global search established its optimum, as data.
+
+    A least-squares cost over hysteresis parameters has several minima. The fitter
+    screens every start, polishes the lowest distinct ends on every fitted sample
+    and, while fewer than :data:`CERTIFIED_AT` of them agree on the best cost, restarts
+    from perturbations of the best end (basin hopping). The certificate says what that
+    search found: a best cost reached from several starts is a minimum the search
+    would find again; one reached once may have a lower neighbour nobody visited.
+
+    Attributes
+    ----------
+    starts : int
+        Start vectors screened (data-driven, spread, nested and given ones).
+    polished : int
+        Ends polished to convergence on every fitted sample (hops included).
+    at_best : int
+        Starts whose end lies within :data:`SAME_MINIMUM` (0.1 %) of the best cost:
+        polished ends, and screened ends already there (not polished again).
+    best_cost : float
+        The best cost (sum of squared residuals over the fitted samples, deg^2).
+    next_cost : float
+        The lowest polished cost above the best by more than 0.1 %: the next basin
+        (NaN when every polished end reached the best).
+    hops : int
+        Basin-hopping restarts run.
+    """
+
+    starts: int
+    polished: int
+    at_best: int
+    best_cost: float
+    next_cost: float
+    hops: int
+
+    @property
+    def certified(self) -> bool:
+        """True when at least :data:`CERTIFIED_AT` starts reached the best cost."""
+        return self.at_best >= CERTIFIED_AT
+
+    @property
+    def text(self) -> str:
+        """One sentence: how many starts reached the best cost and the next basin."""
+        nxt = (
+            f"; the next minimum found costs {_ratio_text(self.next_cost / self.best_cost)} "
+            "the best"
+            if np.isfinite(self.next_cost) and self.best_cost > 0
+            else ""
+        )
+        hops = f", {self.hops} restart(s) from perturbations of the best" if self.hops else ""
+        return (
+            f"{self.at_best} of {self.starts + self.hops} starts reached the best cost "
+            f"(within {100 * SAME_MINIMUM:.1f} %; {self.polished} polished{hops}){nxt}"
+        )
+
+    @property
+    def warning(self) -> str | None:
+        """A sentence when only one start reached the best cost, else None."""
+        if self.certified:
+            return None
+        near = (
+            np.isfinite(self.next_cost)
+            and self.best_cost > 0
+            and self.next_cost <= self.best_cost * (1 + NEAR_MINIMUM)
+        )
+        return "only one start reached the best cost: " + (
+            f"the next minimum found is within {100 * NEAR_MINIMUM:.0f} % of it (a flat "
+            "valley: about as good a fit, with other values)"
+            if near
+            else "the search may have missed a lower minimum (more starts: [fit] n_starts)"
+        )
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields (``next_cost`` None when NaN) with ``text``."""
+        return {
+            "starts": self.starts,
+            "polished": self.polished,
+            "at_best": self.at_best,
+            "best_cost": self.best_cost,
+            "next_cost": self.next_cost if np.isfinite(self.next_cost) else None,
+            "hops": self.hops,
+            "certified": self.certified,
+            "text": self.text,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SearchCertificate:
+        """The certificate :meth:`as_dict` wrote."""
+        nxt = d.get("next_cost")
+        return cls(
+            int(d["starts"]), int(d["polished"]), int(d["at_best"]), float(d["best_cost"]),
+            float("nan") if nxt is None else float(nxt), int(d.get("hops", 0)),
+        )  # fmt: skip
+
+
 #: A recording whose first input lies within this fraction of the input range of zero,
 #: of its lowest or of its highest value starts at rest: the models' own start (every
 #: operator relaxed, ``w[-1] = 0`` clamped into the band at ``v[0]``) is the state
@@ -101,30 +210,50 @@ class InitialState:
     swept the loop. The rule works for every model: it only changes the input the
     model runs on.
 
+    A recording whose input comes back to its first value in the direction it left it,
+    after sweeping its range (a periodic lab input: circles, figure-eights, sines),
+    may also start after its own first cycle replayed (:func:`opening_cycle`): the
+    pre-history is then the ramp, then the recording's first ``cycle_samples``
+    samples, for both motors, so the state of every operator the loop sweeps, and the
+    other motor's state for a model that reads it, is the loop's own. The fit tries
+    the start with and without the replayed cycle and keeps the lower cost.
+
     Attributes
     ----------
     v_from : float
         Fitted level (input unit) the input came from.
     n_samples : int
-        Samples of the synthetic pre-history.
+        Samples of the synthetic pre-history (the ramp and the replayed cycle).
     v0 : float
         First input value.
     text : str
         One sentence for the terminal and fit.json.
+    cycle_samples : int
+        Samples of the recording's opening replayed after the ramp (0: none).
+    v_turn : float or None
+        An earlier turning point of the pre-history: the operators relaxed at
+        ``v_turn``, the input ramps to ``v_from``, then to ``v[0]`` (None or equal to
+        ``v_from``: one ramp). Two levels stand for the last two reversals before
+        the recording (a loop's maximum and minimum), which may lie beyond the
+        recording's own range.
     """
 
     v_from: float
     n_samples: int
     v0: float
     text: str
+    cycle_samples: int = 0
+    v_turn: float | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready form."""
         return {
+            "v_turn": self.v_turn,
             "v_from": self.v_from,
             "n_samples": self.n_samples,
             "v0": self.v0,
             "text": self.text,
+            "cycle_samples": self.cycle_samples,
         }
 
 
@@ -140,6 +269,135 @@ def starts_at_rest(v: np.ndarray) -> bool:
     return abs(v0) <= tol or v0 - float(v.min()) <= tol or float(v.max()) - v0 <= tol
 
 
+def signals_start_at_rest(s: Signals, model: Model | None = None) -> bool:
+    """:func:`starts_at_rest` of the input and, for a ``model`` with a state of the
+    other motor's input (hysteretic coupling: ``other_input_terms``) when that input
+    is measured, of that one too: such a model's state is both motors'."""
+    if not starts_at_rest(s.v):
+        return False
+    vo = s.v_other
+    if vo is None or model is None or not hasattr(innermost(model), "other_input_terms"):
+        return True
+    vo = np.asarray(vo, dtype=float)
+    return not np.all(np.isfinite(vo)) or starts_at_rest(vo)
+
+
+def opening_cycle(v: np.ndarray) -> int:
+    """Samples of the recording's first cycle: the input leaves its first value
+    ``v[0]`` in one direction, crosses it the other way, then crosses it again in the
+    first direction; the index of that last crossing (0 when there is none within the
+    first half of the recording, or within :data:`MAX_PREHISTORY`).
+
+    On a periodic input (a sine, circles, figure-eights) that is one period; on the
+    paper's protocol, the rest of the excursion, the rest at zero and the next
+    excursion's way back up to ``v[0]``. Moves within 1 % of the input range of
+    ``v[0]`` do not count (encoder jitter).
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+        Input (input unit).
+
+    Returns
+    -------
+    int
+        ``k``: ``v[:k]`` replayed before ``v`` continues into ``v[0]`` as the input did.
+    """
+    v = np.asarray(v, dtype=float)
+    n = v.size
+    if n < 8 or np.ptp(v) <= 0:
+        return 0
+    v0, tol = float(v[0]), 0.01 * float(np.ptp(v))
+    limit = min(n // 2, MAX_PREHISTORY)
+    side = np.where(v[:limit] > v0 + tol, 1, np.where(v[:limit] < v0 - tol, -1, 0))
+    moved = side[side != 0]
+    idx = np.flatnonzero(side != 0)
+    if moved.size < 3:
+        return 0
+    d0 = moved[0]
+    back = np.flatnonzero(moved == -d0)
+    if not back.size:
+        return 0
+    again = np.flatnonzero(moved[back[0] :] == d0)
+    if not again.size:
+        return 0
+    # the last sample on the other side (or in the band) before the input is beyond
+    # v[0] in the first direction again: v[:k] then v continues as the input did
+    j = idx[back[0] + again[0]]
+    below = np.flatnonzero((v[:j] - v0) * d0 <= 0)
+    return int(below[-1] + 1) if below.size else 0
+
+
+def _swept(v: np.ndarray) -> int:
+    """Index by which ``v`` has reached both its 2 % and 98 % quantile levels (its size
+    when it never does)."""
+    lo, hi = np.quantile(v, [0.02, 0.98])
+    low, high = np.flatnonzero(v <= lo), np.flatnonzero(v >= hi)
+    return int(max(low[0], high[0])) if low.size and high.size else v.size
+
+
+def _head_of(signals: Signals, m: int) -> Signals:
+    """The first ``m`` samples of ``signals`` (every per-sample array), read-only."""
+    n = np.asarray(signals.v).size
+
+    def cut(a):
+        if a is None:
+            return None
+        a = np.asarray(a)
+        if a.shape != (n,):
+            return a
+        out = np.array(a[:m])
+        out.flags.writeable = False
+        return out
+
+    extra = {k: cut(a) if isinstance(a, np.ndarray) else a for k, a in signals.extra.items()}
+    return Signals(
+        v=cut(signals.v), t_s=cut(signals.t_s), v_other=cut(signals.v_other),
+        theta_other_deg=cut(signals.theta_other_deg), extra=extra,
+    )  # fmt: skip
+
+
+def _with_cycle(signals: Signals, k: int) -> Signals:
+    """``signals`` with their first ``k`` samples replayed before them (every per-sample
+    array: both motors' inputs, the other angle, extras; times run back from ``t[0]``)."""
+    if k <= 0:
+        return signals
+    v = np.asarray(signals.v)
+
+    def rep(a):
+        if a is None:
+            return None
+        a = np.asarray(a)
+        return np.concatenate([a[:k], a]) if a.shape == v.shape else a
+
+    t = None
+    if signals.t_s is not None:
+        t0 = np.asarray(signals.t_s, dtype=float)
+        dt = float(np.median(np.diff(t0))) if t0.size > 1 else 1.0
+        t = np.concatenate([t0[0] - dt * np.arange(k, 0, -1), t0])
+    extra = {key: rep(a) if isinstance(a, np.ndarray) else a for key, a in signals.extra.items()}
+    return Signals(
+        v=rep(v), t_s=t, v_other=rep(signals.v_other),
+        theta_other_deg=rep(signals.theta_other_deg), extra=extra,
+    )  # fmt: skip
+
+
+#: The pre-history's levels may lie beyond the recording's range by this fraction of
+#: it (an input that went further before the recording started), on the side of zero
+#: only when the input crosses zero.
+LEVEL_MARGIN = 0.25
+
+
+def level_bounds(v: np.ndarray) -> tuple[float, float]:
+    """(lowest, highest) level of the pre-history (:class:`InitialState`): the input's
+    range with zero, widened by :data:`LEVEL_MARGIN` of it (below zero only for an
+    input that goes below zero: a one-sided input stays one-sided)."""
+    v = np.asarray(v, dtype=float)
+    lo, hi = min(float(v.min()), 0.0), max(float(v.max()), 0.0)
+    pad = LEVEL_MARGIN * (hi - lo)
+    return (lo - pad if float(v.min()) < 0 else lo), hi + pad
+
+
 def prehistory_step(v: np.ndarray) -> float:
     """Input step of the synthetic pre-history (:class:`InitialState`): the median
     non-zero step of ``v`` (its typical speed), or 1 % of its range."""
@@ -149,26 +407,54 @@ def prehistory_step(v: np.ndarray) -> float:
     return float(np.median(moving)) if moving.size else float(np.ptp(v)) / 100
 
 
-def _ramped(v: np.ndarray, u: float, step: float) -> tuple[np.ndarray, int]:
-    """(the input ``v`` after a ramp from ``u`` in steps of about ``step``, read-only;
-    the ramp's length)."""
-    n_pre = int(np.clip(np.ceil(abs(v[0] - u) / step), 2, MAX_PREHISTORY))
-    vv = np.concatenate([np.linspace(u, v[0], n_pre + 1)[:-1], v])
+def _ramped(v: np.ndarray, levels, step: float) -> tuple[np.ndarray, int]:
+    """(the input ``v`` after ramps through ``levels`` (a level or a sequence of them,
+    the operators relaxed at the first) to ``v[0]`` in steps of about ``step``,
+    read-only; the ramps' length). Equal consecutive levels add nothing."""
+    path = [float(u) for u in np.atleast_1d(levels)]
+    path = [u for i, u in enumerate(path) if i == len(path) - 1 or u != path[i + 1]]
+    parts = []
+    for a, b in zip(path, [*path[1:], float(v[0])], strict=True):
+        last = b == float(v[0]) and a == path[-1]
+        k = int(np.clip(np.ceil(abs(b - a) / step), 2 if last else 1, MAX_PREHISTORY))
+        parts.append(np.linspace(a, b, k + 1)[:-1])
+    ramp = np.concatenate(parts)
+    vv = np.concatenate([ramp, v])
     vv.flags.writeable = False  # the models keep what they derive from a frozen input
-    return vv, n_pre
+    return vv, ramp.size
 
 
 def prehistory_signals(
-    signals: Signals, v_from: float, step: float | None = None
+    signals: Signals,
+    v_from: float,
+    step: float | None = None,
+    cycle: int = 0,
+    v_turn: float | None = None,
 ) -> tuple[Signals, int]:
     """(``signals`` with the synthetic pre-history of :class:`InitialState` prepended,
     its length): the input ramps from ``v_from`` to ``v[0]`` in steps of ``step``
-    (default :func:`prehistory_step` of ``v``); the times run back from ``t[0]`` at the
-    median interval; the other motor's input and angle and every per-sample extra
-    hold their first value. A model run on the result and cut by the length starts
-    in the state the fit estimated (:meth:`FitResult.predict` does this)."""
+    (default :func:`prehistory_step` of ``v``), then (``cycle`` > 0) the recording's
+    first ``cycle`` samples are replayed (both motors); the times run back from
+    ``t[0]`` at the median interval; during the ramp the other motor's input and angle
+    and every per-sample extra hold their first value. A model run on the result and
+    cut by the length starts in the state the fit estimated (:meth:`FitResult.predict`
+    does this). ``v_turn``: an earlier turning point, the operators relaxed there and
+    the input ramping to ``v_from`` first."""
+    v0 = np.asarray(signals.v, dtype=float)
+    step = prehistory_step(v0) if step is None else step
+    cycle = min(int(cycle), v0.size)
+    signals = _with_cycle(signals, cycle)
     v = np.asarray(signals.v, dtype=float)
-    vv, n_pre = _ramped(v, float(v_from), prehistory_step(v) if step is None else step)
+    levels = (float(v_from),) if v_turn is None else (float(v_turn), float(v_from))
+    vv, n_ramp = _ramped(v, levels, step)
+    sig, n_pre = _ramp_padded(signals, vv, n_ramp)
+    return sig, n_pre + int(cycle)
+
+
+def _ramp_padded(signals: Signals, vv: np.ndarray, n_pre: int) -> tuple[Signals, int]:
+    """(``signals`` with the ramped input ``vv`` whose first ``n_pre`` samples are the
+    ramp: every other per-sample array held at its first value there, times run back)."""
+    v = np.asarray(signals.v, dtype=float)
 
     def pad(a):
         a = np.asarray(a)
@@ -200,50 +486,64 @@ def prehistory_signals(
 
 
 class _FromLevel:
-    """``model`` run after a synthetic pre-history: the input ramps from the level
-    ``v_from`` (the last parameter; operators relaxed there) to ``v[0]``; the
+    """``model`` run after a synthetic pre-history: the operators relaxed at the level
+    ``v_turn`` (the second-last parameter), the input ramps to ``v_from`` (the last)
+    and then to ``v[0]`` (after the replayed first ``cycle`` samples, when given); the
     pre-history's outputs are dropped. Model protocol, plus the inner model's exact
     Jacobian and flag-point families when it has them."""
 
+    TURN = "initial_state.v_turn"
     PARAM = "initial_state.v_from"
+    #: Number of level parameters at the end of the vector.
+    LEVELS = 2
 
-    def __init__(self, model: Model, v: np.ndarray):
+    def __init__(self, model: Model, v: np.ndarray, cycle: int = 0):
         self.inner = model
+        self.cycle = int(cycle)
         self.name = model.name
         v = np.asarray(v, dtype=float)
-        lo, hi = min(float(v.min()), 0.0), max(float(v.max()), 0.0)
+        lo, hi = level_bounds(v)
         self.parameters = (
             *model.parameters,
+            Parameter(self.TURN, float(v[0]), lo, hi, unit="input",
+                      doc="an earlier turning point of the input before the recording"),
             Parameter(self.PARAM, float(v[0]), lo, hi, unit="input",
                       doc="level the input came from before the recording"),
         )  # fmt: skip
         self.step = prehistory_step(v)
         self.jac_inner = _analytic_jacobian(model, "jacobian")
+        self._head = None
         self.families_inner = _analytic_jacobian(model, "flag_point_families")
         self._cache: dict = {}
 
-    def prehistory(self, signals: Signals, u: float) -> tuple[Signals, int]:
-        """(signals with the pre-history from ``u`` prepended, its length)."""
-        key = (id(signals.v), float(u))
-        if key in self._cache:
-            return self._cache[key]
-        out = prehistory_signals(signals, u, self.step)
+    def prehistory(self, signals: Signals, levels) -> tuple[Signals, int]:
+        """(signals with the pre-history through ``levels`` (v_turn, v_from) prepended,
+        its length)."""
+        ut, u = (float(x) for x in levels)
+        key = (id(signals.v), ut, u)
+        hit = self._cache.get(key)
+        if hit is not None and hit[0] is signals.v:  # the same array, not a reused id
+            return hit[1]
+        out = prehistory_signals(signals, u, self.step, self.cycle, ut)
         if len(self._cache) > 4:
             self._cache.pop(next(iter(self._cache)))
-        self._cache[key] = out
+        self._cache[key] = (signals.v, out)  # holds the array: its id is not reused
         return out
 
-    def ramped(self, v: np.ndarray, u: float) -> tuple[np.ndarray, int]:
-        """(the input ``v`` after the ramp from ``u``, read-only; the ramp's length)."""
-        return _ramped(v, u, self.step)
+    def ramped(self, v: np.ndarray, levels) -> tuple[np.ndarray, int]:
+        """(the input ``v`` after the ramps through ``levels`` and the replayed cycle,
+        read-only; the pre-history's length)."""
+        k = self.cycle
+        vv, n = _ramped(np.concatenate([v[:k], v]) if k else v, levels, self.step)
+        return vv, n + k
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
-        sig, n_pre = self.prehistory(signals, float(values[-1]))
-        return np.asarray(self.inner.evaluate(sig, np.asarray(values[:-1], float)))[n_pre:]
+        sig, n_pre = self.prehistory(signals, values[-2:])
+        return np.asarray(self.inner.evaluate(sig, np.asarray(values[:-2], float)))[n_pre:]
 
-    def level_output(self, signals: Signals, values: np.ndarray):
-        """The output as a function of the level alone (the other values held at
-        ``values``), the same to the last bit as :meth:`evaluate`, for an inner model
+    def level_output(self, signals: Signals, values: np.ndarray, idx: int = -1):
+        """The output as a function of the level ``values[idx]`` alone (the other values
+        held at ``values``), the same to the last bit as :meth:`evaluate`, for an inner model
         whose output is its ``own_output`` (of this axis's input only) plus its
         ``other_input_terms`` (of the other motor's input only): the pre-history holds
         the other input at its first value, which leaves those terms as they are
@@ -253,12 +553,18 @@ class _FromLevel:
         vo = signals.v_other
         if terms_fn is None or own_fn is None or vo is None or not np.isfinite(vo[0]):
             return None
-        inner = np.asarray(values[:-1], float)
-        terms = terms_fn(signals, inner)
+        inner = np.asarray(values[:-2], float)
+        levels = np.asarray(values[-2:], dtype=float).copy()
+        at = idx - len(values) if idx >= 0 else idx
+        # the other motor holds its first value during the ramp (its terms start there
+        # as without it) and moves through the replayed cycle: terms from the cycle on
+        terms = [t[self.cycle :] for t in terms_fn(_with_cycle(signals, self.cycle), inner)]
         v = np.asarray(signals.v, dtype=float)
 
         def output(u: float) -> np.ndarray:
-            vv, n_pre = self.ramped(v, float(u))
+            lv = levels.copy()
+            lv[at] = u
+            vv, n_pre = self.ramped(v, lv)
             y = np.asarray(own_fn(Signals(v=vv), inner))[n_pre:]
             for term in terms:
                 y += term
@@ -267,21 +573,54 @@ class _FromLevel:
         return output
 
     def jacobian(self, signals, values, rows=None):
+        """The inner model's exact columns and the two levels' by forward differences
+        of ``self.step / 2`` (the state after a ramp is continuous in where it began:
+        LM moves the levels with the other parameters, the profile searches only
+        explore)."""
         jac = self.inner_jacobian(signals, values, rows)
-        return np.hstack([jac, np.zeros((jac.shape[0], 1))])  # v_from is profiled
+        rows = np.arange(np.asarray(signals.v).size) if rows is None else np.asarray(rows)
+        values = np.asarray(values, dtype=float)
+        head, m = self._opening(signals)
+        near = rows < m
+        base = self.evaluate(head, values)[rows[near]]
+        cols = np.zeros((rows.size, 2))
+        for c, j in enumerate((-2, -1)):
+            trial = values.copy()
+            trial[j] += 0.5 * self.step
+            cols[near, c] = (self.evaluate(head, trial)[rows[near]] - base) / (0.5 * self.step)
+        return np.hstack([jac, cols])
+
+    def _opening(self, signals: Signals) -> tuple[Signals, int]:
+        """(the first samples of ``signals`` that the start state moves, their number):
+        up to twice the index by which both inputs have reached both their 2 % and 98 %
+        quantile levels (then every operator up to half the range has forgotten the
+        start). The levels' Jacobian columns are differences over these samples, 0
+        after them (a wider operator's trace is left to the profile searches, which
+        use exact costs)."""
+        if self._head is not None and self._head[0] is signals.v:
+            return self._head[1], self._head[2]
+        n = np.asarray(signals.v).size
+        m = _swept(np.asarray(signals.v, dtype=float))
+        vo = signals.v_other
+        if vo is not None and np.all(np.isfinite(vo)) and np.ptp(vo) > 0:
+            m = max(m, _swept(np.asarray(vo, dtype=float)))
+        m = int(min(n, max(2 * m + 2, self.cycle + 2)))  # the replayed cycle is in it
+        head = _head_of(signals, m)
+        self._head = (signals.v, head, m)
+        return head, m
 
     def inner_jacobian(self, signals, values, rows=None):
         """:meth:`jacobian` without the (zero) column of the profiled level."""
-        sig, n_pre = self.prehistory(signals, float(values[-1]))
+        sig, n_pre = self.prehistory(signals, values[-2:])
         rows = np.arange(np.asarray(signals.v).size) if rows is None else np.asarray(rows)
-        return self.jac_inner(sig, np.asarray(values[:-1], float), rows=rows + n_pre)
+        return self.jac_inner(sig, np.asarray(values[:-2], float), rows=rows + n_pre)
 
     def flag_point_families(self, signals, values):
-        sig, n_pre = self.prehistory(signals, float(values[-1]))
-        return tuple(a[n_pre:] for a in self.families_inner(sig, np.asarray(values[:-1], float)))
+        sig, n_pre = self.prehistory(signals, values[-2:])
+        return tuple(a[n_pre:] for a in self.families_inner(sig, np.asarray(values[:-2], float)))
 
     def with_values(self, values: np.ndarray) -> Model:
-        return self.inner.with_values(np.asarray(values, dtype=float)[:-1])
+        return self.inner.with_values(np.asarray(values, dtype=float)[:-2])
 
 
 def _method_of(model, method: str):
@@ -352,6 +691,9 @@ class FitResult:
     start : dict
         Value of every parameter in the first start vector (the model's own values
         unless ``starts`` were given; empty when not recorded).
+    certificate : SearchCertificate or None
+        How many starts reached the best cost, the next minimum's cost and the
+        restarts run (None: not recorded, e.g. a result loaded from an older file).
     """
 
     model: Model
@@ -374,6 +716,7 @@ class FitResult:
     stderr_reasons: dict[str, str] = field(default_factory=dict)
     initial_state: InitialState | None = None
     start: dict[str, float] = field(default_factory=dict)
+    certificate: SearchCertificate | None = None
 
     def predict(
         self, signals: Signals | np.ndarray, initial_state: bool | None = None
@@ -392,8 +735,9 @@ class FitResult:
             v = np.asarray(s.v, dtype=float)
             initial_state = st is not None and v.size > 0 and float(v[0]) == st.v0
         if initial_state and st is not None:
-            lead = _FromLevel(self.model, np.asarray(s.v, dtype=float))
-            return lead.evaluate(s, np.append(x, st.v_from))
+            lead = _FromLevel(self.model, np.asarray(s.v, dtype=float), st.cycle_samples)
+            turn = st.v_from if st.v_turn is None else st.v_turn
+            return lead.evaluate(s, np.append(x, [turn, st.v_from]))
         return self.model.evaluate(s, x)
 
     def eval_uncertainty(
@@ -508,6 +852,16 @@ class FitResult:
             f"    converged          = {self.converged} ({self.message})",
             f"    samples in loss    = {self.n_samples}, free parameters = {len(self.free)}",
             f"    function evals     = {self.nfev}, starts = {self.starts_tried}",
+            *(
+                [f"    global search      = {self.certificate.text}"]
+                + (
+                    [f"    WARNING            : {self.certificate.warning}"]
+                    if self.certificate.warning
+                    else []
+                )
+                if self.certificate is not None
+                else []
+            ),
             f"    RMSE / max |err|   = {m.rmse_deg:.4g} / {m.max_abs_err_deg:.4g} deg "
             f"(NRMSE {m.nrmse_pct:.3g} %)",
             f"    held-out RMSE      = {h.rmse_deg:.4g} deg on {h.n_samples} samples",
@@ -603,6 +957,7 @@ class FitResult:
         it is not one."""
         kw = results.fit_fields(results.read_record(path), str(path))
         state = kw.pop("initial_state")
+        cert = kw.pop("certificate")
         return cls(
             **kw
             | {
@@ -610,6 +965,7 @@ class FitResult:
                     FitNote(n["code"], n["text"], tuple(n.get("params", ()))) for n in kw["notes"]
                 ),
                 "initial_state": None if state is None else InitialState(**state),
+                "certificate": None if cert is None else SearchCertificate.from_dict(cert),
             }
         )
 
@@ -640,6 +996,13 @@ class _Counter:
         self.vf_index = names.index("v_f") if "v_f" in names else -1
         self.used_idx = np.flatnonzero(used)
         self.theta_used = theta[self.used_idx]
+        # parameters whose Jacobian column is a forward difference of this step (a flag
+        # point the output is continuous in: the model's exact column is 0 there)
+        inner = model.inner if isinstance(model, _FromLevel) else model
+        self.fd_idx = (
+            [self.vf_index] if self.vf_index >= 0 and getattr(inner, "CONTINUOUS_FLAG_POINT", False) else []
+        )  # fmt: skip
+        self.fd_step = 0.5 * prehistory_step(np.asarray(signals.v, dtype=float))
 
     def cost(self, full: np.ndarray) -> float:
         """Sum of rho(r^2) over the fitted samples (rho as scipy's least_squares)."""
@@ -652,8 +1015,8 @@ class _Counter:
         for the initial-state level of a model with terms of the other motor's input
         (:meth:`_FromLevel.level_output`) those are computed once; the costs are the
         same to the last bit as :meth:`cost`."""
-        if isinstance(self.model, _FromLevel) and idx == len(self.model.parameters) - 1:
-            output = self.model.level_output(self.signals, full)
+        if isinstance(self.model, _FromLevel) and idx >= len(self.model.parameters) - 2:
+            output = self.model.level_output(self.signals, full, idx)
             if output is not None:
                 return self._output_cost(output)
         if self.families_fn is not None and idx == self.vf_index:
@@ -706,6 +1069,20 @@ class _Counter:
             r = y[self.used_idx] - self.theta_used
         return r if np.isfinite(r).all() else np.where(np.isfinite(r), r, _BIG)
 
+    def _with_differences(self, full, jac, cols) -> np.ndarray:
+        """``jac`` with the columns of :attr:`fd_idx` replaced by forward differences."""
+        order = list(range(jac.shape[1])) if cols is None else [int(c) for c in cols]
+        todo = [(order.index(i), i) for i in self.fd_idx if i in order]
+        if not todo:
+            return jac
+        jac = np.array(jac, dtype=float)
+        base = self.residuals(full)
+        for col, i in todo:
+            trial = np.asarray(full, dtype=float).copy()
+            trial[i] += self.fd_step
+            jac[:, col] = (self.residuals(trial) - base) / self.fd_step
+        return jac
+
     def jacobian(self, full: np.ndarray, cols: np.ndarray | None = None) -> np.ndarray:
         """d residual / d parameters at the fitted samples, shape (n_used, p) (the
         model's exact Jacobian; counted as one evaluation); ``cols``: only those
@@ -715,16 +1092,20 @@ class _Counter:
             if (
                 cols is not None
                 and isinstance(self.model, _FromLevel)
-                and (np.asarray(cols) < len(self.model.parameters) - 1).all()
+                and (np.asarray(cols) < len(self.model.parameters) - 2).all()
             ):
                 # the profiled level's zero column is never asked for: not built
                 jac = self.model.inner_jacobian(self.signals, full, rows=self.used_idx)
             else:
                 jac = self.jac_fn(self.signals, full, rows=self.used_idx)
+                if isinstance(self.model, _FromLevel):
+                    self.n += 1  # the levels' differences over the opening (about one run)
         if cols is not None and not (
             len(cols) == jac.shape[1] and np.array_equal(cols, np.arange(jac.shape[1]))
         ):
             jac = jac[:, cols]
+        if self.fd_idx:
+            jac = self._with_differences(full, jac, cols)
         # one sum tells whether every entry is finite (an overflow to inf is only rechecked)
         return jac if np.isfinite(jac.sum()) else np.where(np.isfinite(jac), jac, 0.0)
 
@@ -982,6 +1363,7 @@ def _fit_model(
     f_scale_deg: float = 0.5,
     nested: bool = True,
     initial_state: str = "auto",
+    basin_hops: int | None = None,
 ) -> FitResult:
     """Fit ``model`` to measured angles by least squares (Eq24).
 
@@ -1030,6 +1412,12 @@ def _fit_model(
         ``"auto"``: a recording that does not start at rest (:func:`starts_at_rest`)
         gets its initial state fitted (:class:`InitialState`, reported in
         ``initial_state``); ``"rest"``: every model starts relaxed at ``v[0]``.
+    basin_hops : int, optional
+        Most restarts from perturbations of the best end while fewer than
+        :data:`CERTIFIED_AT` starts reached the best cost (the global search,
+        :func:`_global_search`); default :data:`MAX_HOPS`, fewer when they do not fit
+        in :data:`WORK_BUDGET`; 0: a local search (the best screened end polished, no
+        restarts: a warm refit).
 
     Returns
     -------
@@ -1046,12 +1434,13 @@ def _fit_model(
     _check_args(model, signals, theta_deg, fit_mask, holdout_mask, starts, method, max_nfev,
                 screen_nfev, ftol, loss, f_scale_deg)  # fmt: skip
     check_choice("fit_model", "initial_state", initial_state, ("auto", "rest"))
+    as_real("fit_model", "basin_hops", basin_hops, integer=True, lo=0, none_ok=True)
     s = as_signals(signals)
     v = np.asarray(s.v, dtype=float)
     theta = np.asarray(theta_deg, dtype=float)
     opts = dict(
         fit_mask=fit_mask, holdout_mask=holdout_mask, method=method, max_nfev=max_nfev,
-        screen_nfev=screen_nfev, ftol=ftol, initial_state=initial_state,
+        screen_nfev=screen_nfev, ftol=ftol, initial_state=initial_state, basin_hops=basin_hops,
     )  # fmt: skip
     hold, used = _loss_samples(theta, fit_mask, holdout_mask)
     _validate(s, theta, sum(not p.fixed for p in model.parameters), used)
@@ -1061,31 +1450,88 @@ def _fit_model(
     inner_fit = _nested_fit(model, s, theta, starts, opts | dict(loss=loss, f_scale_deg=f_scale_deg)) if nested else None  # fmt: skip
     if inner_fit is not None:
         starts.append(inner_fit[0])
-    # a recording that does not start at rest: its initial state is fitted (v_from)
-    level = initial_state == "auto" and not starts_at_rest(v)
-    fitted_model: Model = _FromLevel(model, v) if level else model
-    search = _Search.of(fitted_model, s, theta, used, loss, f_scale_deg, method, ftol, screen_nfev)
+    # a recording that does not start at rest: its initial state is fitted (v_from), with
+    # and without the recording's first cycle replayed before it (when it has one)
+    level = initial_state == "auto" and not signals_start_at_rest(s, model)
+    k = opening_cycle(v) if level else 0
+    run = functools.partial(
+        _searched, model, s, theta, used, hold, inner_fit, level, opts | dict(loss=loss, f_scale_deg=f_scale_deg)
+    )  # fmt: skip
+    if k and v.size > LARGE_ROWS:
+        # a long recording: one start state, the one whose starts begin lower
+        k = k if run(starts, k, probe=True) < run(starts, 0, probe=True) else 0
+        out = run(starts, k)
+    else:
+        out = run(starts, 0)
+    if k and out.cycle == 0:
+        # the other start state: from the first one's end and from every start
+        carried = np.asarray([out.result.params[n] for n in out.names[:-2]], float)
+        other = run([carried, *starts], k, spent=out.work)
+        if other.cost < out.cost:
+            out = other
+    return _without_level(out.result, model, v, out.full, out.cycle) if level else out.result
+
+
+@dataclass(frozen=True)
+class _Searched:
+    """One search's outcome: the result (in terms of the searched model, the level last
+    when fitted), its cost and end, the search's work and the replayed cycle."""
+
+    result: FitResult
+    cost: float
+    full: np.ndarray
+    names: tuple[str, ...]
+    work: float
+    cycle: int
+
+
+#: A recording of more samples than this tries one start state (with or without its
+#: first cycle replayed), chosen by the starts' costs (:func:`_fit_model`); shorter
+#: ones search both and keep the lower (measured on a 50,000-sample coupled recording:
+#: both searches took the coupled two-tendon GPI from 2.5 to 5.9 s).
+LARGE_ROWS = 20_000
+
+
+def _searched(
+    model, s, theta, used, hold, inner_fit, level, opts, starts, cycle, spent=0.0, probe=False
+) -> _Searched | float:  # fmt: skip
+    """The global search of ``model`` from ``starts`` (model vectors) on the fitted
+    samples ``used``; ``level``: after a fitted pre-history (:class:`_FromLevel`, with
+    the recording's first ``cycle`` samples replayed); ``spent``: work done before it
+    (:data:`WORK_BUDGET`). ``probe``: only the lowest cost of the starts (their levels
+    profiled), a float."""
+    v = np.asarray(s.v, dtype=float)
+    loss, method = opts["loss"], opts["method"]
+    max_nfev, basin_hops = opts["max_nfev"], opts["basin_hops"]
+    fitted_model: Model = _FromLevel(model, v, cycle) if level else model
+    search = _Search.of(
+        fitted_model, s, theta, used, loss, opts["f_scale_deg"], method, opts["ftol"],
+        opts["screen_nfev"],
+    )  # fmt: skip
     if level:
         starts = _starts_with_level(search, starts, inner_fit)
     # in-bounds points already reached (starts, screened ends): the result must not be worse
     known = [(search.counter.cost(x0), x0) for x0 in starts]
+    if probe:
+        return min(c for c, _ in known)
     if loss != "linear":
-        x_plain = _plain_fit_end(model, s, theta, opts, starts, search)
+        plain_opts = {k: x for k, x in opts.items() if k not in ("loss", "f_scale_deg")}
+        x_plain = _plain_fit_end(model, s, theta, plain_opts, starts, search)
         known.append((search.counter.cost(x_plain), x_plain))
-        best, screened = _screen_and_polish(search, [x_plain, *starts], max_nfev, ROBUST_STEPS)
-        known += screened
-    elif len(starts) > 1:
-        best, screened = _screen_and_polish(search, starts, max_nfev, FIRST_STEPS)
-        known += screened
+        starts, steps = [x_plain, *starts], ROBUST_STEPS
     else:
-        best = search.run(starts[0], max_nfev, FIRST_STEPS + ("fine", "lm"))
-    (cost, full, res), floor, notes = _in_bounds_end(search, best, known, max_nfev)
+        steps = FIRST_STEPS
+    hops = MAX_HOPS if basin_hops is None else int(basin_hops)
+    found = _global_search(search, starts, max_nfev, steps, hops, spent)
+    known += found.screened
+    (cost, full, res), floor, notes = _floor_checked(search, found, known, max_nfev)
     result = _result(
         fitted_model, s, theta, used, hold, full, res, search.names, search.is_free, search.pidx,
         search.counter.n, len(starts), search.lsq_free, search.uidx,
     )  # fmt: skip
     result = _with_notes(result, search, cost, full, floor, notes)
-    return _without_level(result, model, v, full) if level else result
+    result = replace(result, certificate=found.certificate(cost, len(starts)))
+    return _Searched(result, cost, full, search.names, _work(search, search), cycle)
 
 
 #: Search steps of every start: fine v_f grid, LM, wide v_f grid, LM (short when several
@@ -1148,7 +1594,8 @@ class _Search:
     pidx : list of int
         Free profiled parameters (v_f).
     uidx : int or None
-        Index of the initial-state level (profiled), None when it is not fitted.
+        Index of the initial-state level ``v_from`` (profiled; ``uidx - 1`` is the
+        earlier turning point ``v_turn``), None when it is not fitted.
     lsq_free : ndarray of int
         Free parameters moved by LM / trf (free, neither profiled nor the level).
     method : str
@@ -1182,7 +1629,9 @@ class _Search:
         is_free = np.array([not p.fixed for p in params])
         uidx = len(names) - 1 if level else None
         pidx = [i for i, nm in enumerate(names) if nm in PROFILE_PARAMS and is_free[i]]
-        held = [*pidx, len(names) - 1] if level else pidx
+        # the levels (and a flag point the output is continuous in) are LM's too, by
+        # finite differences; profiled as well, to explore
+        held = [i for i in pidx if i not in counter_fd(model, names)]
         lsq_free = np.flatnonzero(is_free & ~np.isin(np.arange(len(names)), held))
         # the model runs on read-only copies of the inputs: they cannot change during the
         # fit, so the models keep what they derive from them (runs of held samples)
@@ -1209,12 +1658,14 @@ class _Search:
             if step == "lm" and self.lsq_free.size:
                 first = res is None
                 full, res = _lsq(c, full, self.lsq_free, lo, hi, how, nfev_limit, self.ftol)
+                full = self.levels_inside(full)
                 if first and 2.0 * res.cost > stop_above:
                     break  # least_squares' cost is half the counter's
             elif step in ("wide", "fine"):
                 full = _refine_profiled(c, full, self.pidx, self.v, lo, hi, wide=step == "wide")
                 if self.uidx is not None:
                     full = _refine_level(c, full, self.uidx, lo, hi, wide=step == "wide")
+                    full = _refine_level(c, full, self.uidx - 1, lo, hi, wide=step == "wide")
             elif step == "reopt" and self.lsq_free.size and self.pidx:
                 full = _reoptimised_profile(
                     c, full, self.pidx, self.lsq_free, self.v, lo, hi, how, self.screen_nfev,
@@ -1223,8 +1674,38 @@ class _Search:
         return c.cost(full), full, res
 
     def outside(self, full: np.ndarray) -> list[int]:
-        """Indices of the LM-fitted parameters of ``full`` outside their bounds."""
-        return _outside(full, self.lsq_free, self.lower, self.upper)
+        """Indices of the LM-fitted parameters of ``full`` outside their bounds (the
+        initial-state levels excepted: :meth:`levels_inside` clips them)."""
+        levels = () if self.uidx is None else (self.uidx - 1, self.uidx)
+        return [i for i in _outside(full, self.lsq_free, self.lower, self.upper) if i not in levels]
+
+    def without_levels(self) -> _Search:
+        """This search with the initial-state levels left to the profile steps (not
+        moved by LM)."""
+        if self.uidx is None:
+            return self
+        levels = (self.uidx - 1, self.uidx)
+        return replace(self, lsq_free=np.array([i for i in self.lsq_free if i not in levels], int))
+
+    def levels_inside(self, full: np.ndarray) -> np.ndarray:
+        """``full`` with the initial-state levels clipped into their bounds (plausibility
+        limits of where the input came from, not physical ones: LM may step past them
+        where the cost is flat, and a bounded refit for them would cost a trf run)."""
+        if self.uidx is None:
+            return full
+        out = np.asarray(full, dtype=float).copy()
+        for i in (self.uidx - 1, self.uidx):
+            out[i] = min(max(out[i], self.lower[i]), self.upper[i])
+        return out
+
+
+def counter_fd(model, names) -> list[int]:
+    """Indices of the profiled parameters of ``model`` that LM moves too (a flag point
+    the output is continuous in: :attr:`ContinuousEGPIModel.CONTINUOUS_FLAG_POINT`)."""
+    inner = model.inner if isinstance(model, _FromLevel) else model
+    if "v_f" in names and getattr(inner, "CONTINUOUS_FLAG_POINT", False):
+        return [list(names).index("v_f")]
+    return []
 
 
 def _frozen(a) -> np.ndarray:
@@ -1245,16 +1726,34 @@ def _starts_with_level(search: _Search, starts, inner_fit) -> list[np.ndarray]:
     fits the first start best (scanned once over the whole range); the nested start
     (last, when ``inner_fit`` is given) at its base fit's level."""
     counter, uidx = search.counter, search.uidx
-    first = np.append(starts[0], float(search.v[0]))
+    first = np.append(starts[0], [float(search.v[0])] * 2)
     u0 = _refine_level(counter, first, uidx, search.lower, search.upper)[-1]
-    u_nested = (
-        inner_fit[1].initial_state.v_from
-        if inner_fit is not None and inner_fit[1].initial_state is not None
-        else u0
-    )
-    out = [np.append(x0, u0) for x0 in starts]
+    u1 = _other_branch_level(search, np.append(starts[0], [u0, u0]))[-1]
+    st = inner_fit[1].initial_state if inner_fit is not None else None
+    u_nested = (st.v_turn if st.v_turn is not None else st.v_from, st.v_from) if st else (u0, u0)
+    # every other start on the other branch: which branch the recording starts on is
+    # as much a basin of the cost as any parameter (measured on a two-tendon truth
+    # starting mid-loop: 9 starts on one branch ended at 184.5, the other's at 182.1)
+    out = [np.append(x0, [u0, u0] if i % 2 == 0 else [u1, u1]) for i, x0 in enumerate(starts)]
     if inner_fit is not None:
-        out[-1][-1] = u_nested
+        out[-1][-2:] = u_nested
+    return out
+
+
+def _other_branch_level(search: _Search, full: np.ndarray) -> np.ndarray:
+    """``full`` with its initial-state level moved to the best of
+    :data:`INITIAL_STATE_GRID` levels on the other side of the first input (the other
+    branch: above it a falling branch, at or below it the loading one), the other
+    parameters held; ``full`` itself when that side is empty."""
+    uidx, v0 = search.uidx, float(search.v[0])
+    lo, hi = search.lower[uidx], search.upper[uidx]
+    a, b = (lo, v0) if full[uidx] > v0 else (v0 + 1e-9 * max(abs(v0), 1.0), hi)
+    if not a < b:
+        return full
+    grid = np.linspace(a, b, INITIAL_STATE_GRID)
+    cost = search.counter.held_cost(full, uidx)
+    out = full.copy()
+    out[uidx] = grid[int(np.argmin([cost(u) for u in grid]))]
     return out
 
 
@@ -1277,7 +1776,12 @@ def _plain_fit_end(model, s, theta, opts, starts, search: _Search) -> np.ndarray
     x_plain = np.array([p.value for p in plain.model.parameters], dtype=float)
     if search.uidx is not None:
         st = plain.initial_state
-        x_plain = np.append(x_plain, st.v_from if st is not None else starts[0][-1])
+        levels = (
+            [st.v_from if st.v_turn is None else st.v_turn, st.v_from]
+            if st is not None
+            else starts[0][-2:]
+        )
+        x_plain = np.append(x_plain, levels)
     return x_plain
 
 
@@ -1331,56 +1835,298 @@ def _screened_ends(screen: _Search, starts, steps) -> list[np.ndarray]:
     return ends
 
 
-def _screen_and_polish(search: _Search, starts, max_nfev, steps):
-    """(the polished best, [(cost, end) of every screened start]): every start screened
-    by :func:`_screened_ends` on :func:`_screening`'s samples, then the best end (in
-    the cost over every fitted sample) by :data:`POLISH_STEPS` with LM runs to
-    convergence (``max_nfev``).
+#: Most screened ends polished (the lowest first; measured on the README demo's
+#: pitch-: the second polished end reaches the best basin).
+MAX_POLISHED = 4
+#: Screened ends are polished to convergence on every fitted sample, the lowest first:
+#: short screening runs rank basins badly (measured on the README demo's pitch-: the
+#: nested GPI start screened to 2.7 and polished to 2.5, eight data-driven starts
+#: screened to 159 and polished to 0.104). A screened end already within
+#: :data:`SAME_MINIMUM` of the best polished cost has reached it and is not polished
+#: again. After the first polish, each further polish or restart must fit in
+#: :data:`WORK_BUDGET` (:func:`_affordable`).
+#:
+#: The search's work, in model evaluations x input samples (each evaluation runs the
+#: model over the whole input), that further polishes and restarts may bring a fit to:
+#: one more is run only when the work so far plus that of the first polish stays
+#: within it. Counted, not timed, so a fit is the same on every machine. Measured on
+#: 50,000-sample recordings (bench_speed): one continuous-EGPI polish ~1,000
+#: evaluations (5e7, ~2 s), an EGPI polish ~300 (1.5e7, ~1 s); a few thousand samples
+#: (the README demo) afford every start and :data:`MAX_HOPS` restarts.
+WORK_BUDGET = 5e7
+#: A screened end above this multiple of the best polished cost is not polished (the
+#: coupled two-tendon GPI's silent-coupling start ends ~2000x above the others).
+POLISH_STOP_RATIO = 1000.0
+#: The search is certified when at least this many starts reached the best cost;
+#: until then it restarts from perturbations of the best end (basin hopping).
+CERTIFIED_AT = 2
+#: Most basin-hopping restarts of one fit.
+MAX_HOPS = 4
+#: Spread of a hop: positive parameters are multiplied by exp(N(0, HOP_SPREAD^2)),
+#: the others moved by N(0, HOP_SPREAD^2) x their magnitude.
+HOP_SPREAD = 0.7
+#: Spread of a hop's flag point (profiled, not moved by LM), as a fraction of the input
+#: range (measured on an EGPI truth at 5 Hz: the best basin's v_f 6 % of the range from
+#: where the starts put it, beyond the wide profile's reach with the others held).
+HOP_FLAG_SPREAD = 0.08
+#: Seed of the hops' perturbations (a fit is deterministic).
+HOP_SEED = 20261129
 
-    Without a profiled flag point, an unbounded best end outside the bounds is returned
-    as it is: the bounded refit (:func:`_in_bounds_end`) takes over from there (an
-    unbounded polish would only be clipped back; measured on the coupled two-tendon
-    GPI: the same end, 2.6 s less). A flag-point model's polish re-optimises v_f with
-    the other parameters (``"reopt"``) before that (measured without it: continuous
-    EGPI fits 2 % higher in cost)."""
+
+@dataclass
+class _Found:
+    """What :func:`_global_search` found.
+
+    ``polished``: (cost, end, least_squares result, notes) of every polished end (in
+    bounds); ``screened``: (cost over every fitted sample, end) of every screened start;
+    ``reached``: costs of screened ends not polished because they already were within
+    :data:`SAME_MINIMUM` of the best polished cost; ``hops``: restarts run."""
+
+    polished: list
+    screened: list
+    reached: list
+    hops: int
+
+    def best(self):
+        """(cost, end, result, notes) of the lowest polished end (of equal costs, to
+        1e-9, one whose last least-squares run converged)."""
+        low = min(e[0] for e in self.polished)
+        tied = [e for e in self.polished if e[0] <= low + 1e-9 * abs(low)]
+        done = [e for e in tied if e[2] is None or e[2].status > 0]
+        return min(done or tied, key=lambda e: e[0])
+
+    def certificate(self, cost: float, n_starts: int) -> SearchCertificate:
+        """The certificate of the search for the final ``cost`` (the fit's end, after
+        the floor check)."""
+        costs = [e[0] for e in self.polished] + list(self.reached)
+        tol = cost * (1 + SAME_MINIMUM) + 1e-300
+        at_best = sum(c <= tol for c in costs)
+        above = [e[0] for e in self.polished if e[0] > tol]
+        return SearchCertificate(
+            n_starts, len(self.polished), max(at_best, 1), float(cost),
+            float(min(above)) if above else float("nan"), self.hops,
+        )  # fmt: skip
+
+
+def _work(search: _Search, screen: _Search) -> float:
+    """The search's work so far: model evaluations x input samples."""
+    n = search.counter.n + (screen.counter.n if screen is not search else 0)
+    return float(n) * search.v.size
+
+
+def _affordable(search: _Search, screen: _Search, one_polish: float, spent: float = 0.0) -> bool:
+    """Whether one more polish (of work ``one_polish``) keeps the search, after the
+    work ``spent`` before it (another start state's search), within
+    :data:`WORK_BUDGET`."""
+    return spent + _work(search, screen) + one_polish <= WORK_BUDGET
+
+
+def _global_search(search: _Search, starts, max_nfev, steps, hops: int, spent=0.0) -> _Found:
+    """The multi-start search with basin hopping (docs/design/fit.md, "The global search").
+
+    1. Every start is screened (:func:`_screened_ends`: short LM runs on
+       :func:`_screening`'s samples, the lowest-cost start first).
+    2. The lowest screened ends are polished to convergence on every fitted sample and
+       brought inside the bounds (:func:`_polished_end`), as many as
+       :data:`WORK_BUDGET` allows (at least one); an end already within :data:`SAME_MINIMUM` of the
+       best polished cost has reached it (not polished again); ends above
+       :data:`POLISH_STOP_RATIO` x it are left.
+    3. When the best end has parameters on a bound, one restart with them at their
+       typical start value (:func:`_released`): a bound that an interior start beats
+       is a search failure.
+    4. While fewer than :data:`CERTIFIED_AT` starts reached the best cost, restarts
+       from perturbations of the best end (:func:`_hop`; every other one with the
+       initial state on the other branch, :func:`_other_branch_level`, when it is
+       fitted), each screened, then polished
+       unless it ends above :data:`POLISH_STOP_RATIO` x the best; at most ``hops``
+       restarts in all (steps 3 and 4), within :data:`WORK_BUDGET`.
+    """
     screen = _screening(search)
     ends = _screened_ends(screen, starts, steps)
+    screened = [(search.counter.cost(x), x) for x in ends]
+    found = _Found([], screened, [], 0)
+    one, cap = 0.0, max_nfev  # the work of the first polish; the later ones' LM limit
+    for c, x in sorted(screened, key=lambda e: e[0]):
+        if found.polished:
+            b = found.best()[0]
+            if c <= b * (1 + SAME_MINIMUM):
+                found.reached.append(c)
+                continue
+            if (
+                len(found.polished) >= (MAX_POLISHED if hops > 0 else 1)
+                or c > _stop_ratio(one) * b
+                or not _affordable(search, screen, one, spent)
+            ):
+                break
+        before, n0 = _work(search, screen), search.counter.n
+        found.polished.append(_polished_end(search, x, cap))
+        if not one:
+            one = _work(search, screen) - before
+            cap = _later_cap(max_nfev, search.counter.n - n0)
+    rng = np.random.default_rng(HOP_SEED)
+    ref = np.median(np.abs(np.asarray(starts, dtype=float)), axis=0)
+    released = _released(search, found.best()[1], np.median(np.asarray(starts, float), axis=0))
+    if released is not None and hops > 0 and _affordable(search, screen, one, spent):
+        found.hops += 1
+        _, x, _ = screen.run(released, screen.screen_nfev, steps)
+        found.polished.append(_polished_end(search, x, cap))
+    while (
+        found.hops < hops
+        and found.certificate(found.best()[0], len(starts)).at_best < CERTIFIED_AT
+        and _affordable(search, screen, one, spent)
+    ):
+        found.hops += 1
+        b = found.best()
+        x = _hop(search, b[1], ref, rng)
+        if search.uidx is not None and found.hops % 2 == 1:
+            x = _other_branch_level(search, x)
+        _, x, _ = screen.run(x, screen.screen_nfev, steps)
+        if search.counter.cost(x) <= _stop_ratio(one) * b[0]:
+            found.polished.append(_polished_end(search, x, cap))
+    best = found.best()
+    if cap is not None and cap != max_nfev and best[2] is not None and best[2].status == 0:
+        # the best end came from a polish cut at the later ones' limit: run it out
+        found.polished.append(_polished_end(search, best[1], max_nfev))
     if screen is not search:
         search.counter.n += screen.counter.n
-    screened = [(search.counter.cost(x), x) for x in ends]
-    cost, x = min(screened, key=lambda c: c[0])
-    if search.outside(x) and not search.pidx:
-        return (cost, x, None), screened
-    return search.run(x, max_nfev, POLISH_STEPS), screened
+    return found
 
 
-def _in_bounds_end(search: _Search, best, known, max_nfev):
-    """((cost, end, least_squares result), floor, notes): the search's end made physical
-    and no worse than a point already reached.
+#: Later polishes (after the first) run LM for at most this multiple of the first
+#: polish's evaluations (at least :data:`MIN_LATER_NFEV`): a poor end's bounded refit
+#: can take hundreds of iterations (measured on a 50,000-sample coupled recording: a
+#: screened end 188x above the best took 530 iterations, 13 s, to end 3x above it);
+#: a later end that becomes the best is then run out to the fit's own limit.
+LATER_NFEV_RATIO = 2.0
+MIN_LATER_NFEV = 50
 
-    ``floor``: the lowest-cost point of ``known`` inside the bounds (None: none). An
-    unbounded LM end outside the bounds is refitted bounded (:func:`_bounded_polish`) from
-    it brought into them (:func:`_into_bounds`; measured: ends far better than trf from a
-    better-scoring start); an end worse
-    than the floor is refitted bounded from the floor (trf only accepts steps that lower
-    the cost, so it cannot end worse than it). ``notes``: :class:`FitNote` of each refit.
+
+def _stop_ratio(first_polish_work: float) -> float:
+    """How far above the best polished cost a screened end may be and still be
+    polished: :data:`POLISH_STOP_RATIO` while a polish is cheap (its work at most
+    1/20 of :data:`WORK_BUDGET`: up to ~10,000 samples), else
+    :data:`SCREEN_STOP_RATIO` (a long recording's poor ends are left)."""
+    return POLISH_STOP_RATIO if first_polish_work <= WORK_BUDGET / 20 else SCREEN_STOP_RATIO
+
+
+def _later_cap(max_nfev, first_evals: int):
+    """The LM limit of the polishes after the first (:data:`LATER_NFEV_RATIO`)."""
+    cap = max(MIN_LATER_NFEV, int(LATER_NFEV_RATIO * first_evals))
+    return cap if max_nfev is None else min(max_nfev, cap)
+
+
+def _released(search: _Search, x: np.ndarray, typical: np.ndarray) -> np.ndarray | None:
+    """A restart from the end ``x`` with every LM-fitted parameter that sits on a bound
+    moved to its ``typical`` start value (the starts' median), or None when none sits on
+    a bound (or the typical value is on it too).
+
+    A parameter on a bound is either a constrained optimum (the cost falls towards the
+    bound) or a local minimum's accident: an interior start that reaches a lower cost
+    is a search failure, not a fact about the data (measured on the README demo's
+    pitch+: kappa at its bound 100 with cost 6.4, the interior basin kappa 4.1 at 0.55).
     """
-    cost, full, res = best
-    names = search.names
-    notes: list[FitNote] = []
+    levels = () if search.uidx is None else (search.uidx - 1, search.uidx)
+    at = [
+        int(i) for i in search.lsq_free
+        if i not in levels  # a level on its bound: the input came from far, no accident
+        if _on_bound(x[i], search.lower[i], search.upper[i])
+        and not _on_bound(typical[i], search.lower[i], search.upper[i])
+        and search.lower[i] < typical[i] < search.upper[i]
+    ]  # fmt: skip
+    if not at:
+        return None
+    out = np.asarray(x, dtype=float).copy()
+    out[at] = typical[at]
+    return out
+
+
+def _hop(search: _Search, x: np.ndarray, ref: np.ndarray, rng) -> np.ndarray:
+    """A restart near the end ``x``: every LM-fitted parameter perturbed
+    (:data:`HOP_SPREAD`; a positive one by a log-normal factor on at least 5 % of its
+    typical magnitude ``ref``, so one at a zero bound moves too), kept inside its bounds;
+    a profiled flag point moved by :data:`HOP_FLAG_SPREAD` of the input range."""
+    out = np.asarray(x, dtype=float).copy()
+    for i in search.lsq_free:
+        lo, hi = search.lower[i], search.upper[i]
+        if lo >= 0:
+            val = max(out[i], 0.05 * ref[i]) * np.exp(rng.normal(0.0, HOP_SPREAD))
+        else:
+            val = out[i] + rng.normal(0.0, HOP_SPREAD) * max(abs(out[i]), ref[i], 1e-12)
+        out[i] = min(max(val, lo), hi)
+    span = float(np.ptp(search.v))
+    for i in search.pidx:  # the flag point: moved by HOP_FLAG_SPREAD of the input range
+        if i not in search.lsq_free:
+            val = out[i] + rng.normal(0.0, HOP_FLAG_SPREAD) * span
+            out[i] = min(max(val, search.lower[i], float(search.v.min())), search.upper[i])
+    return out
+
+
+def _polished_end(search: _Search, x: np.ndarray, max_nfev):
+    """(cost, end, least_squares result or None, notes) of the screened end ``x``
+    polished by :data:`POLISH_STEPS` with LM runs to convergence and brought inside the
+    bounds (a :class:`FitNote` ``"left_bounds"`` when that needed a bounded refit).
+
+    Without a profiled flag point, an unbounded end outside the bounds goes to the
+    bounded refit as it is (an unbounded polish would only be clipped back; measured on
+    the coupled two-tendon GPI: the same end, 2.6 s less). A flag-point model's polish
+    re-optimises v_f with the other parameters (``"reopt"``) first (measured without it:
+    continuous EGPI fits 2 % higher in cost). An unbounded LM end outside the bounds is
+    refitted bounded (:func:`_bounded_polish`) from it brought into them
+    (:func:`_into_bounds`; measured: ends far better than trf from a better-scoring
+    start)."""
+    if search.outside(x) and not search.pidx:
+        cost, full, res = search.counter.cost(x), x, None
+    else:
+        cost, full, res = search.run(x, max_nfev, POLISH_STEPS)
     left = search.outside(full)
+    if not left:
+        return cost, full, res, ()
+    # the bounded refit holds the initial-state levels for LM (profiled in its steps):
+    # measured on a 50,000-sample coupled recording, with them free the held LM runs
+    # took 300 iterations each (34 s) to a cost above the unbounded end's
+    bounded = search.without_levels()
+    start = _into_bounds(bounded, full, left, max_nfev)
+    (cost, full, res), how = _bounded_polish(bounded, start, max_nfev)
+    if bounded is not search and res is not None:  # the covariance's columns: every LM one
+        res = OptimizeResult(res, jac=_jacobian_at(search.counter, full, search.lsq_free))
+    names = search.names
+    note = FitNote(
+        "left_bounds",
+        f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded ({how})",
+        tuple(names[i] for i in left),
+    )
+    return cost, full, res, (note,)
+
+
+def _jacobian_at(counter: _Counter, full: np.ndarray, free) -> np.ndarray:
+    """The residuals' Jacobian over the parameters ``free`` at ``full``: the model's
+    own (:meth:`_Counter.jacobian`), else forward differences (as least_squares'
+    "2-point")."""
+    if counter.jac_fn is not None:
+        return counter.jacobian(full, free)
+    base = counter.residuals(full)
+    cols = []
+    for i in free:
+        h = np.sqrt(np.finfo(float).eps) * max(1.0, abs(float(full[i])))
+        trial = np.asarray(full, dtype=float).copy()
+        trial[i] += h
+        cols.append((counter.residuals(trial) - base) / h)
+    return np.stack(cols, axis=1) if cols else np.zeros((base.size, 0))
+
+
+def _floor_checked(search: _Search, found: _Found, known, max_nfev):
+    """((cost, end, least_squares result), floor, notes): the best polished end, no
+    worse than a point already reached.
+
+    ``floor``: the lowest-cost point of ``known`` inside the bounds (None: none). An end
+    worse than the floor is refitted bounded from the floor (trf only accepts steps that
+    lower the cost, so it cannot end worse than it). ``notes``: :class:`FitNote` of the
+    best end's bounded refit and of this one.
+    """
+    cost, full, res, notes = found.best()
+    notes = list(notes)
     inside = [(c, x) for c, x in known if np.isfinite(c) and not search.outside(x)]
     floor = min(inside, key=lambda c: c[0]) if inside else None
-    if left:
-        start = _into_bounds(search, full, left, max_nfev)
-        (cost, full, res), how = _bounded_polish(search, start, max_nfev)
-        notes.append(
-            FitNote(
-                "left_bounds",
-                f"LM left the bounds ({', '.join(names[i] for i in left)}); refitted bounded ({how})",
-                tuple(names[i] for i in left),
-            )
-        )
     if floor is not None and not cost <= floor[0]:
         cost, full, res = search.run(floor[1], max_nfev, POLISH_STEPS, "trf")
         notes.append(
@@ -1511,6 +2257,15 @@ def _into_bounds(search: _Search, full: np.ndarray, left: list[int], max_nfev) -
     return held
 
 
+def _shown(x: float, search: _Search, name: str) -> str:
+    """``x`` as the bound it sits on when within 1e-6 of it ("0", not "6.7e-10")."""
+    i = search.names.index(name)
+    for b in (search.lower[i], search.upper[i]):
+        if _on_bound(x, b, b):
+            return f"{b:.6g}"
+    return f"{x:.6g}"
+
+
 def _with_notes(result: FitResult, search: _Search, cost, full, floor, notes) -> FitResult:
     """``result`` with the fitter's notes: not converged when still worse than the
     ``floor`` (``"not_a_minimum"``), NaN standard errors for parameters a bounded
@@ -1535,7 +2290,11 @@ def _with_notes(result: FitResult, search: _Search, cost, full, floor, notes) ->
         notes.append(FitNote("at_bound", f"at the bound: {', '.join(at_bound)}", tuple(at_bound)))
     stderr = result.stderr | dict.fromkeys(at_bound, float("nan"))
     reasons = result.stderr_reasons | {
-        nm: f"at its bound ({full[names.index(nm)]:.6g}): the covariance does not apply there"
+        nm: (
+            f"at its bound ({_shown(full[names.index(nm)], search, nm)}): the lowest cost "
+            "found has it there (a constrained optimum, not a lack of data); the covariance "
+            "does not apply at a bound"
+        )
         for nm in at_bound
     }
     message = result.message + "".join(f" [{n.text}]" for n in notes)
@@ -1561,18 +2320,27 @@ def _nested_fit(model, s, theta, starts, opts) -> tuple[np.ndarray, FitResult] |
     return x, res
 
 
-def _without_level(result: FitResult, model: Model, v: np.ndarray, full: np.ndarray) -> FitResult:
+def _without_level(
+    result: FitResult, model: Model, v: np.ndarray, full: np.ndarray, cycle: int = 0
+) -> FitResult:
     """``result`` of a :class:`_FromLevel` fit in terms of ``model``: the level
-    ``v_from`` leaves the parameters for :attr:`FitResult.initial_state`."""
-    u = float(full[-1])
+    ``v_from`` (and the replayed ``cycle``) leave the parameters for
+    :attr:`FitResult.initial_state`."""
+    ut, u = float(full[-2]), float(full[-1])
     p = len(model.parameters)
     names = tuple(pp.name for pp in model.parameters)
     branch = f"a falling branch that turned at {u:.6g}" if u > v[0] else "the loading branch"
-    st = _FromLevel(model, v)
-    n_pre = st.prehistory(Signals(v=np.asarray(v, float)), u)[1]
+    via = f" via {u:.6g}" if ut != u else ""
+    st = _FromLevel(model, v, cycle)
+    n_pre = st.prehistory(Signals(v=np.asarray(v, float)), (ut, u))[1]
+    replay = (
+        f", then the recording's first {cycle} samples (its first cycle, both motors) replayed"
+        if cycle
+        else ""
+    )
     text = (
         f"the recording starts mid-range (input {v[0]:.6g}, not at rest): initial state "
-        f"fitted as {branch} (pre-history from {u:.6g}, {n_pre} samples)"
+        f"fitted as {branch} (pre-history from {ut:.6g}{via}{replay}, {n_pre} samples)"
     )
     return replace(
         result,
@@ -1581,7 +2349,9 @@ def _without_level(result: FitResult, model: Model, v: np.ndarray, full: np.ndar
         stderr_reasons={k: r for k, r in result.stderr_reasons.items() if k in names},
         covariance=result.covariance[:p, :p],
         free=tuple(k for k in result.free if k in names),
-        initial_state=InitialState(u, int(n_pre), float(v[0]), text),
+        initial_state=InitialState(
+            u, int(n_pre), float(v[0]), text, int(cycle), None if ut == u else ut
+        ),
     )
 
 
@@ -1606,7 +2376,7 @@ def _result(
     k = int(is_free.sum())
     rss = float(np.sum(resid[used] ** 2))
     cov, stderr, reasons = _covariance(res, names, lsq_idx, n, k, rss)
-    for i in pidx:
+    for i in (i for i in pidx if i not in set(int(j) for j in lsq_idx)):
         stderr[names[i]] = float("nan")
         reasons[names[i]] = (
             "profiled: the output steps in it (piecewise constant), so it has no "
@@ -1614,6 +2384,7 @@ def _result(
         )
     if uidx is not None:
         stderr[names[uidx]] = float("nan")
+        stderr[names[uidx - 1]] = float("nan")
     converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)
     message = "profile search only" if res is None else str(res.message)
     outside = [
@@ -1734,6 +2505,8 @@ def fit_notices(res: FitResult) -> tuple[str, ...]:
     out = []
     if res.initial_state is not None:
         out.append(res.initial_state.text)
+    if res.certificate is not None and res.certificate.warning:
+        out.append(f"{res.certificate.warning} ({res.certificate.text})")
     missing = {k: r for k, r in res.stderr_reasons.items() if not r.startswith("profiled")}
     if missing:
         out.append("no standard error for " + "; ".join(f"{k} ({r})" for k, r in missing.items()))

@@ -324,6 +324,25 @@ def split_masks(v: np.ndarray, config: FitConfig = FitConfig()) -> tuple[np.ndar
     return cyc, holdout_mask(cyc, config.holdout_fraction, v)
 
 
+#: With ``n_starts = 0`` a fit gets START_ROWS // fitted samples starts, between
+#: :data:`MIN_AUTO_STARTS` and :data:`MAX_AUTO_STARTS` (8 up to 5,000 fitted samples,
+#: 2 from 20,000): screening a start costs about one model run per LM iteration, so
+#: the search's time grows with starts x samples, and a long recording's cost surface
+#: is the better determined one.
+START_ROWS = 40_000
+MIN_AUTO_STARTS = 2
+MAX_AUTO_STARTS = 8
+
+
+def search_starts(n_config: int, n_fitted: int) -> int:
+    """Number of data-driven starts of a fit: ``n_config`` when set (> 0), else by the
+    number of fitted samples ``n_fitted`` (:data:`START_ROWS`). The one rule, read by
+    the CLI's fit and by :func:`fit`."""
+    if n_config > 0:
+        return int(n_config)
+    return int(np.clip(START_ROWS // max(n_fitted, 1), MIN_AUTO_STARTS, MAX_AUTO_STARTS))
+
+
 def fit_kind(
     kind: str,
     signals: Signals | np.ndarray,
@@ -378,9 +397,9 @@ def fit_kind(
         return _scaled_fit(res, scale, unfitted_model(kind, v, config, db))
     model = unfitted_model(kind, v, config, db)
     info = kind_info(kind)
-    n_starts = getattr(config, info.n_starts)
     rng = np.random.default_rng(config.seed)
     fit_sel = np.isfinite(theta) & ~holdout
+    n_starts = search_starts(getattr(config, info.n_starts), int(fit_sel.sum()))
     theta_fit = np.where(fit_sel, theta, np.nan)
     if info.coupled:
         if s.v_other is None:
@@ -421,6 +440,7 @@ def _fit_configured(
         max_nfev=config.max_nfev,
         loss=config.loss,
         f_scale_deg=config.f_scale_deg,
+        basin_hops=config.max_restarts,
     )
 
 
@@ -653,6 +673,7 @@ def fit(
     if recipe is not None and np.isfinite(theta_fit).sum() > 2:
         rng = np.random.default_rng(config.seed)
         tail = model.values[len(base.parameters) :]
-        starts += [np.append(x, tail) for x in recipe(base, v, theta_fit, config.n_starts, rng, db)]
+        n_starts = search_starts(config.n_starts, int(np.isfinite(theta_fit).sum()))
+        starts += [np.append(x, tail) for x in recipe(base, v, theta_fit, n_starts, rng, db)]
         starts = [keep_fixed(model, x) for x in starts]
     return _fit_configured(model, signals, theta, hold, starts, config)

@@ -539,6 +539,7 @@ def fit_record(res) -> dict:
                 {"code": n.code, "text": n.text, "params": list(n.params)} for n in res.notes
             ],
             "initial_state": None if res.initial_state is None else res.initial_state.as_dict(),
+            "certificate": None if res.certificate is None else res.certificate.as_dict(),
         }
     )
 
@@ -583,6 +584,7 @@ def fit_fields(obj: Mapping, where: str = "fit file") -> dict:
             "notes": list(obj.get("notes", [])),
             "stderr_reasons": dict(obj.get("stderr_reasons", {})),
             "initial_state": obj.get("initial_state"),
+            "certificate": obj.get("certificate"),
             "start": numbers(obj.get("start", {})),
         }
     except CalibError as exc:

@@ -553,7 +553,14 @@ class ContinuousEGPIModel(I2RISEGPIModel):
     while ``gamma_r2 + kappa r`` lies above the state. No ``v'`` dead band is needed:
     the unloading update only acts on a falling input. ``deadband_counts`` is kept for
     the interface and unused.
+
+    The output is continuous in ``v_f`` (a step that crosses it meets the stage-1
+    boundary at ``v_f`` itself), so the fitter moves ``v_f`` with the other parameters
+    (a finite-difference column, :data:`CONTINUOUS_FLAG_POINT`) besides profiling it.
     """
+
+    #: The output is continuous (piecewise smooth) in the flag point ``v_f``.
+    CONTINUOUS_FLAG_POINT = True
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
         """Output angle (deg), shape (n_samples,)."""

@@ -18,8 +18,8 @@ Recipe (docs/fit.md):
    loading slope) after it has followed it - the paper's "first point where the
    derivative is approximately zero" (Lee et al. 2021), read as the derivative of the
    output with respect to the input, since the commanded input itself keeps moving.
-4. Further starts: the shape parameters scaled by log-uniform factors (seeded), the
-   envelope lines refitted for each.
+4. Further starts: the shape parameters spread by a seeded scrambled Halton design
+   (:func:`start_values`), the envelope lines refitted for each.
 
 The recipe applies to models whose parameters are exactly those of the GPI
 (:data:`GPI_PARAMETERS`) or of the I2RIS EGPI (:data:`EGPI_PARAMETERS`, both the
@@ -30,6 +30,7 @@ the models (``ParametricModel.guess``) and is used by the fitting stage.
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import qmc
 
 from i2ris_calib.hysteresis.bands import input_bands
 from i2ris_calib.hysteresis.kernel import density, motion_direction, thresholds
@@ -244,6 +245,13 @@ def initial_values(
     return model.vector({k: x for k, x in vals.items() if k in model.names})
 
 
+#: Spread of the shape starts: factors in [1/SHAPE_SPREAD, SHAPE_SPREAD] of the
+#: data-driven rn, r1 and sigma (:func:`start_values`).
+SHAPE_SPREAD = 4.0
+#: Range of kappa over the starts (:func:`start_values`).
+KAPPA_RANGE = (1.0, 16.0)
+
+
 def start_values(
     model: Model,
     v: np.ndarray,
@@ -253,19 +261,29 @@ def start_values(
     deadband: float = 0.0,
     v_f: float | None = None,
 ) -> list[np.ndarray]:
-    """``n_starts`` start vectors: the data-driven one first, then seeded variations
-    of the shape parameters (log-uniform factors in [1/3, 3]; kappa in [1/2, 2])."""
+    """``n_starts`` start vectors: the data-driven one first, then variations of the
+    shape parameters spread over the space labs see: a scrambled Halton design (seeded
+    by ``rng``) over log factors in [1/4, 4] of the data-driven ``rn``, ``r1`` and
+    ``sigma`` and ``kappa`` log-uniform in [1, 16] (an EGPI's second family can be
+    from about as steep as the first to many times steeper). A design covers the box
+    evenly where random draws cluster (measured on the README demo's pitch+: the
+    best EGPI basin, 12x lower in cost than the data-driven start's, is reached from
+    about one start in five)."""
     base = shape_defaults(np.asarray(theta, dtype=float))
     starts = [initial_values(model, v, theta, deadband, base, v_f)]
     if recipe_of(model) == "egpi":
         v_f = float(starts[0][EGPI_PARAMETERS.index("v_f")])
-    for _ in range(max(0, n_starts - 1)):
-        f = np.exp(rng.uniform(np.log(1 / 3), np.log(3), 3))
+    if n_starts <= 1:
+        return starts
+    u = qmc.Halton(d=4, scramble=True, rng=rng).random(n_starts - 1)
+    f = np.exp(np.log(SHAPE_SPREAD) * (2.0 * u[:, :3] - 1.0))
+    kappa = np.exp(np.log(KAPPA_RANGE[0]) + u[:, 3] * np.log(KAPPA_RANGE[1] / KAPPA_RANGE[0]))
+    for fi, ki in zip(f, kappa, strict=True):
         shape = {
-            "rn": base["rn"] * f[0],
-            "r1": base["r1"] * f[1],
-            "sigma": base["sigma"] * f[2],
-            "kappa": base["kappa"] * float(np.exp(rng.uniform(np.log(0.5), np.log(2.0)))),
+            "rn": base["rn"] * fi[0],
+            "r1": base["r1"] * fi[1],
+            "sigma": base["sigma"] * fi[2],
+            "kappa": float(ki),
         }
         starts.append(initial_values(model, v, theta, deadband, shape, v_f))
     return starts

@@ -59,6 +59,7 @@ def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str
         "warnings": list(fit_warnings(res, np.zeros(0) if v is None else v)),
         "stderr_reasons": dict(res.stderr_reasons),
         "initial_state": None if res.initial_state is None else res.initial_state.as_dict(),
+        "certificate": None if res.certificate is None else res.certificate.as_dict(),
     }
     if hasattr(base_of(model), "deadband_counts"):
         rec["deadband_counts"] = float(base_of(model).deadband_counts)

@@ -23,6 +23,7 @@ from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info
 from i2ris_calib.report.tables import (
     FIT_MODELS,
     PROFILED_PARAMS,
+    at_bound,
     fmt_sig,
     not_converged,
     unidentified,
@@ -177,13 +178,17 @@ def _identification_note(d: Mapping[str, Any], best: str) -> str:
     """Which fitted parameters of model ``best`` the data do not identify, or that all
     are identified (profiled ones named)."""
     bad = unidentified(d, best)
+    bound = at_bound(d, best)
     free = d["models"][best].get("free") or d["models"][best].get("params") or []
     n_free = len([n for n in free if n not in PROFILED_PARAMS])
+    edge = f"{', '.join(bound)} at a bound (the lowest cost found has it there)" if bound else ""
     if bad:
         return (
             f"{len(bad)} parameter(s) not identified by these data ({', '.join(bad)}): "
-            "trust the predictions, not those values"
+            "trust the predictions, not those values" + (f"; {edge}" if edge else "")
         )
+    if bound:
+        return f"the other fitted parameters identified; {edge}"
     profiled = [n for n in free if n in PROFILED_PARAMS]
     return f"all {n_free} fitted parameters identified" + (
         f" ({', '.join(profiled)} profiled)" if profiled else ""

@@ -615,6 +615,16 @@ def _grouped_caption(dataset: Mapping[str, Any], label: str, n_params: int, grou
     )
 
 
+def at_bound(dataset: Mapping[str, Any], key: str) -> list[str]:
+    """Free parameters of model ``key`` that the fit left on a bound (the search found
+    no lower cost inside it: a constrained optimum)."""
+    rec = dataset.get("models", {}).get(key)
+    if not isinstance(rec, Mapping):
+        return []
+    reasons = rec.get("stderr_reasons") or {}
+    return [n for n, r in reasons.items() if str(r).startswith("at its bound")]
+
+
 def unidentified(dataset: Mapping[str, Any], key: str) -> list[str]:
     """Free parameters of model ``key`` whose stderr is missing or exceeds |value|
     (the profiled flag point excluded: it has no stderr by construction)."""
@@ -623,10 +633,13 @@ def unidentified(dataset: Mapping[str, Any], key: str) -> list[str]:
         return []
     out = []
     free = rec.get("free")
+    reasons = rec.get("stderr_reasons") or {}
     for n, v in (rec.get("params") or {}).items():
         se = _finite((rec.get("stderr") or {}).get(n))
         if n in PROFILED_PARAMS or (isinstance(free, list) and n not in free) or se == 0.0:
             continue
+        if str(reasons.get(n, "")).startswith("at its bound"):
+            continue  # a constrained optimum (at_bound lists it), not a lack of data
         val = _finite(v)
         if se is None or val is None or se > abs(val):
             out.append(n)
@@ -644,17 +657,37 @@ FIT_INFO_KEYS = (
 )
 
 
+def certificate_cell(cert: Any) -> str:
+    """The fit's search certificate (fit.json ``certificate``) in a few words: how many
+    starts reached the best cost, the next minimum found, and a warning mark when only
+    one start reached it; an em dash when the record has none (an older fit.json)."""
+    if not isinstance(cert, Mapping) or _finite(cert.get("at_best")) is None:
+        return "\u2014"
+    n_all = int(_finite(cert.get("starts")) or 0) + int(_finite(cert.get("hops")) or 0)
+    txt = f"{int(cert['at_best'])} of {n_all} starts at the best cost"
+    nxt, best = _finite(cert.get("next_cost")), _finite(cert.get("best_cost"))
+    if nxt is not None and best:
+        txt += f"; next minimum {nxt / best:.4g}x"
+    if cert.get("certified") is False:
+        txt = "**only one start reached it**: " + txt
+    return txt
+
+
 def fit_info_table(dataset: Mapping[str, Any]) -> Table:
     """Convergence and information criteria per model for one dataset."""
     models = [
         (k, lab) for k, lab in FIT_MODELS if isinstance(dataset.get("models", {}).get(k), dict)
     ]
     rows = tuple(
-        (lab, *(fmt(dataset["models"][k].get(key)) for key, _ in FIT_INFO_KEYS))
+        (
+            lab,
+            *(fmt(dataset["models"][k].get(key)) for key, _ in FIT_INFO_KEYS),
+            certificate_cell(dataset["models"][k].get("certificate")),
+        )
         for k, lab in models
     )
     return Table(
-        header=("model", *(label for _, label in FIT_INFO_KEYS)),
+        header=("model", *(label for _, label in FIT_INFO_KEYS), "global search"),
         rows=rows,
         caption=f"{_dataset_label(dataset)}: fit diagnostics.",
     )

@@ -309,6 +309,9 @@ class OffsetProfile:
                         starts=starts,
                         method=cfg.method,
                         max_nfev=cfg.max_nfev,
+                        # warm refits along the clock profile: local (the cold fit
+                        # of fit_kind is the global search)
+                        basin_hops=0,
                     )  # fmt: skip
                 )
             if self.cold or not starts:
@@ -1127,6 +1130,25 @@ def model_evidence(
     }
 
 
+#: Starts of each cold fit along the clock-offset profile when ``[fit] n_starts`` is 0
+#: (by the data's size): the profile refits the models at tens of offsets, each warm
+#: from its neighbours; the fit stage's own search runs on the synced result.
+PROFILE_STARTS = 2
+
+
+def profile_fit_config(fit_config: FitConfig | None) -> FitConfig:
+    """The fit settings of the clock-offset profile: ``fit_config`` without held-out
+    cycles or restarts, its starts by the data's size replaced by
+    :data:`PROFILE_STARTS`."""
+    cfg = replace(fit_config or FitConfig(), holdout_fraction=0.0)
+    return replace(
+        cfg,
+        n_starts=cfg.n_starts or PROFILE_STARTS,
+        n_starts_gpi=cfg.n_starts_gpi or PROFILE_STARTS,
+        max_restarts=0,
+    )
+
+
 def clock_from_model(
     series: list[AxisSeries],
     log: EncoderLog,
@@ -1163,7 +1185,7 @@ def clock_from_model(
         With the offset profile (offsets at ``t_c``, RSS) and the uncertainty terms
         (:func:`offset_stderr`) as evidence.
     """
-    fit_config = replace(fit_config or FitConfig(), holdout_fraction=0.0)
+    fit_config = profile_fit_config(fit_config)
     t_c = float(np.mean(np.concatenate([s.t_cam_s for s in series])))
     window = search_window(series, log, cfg, t_c, prior)
     o_x, halfwidth, step, _ = window

@@ -97,3 +97,21 @@ def test_two_level_prehistory_runs_through_both_turns():
     assert np.asarray(one.v)[0] == -400.0 and np.all(np.diff(np.asarray(one.v)[:n1]) > 0)
     cyc, nc = F.prehistory_signals(Signals(v=v), v_from=-400.0, step=50.0, cycle=6)
     np.testing.assert_array_equal(np.asarray(cyc.v)[nc - 6 : nc], v[:6])
+
+
+def test_other_motor_prehistory_runs_first_and_alone():
+    """The other motor's levels: its ramps come first (this motor held where its own
+    ramps begin), then this motor's ramps (the other held at its first value); the
+    recording follows unchanged."""
+    v = np.array([100.0, 200.0, 300.0, 250.0])
+    vo = np.array([-50.0, 0.0, 50.0, 100.0])
+    sig, n = F.prehistory_signals(
+        Signals(v=v, v_other=vo), v_from=-200.0, step=100.0, other_levels=(700.0, -600.0),
+        other_step=100.0,
+    )  # fmt: skip
+    pv, po = np.asarray(sig.v)[:n], np.asarray(sig.v_other)[:n]
+    k = int(np.flatnonzero(np.diff(pv) != 0)[0]) + 1  # where this motor starts to move
+    assert po[0] == 700.0 and np.isclose(po[:k].min(), -600.0)
+    assert np.all(pv[:k] == -200.0) and np.all(po[k:] == vo[0])
+    np.testing.assert_array_equal(np.asarray(sig.v)[n:], v)
+    np.testing.assert_array_equal(np.asarray(sig.v_other)[n:], vo)

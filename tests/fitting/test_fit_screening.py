@@ -156,6 +156,18 @@ def test_level_output_is_evaluate_to_the_last_bit():
             trial = full.copy()
             trial[-2] = u
             np.testing.assert_array_equal(turn(u), fc.evaluate(s, trial))
+    # the other motor's own pre-history (four levels): the own levels' shortcut is
+    # still the whole model bit for bit; the other motor's levels have none
+    f4 = F._FromLevel(m, s.v, 30, s.v_other)
+    assert f4.levels == 4
+    full4 = np.append(m.values, [900.0, -800.0, 0.0, 0.0])
+    for idx in (len(full4) - 1, len(full4) - 2):
+        out4 = f4.level_output(s, full4, idx)
+        for u in (float(s.v.min()), 0.0, 1234.5):
+            trial = full4.copy()
+            trial[idx] = u
+            np.testing.assert_array_equal(out4(u), f4.evaluate(s, trial))
+    assert f4.level_output(s, full4, len(full4) - 3) is None
     agpi = F._FromLevel(two_tendon_gpi_model(), s.v)
     assert agpi.level_output(s, np.append(two_tendon_gpi_model().values, [0.0, 0.0])) is None
     assert fl.level_output(Signals(v=s.v), full) is None

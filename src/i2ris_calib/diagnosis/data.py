@@ -203,18 +203,21 @@ def search_data(
     loading = loading_mask(data.v, data.bands.deadband)[idx]
     d = SearchData(sig, np.where(ok, th, 0.0), fit, hold, units, loading)
     if initial_state is not None and note:
-        d = _after_prehistory(
-            d, initial_state.v_from, initial_state.cycle_samples, initial_state.v_turn
-        )
+        d = _after_prehistory(d, initial_state)
     return d, hold_full, step
 
 
-def _after_prehistory(
-    d: SearchData, v_from: float, cycle: int = 0, v_turn: float | None = None
-) -> SearchData:
-    """``d`` with the pre-history from ``v_turn`` via ``v_from`` (and the replayed
-    first ``cycle`` samples) prepended (nothing counted there)."""
-    sig, n_pre = prehistory_signals(d.signals, v_from, cycle=cycle, v_turn=v_turn)
+def _after_prehistory(d: SearchData, st: InitialState) -> SearchData:
+    """``d`` with the fit's pre-history ``st`` (the ramps from ``v_turn`` via ``v_from``,
+    the other motor's first when estimated, the replayed first cycle) prepended
+    (nothing counted there)."""
+    other = None
+    if st.other_v_from is not None:
+        o_turn = st.other_v_from if st.other_v_turn is None else st.other_v_turn
+        other = (o_turn, st.other_v_from)
+    sig, n_pre = prehistory_signals(
+        d.signals, st.v_from, cycle=st.cycle_samples, v_turn=st.v_turn, other_levels=other
+    )
 
     def pad(a: np.ndarray, value) -> np.ndarray:
         return np.concatenate([np.full(n_pre, value, dtype=a.dtype), a])

@@ -236,6 +236,13 @@ class InitialState:
         ``v_from``: one ramp). Two levels stand for the last two reversals before
         the recording (a loop's maximum and minimum), which may lie beyond the
         recording's own range.
+    other_v_turn, other_v_from : float or None
+        The other motor's pre-history, for a model with a state of its input
+        (hysteretic coupling): relaxed at ``other_v_turn``, ramping to
+        ``other_v_from`` and to its first value ``v0_other``, before this motor's
+        ramps (None: it held its first value, relaxed there).
+    v0_other : float or None
+        The other motor's first input value (with its levels).
     """
 
     v_from: float
@@ -244,10 +251,16 @@ class InitialState:
     text: str
     cycle_samples: int = 0
     v_turn: float | None = None
+    other_v_turn: float | None = None
+    other_v_from: float | None = None
+    v0_other: float | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready form."""
         return {
+            "other_v_turn": self.other_v_turn,
+            "other_v_from": self.other_v_from,
+            "v0_other": self.v0_other,
             "v_turn": self.v_turn,
             "v_from": self.v_from,
             "n_samples": self.n_samples,
@@ -269,6 +282,12 @@ def starts_at_rest(v: np.ndarray) -> bool:
     return abs(v0) <= tol or v0 - float(v.min()) <= tol or float(v.max()) - v0 <= tol
 
 
+def reads_other_state(model: Model) -> bool:
+    """True for a model with a state of the other motor's input (hysteretic coupling:
+    its base has ``other_input_terms``)."""
+    return hasattr(innermost(model), "other_input_terms")
+
+
 def signals_start_at_rest(s: Signals, model: Model | None = None) -> bool:
     """:func:`starts_at_rest` of the input and, for a ``model`` with a state of the
     other motor's input (hysteretic coupling: ``other_input_terms``) when that input
@@ -276,7 +295,7 @@ def signals_start_at_rest(s: Signals, model: Model | None = None) -> bool:
     if not starts_at_rest(s.v):
         return False
     vo = s.v_other
-    if vo is None or model is None or not hasattr(innermost(model), "other_input_terms"):
+    if vo is None or model is None or not reads_other_state(model):
         return True
     vo = np.asarray(vo, dtype=float)
     return not np.all(np.isfinite(vo)) or starts_at_rest(vo)
@@ -430,6 +449,8 @@ def prehistory_signals(
     step: float | None = None,
     cycle: int = 0,
     v_turn: float | None = None,
+    other_levels: tuple[float, float] | None = None,
+    other_step: float | None = None,
 ) -> tuple[Signals, int]:
     """(``signals`` with the synthetic pre-history of :class:`InitialState` prepended,
     its length): the input ramps from ``v_from`` to ``v[0]`` in steps of ``step``
@@ -439,7 +460,10 @@ def prehistory_signals(
     and every per-sample extra hold their first value. A model run on the result and
     cut by the length starts in the state the fit estimated (:meth:`FitResult.predict`
     does this). ``v_turn``: an earlier turning point, the operators relaxed there and
-    the input ramping to ``v_from`` first."""
+    the input ramping to ``v_from`` first. ``other_levels`` (o_turn, o_from): the
+    other motor's own pre-history, run first (this motor held where its ramps begin):
+    relaxed at o_turn, ramping to o_from and to its first value in steps of
+    ``other_step``; without them it holds its first value (relaxed there)."""
     v0 = np.asarray(signals.v, dtype=float)
     step = prehistory_step(v0) if step is None else step
     cycle = min(int(cycle), v0.size)
@@ -448,7 +472,44 @@ def prehistory_signals(
     levels = (float(v_from),) if v_turn is None else (float(v_turn), float(v_from))
     vv, n_ramp = _ramped(v, levels, step)
     sig, n_pre = _ramp_padded(signals, vv, n_ramp)
+    if other_levels is not None and signals.v_other is not None:
+        sig, n_o = _other_first(sig, other_levels, other_step)
+        n_pre += n_o
     return sig, n_pre + int(cycle)
+
+
+def _other_first(signals: Signals, levels, step: float | None) -> tuple[Signals, int]:
+    """(``signals`` with the other motor's pre-history through ``levels`` prepended,
+    this motor (and every other per-sample array) held at its first value meanwhile;
+    its length)."""
+    vo = np.asarray(signals.v_other, dtype=float)
+    step = prehistory_step(vo) if step is None else step
+    ramp, n = _ramped(vo, tuple(float(x) for x in levels), step)
+    v = np.asarray(signals.v)
+
+    def hold(a):
+        if a is None:
+            return None
+        a = np.asarray(a)
+        if a.shape != v.shape:
+            return a
+        out = np.concatenate([np.full(n, a[0], dtype=a.dtype), a])
+        out.flags.writeable = False
+        return out
+
+    t = None
+    if signals.t_s is not None:
+        t0 = np.asarray(signals.t_s, dtype=float)
+        dt = float(np.median(np.diff(t0))) if t0.size > 1 else 1.0
+        t = np.concatenate([t0[0] - dt * np.arange(n, 0, -1), t0])
+    extra = {k: hold(a) if isinstance(a, np.ndarray) else a for k, a in signals.extra.items()}
+    return (
+        Signals(
+            v=hold(v), t_s=t, v_other=ramp, theta_other_deg=hold(signals.theta_other_deg),
+            extra=extra,
+        ),
+        n,
+    )  # fmt: skip
 
 
 def _ramp_padded(signals: Signals, vv: np.ndarray, n_pre: int) -> tuple[Signals, int]:
@@ -494,17 +555,34 @@ class _FromLevel:
 
     TURN = "initial_state.v_turn"
     PARAM = "initial_state.v_from"
-    #: Number of level parameters at the end of the vector.
-    LEVELS = 2
+    OTHER_TURN = "initial_state.other_v_turn"
+    OTHER_FROM = "initial_state.other_v_from"
 
-    def __init__(self, model: Model, v: np.ndarray, cycle: int = 0):
+    def __init__(self, model: Model, v: np.ndarray, cycle: int = 0, v_other=None):
         self.inner = model
         self.cycle = int(cycle)
         self.name = model.name
         v = np.asarray(v, dtype=float)
         lo, hi = level_bounds(v)
+        other = ()
+        self.other_step = None
+        if v_other is not None and reads_other_state(model):
+            vo = np.asarray(v_other, dtype=float)
+            if vo.size and np.all(np.isfinite(vo)) and np.ptp(vo) > 0:
+                olo, ohi = level_bounds(vo)
+                other = (
+                    Parameter(self.OTHER_TURN, float(vo[0]), olo, ohi, unit="input",
+                              doc="an earlier turning point of the other motor's input"),
+                    Parameter(self.OTHER_FROM, float(vo[0]), olo, ohi, unit="input",
+                              doc="level the other motor's input came from"),
+                )  # fmt: skip
+                self.other_step = prehistory_step(vo)
+        #: Number of level parameters at the end of the vector: (other motor's two,)
+        #: then v_turn, v_from.
+        self.levels = 2 + len(other)
         self.parameters = (
             *model.parameters,
+            *other,
             Parameter(self.TURN, float(v[0]), lo, hi, unit="input",
                       doc="an earlier turning point of the input before the recording"),
             Parameter(self.PARAM, float(v[0]), lo, hi, unit="input",
@@ -517,14 +595,17 @@ class _FromLevel:
         self._cache: dict = {}
 
     def prehistory(self, signals: Signals, levels) -> tuple[Signals, int]:
-        """(signals with the pre-history through ``levels`` (v_turn, v_from) prepended,
-        its length)."""
-        ut, u = (float(x) for x in levels)
-        key = (id(signals.v), ut, u)
+        """(signals with the pre-history through ``levels`` (the last
+        :attr:`levels` values: (other motor's turn and level,) v_turn, v_from)
+        prepended, its length)."""
+        lv = tuple(float(x) for x in levels)
+        ut, u = lv[-2], lv[-1]
+        other = lv[:2] if len(lv) == 4 else None
+        key = (id(signals.v), *lv)
         hit = self._cache.get(key)
         if hit is not None and hit[0] is signals.v:  # the same array, not a reused id
             return hit[1]
-        out = prehistory_signals(signals, u, self.step, self.cycle, ut)
+        out = prehistory_signals(signals, u, self.step, self.cycle, ut, other, self.other_step)
         if len(self._cache) > 4:
             self._cache.pop(next(iter(self._cache)))
         self._cache[key] = (signals.v, out)  # holds the array: its id is not reused
@@ -538,8 +619,9 @@ class _FromLevel:
         return vv, n + k
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:
-        sig, n_pre = self.prehistory(signals, values[-2:])
-        return np.asarray(self.inner.evaluate(sig, np.asarray(values[:-2], float)))[n_pre:]
+        k = self.levels
+        sig, n_pre = self.prehistory(signals, values[-k:])
+        return np.asarray(self.inner.evaluate(sig, np.asarray(values[:-k], float)))[n_pre:]
 
     def level_output(self, signals: Signals, values: np.ndarray, idx: int = -1):
         """The output as a function of the level ``values[idx]`` alone (the other values
@@ -553,12 +635,20 @@ class _FromLevel:
         vo = signals.v_other
         if terms_fn is None or own_fn is None or vo is None or not np.isfinite(vo[0]):
             return None
-        inner = np.asarray(values[:-2], float)
-        levels = np.asarray(values[-2:], dtype=float).copy()
         at = idx - len(values) if idx >= 0 else idx
-        # the other motor holds its first value during the ramp (its terms start there
-        # as without it) and moves through the replayed cycle: terms from the cycle on
-        terms = [t[self.cycle :] for t in terms_fn(_with_cycle(signals, self.cycle), inner)]
+        if at < -2:
+            return None  # the other motor's levels move its terms: no shortcut
+        k = self.levels
+        inner = np.asarray(values[:-k], float)
+        levels = np.asarray(values[-2:], dtype=float).copy()
+        # the other motor holds its first value during this motor's ramps (its terms
+        # change only in its own pre-history, before them, and in the replayed cycle):
+        # terms of [its pre-history | the cycle | the recording], from the recording on
+        base = _with_cycle(signals, self.cycle)
+        n_o = 0
+        if k == 4:
+            base, n_o = _other_first(base, values[-4:-2], self.other_step)
+        terms = [t[n_o + self.cycle :] for t in terms_fn(base, inner)]
         v = np.asarray(signals.v, dtype=float)
 
         def output(u: float) -> np.ndarray:
@@ -583,11 +673,12 @@ class _FromLevel:
         head, m = self._opening(signals)
         near = rows < m
         base = self.evaluate(head, values)[rows[near]]
-        cols = np.zeros((rows.size, 2))
-        for c, j in enumerate((-2, -1)):
+        cols = np.zeros((rows.size, self.levels))
+        for c, j in enumerate(range(-self.levels, 0)):
+            h = 0.5 * (self.step if j >= -2 else self.other_step)
             trial = values.copy()
-            trial[j] += 0.5 * self.step
-            cols[near, c] = (self.evaluate(head, trial)[rows[near]] - base) / (0.5 * self.step)
+            trial[j] += h
+            cols[near, c] = (self.evaluate(head, trial)[rows[near]] - base) / h
         return np.hstack([jac, cols])
 
     def _opening(self, signals: Signals) -> tuple[Signals, int]:
@@ -611,16 +702,18 @@ class _FromLevel:
 
     def inner_jacobian(self, signals, values, rows=None):
         """:meth:`jacobian` without the (zero) column of the profiled level."""
-        sig, n_pre = self.prehistory(signals, values[-2:])
+        k = self.levels
+        sig, n_pre = self.prehistory(signals, values[-k:])
         rows = np.arange(np.asarray(signals.v).size) if rows is None else np.asarray(rows)
-        return self.jac_inner(sig, np.asarray(values[:-2], float), rows=rows + n_pre)
+        return self.jac_inner(sig, np.asarray(values[:-k], float), rows=rows + n_pre)
 
     def flag_point_families(self, signals, values):
-        sig, n_pre = self.prehistory(signals, values[-2:])
-        return tuple(a[n_pre:] for a in self.families_inner(sig, np.asarray(values[:-2], float)))
+        k = self.levels
+        sig, n_pre = self.prehistory(signals, values[-k:])
+        return tuple(a[n_pre:] for a in self.families_inner(sig, np.asarray(values[:-k], float)))
 
     def with_values(self, values: np.ndarray) -> Model:
-        return self.inner.with_values(np.asarray(values, dtype=float)[:-2])
+        return self.inner.with_values(np.asarray(values, dtype=float)[: -self.levels])
 
 
 def _method_of(model, method: str):
@@ -735,9 +828,9 @@ class FitResult:
             v = np.asarray(s.v, dtype=float)
             initial_state = st is not None and v.size > 0 and float(v[0]) == st.v0
         if initial_state and st is not None:
-            lead = _FromLevel(self.model, np.asarray(s.v, dtype=float), st.cycle_samples)
-            turn = st.v_from if st.v_turn is None else st.v_turn
-            return lead.evaluate(s, np.append(x, [turn, st.v_from]))
+            lead = _FromLevel(self.model, np.asarray(s.v, dtype=float), st.cycle_samples,
+                              s.v_other if st.other_v_from is not None else None)  # fmt: skip
+            return lead.evaluate(s, np.append(x, state_levels(st, lead.levels)))
         return self.model.evaluate(s, x)
 
     def eval_uncertainty(
@@ -1016,6 +1109,7 @@ class _Counter:
         (:meth:`_FromLevel.level_output`) those are computed once; the costs are the
         same to the last bit as :meth:`cost`."""
         if isinstance(self.model, _FromLevel) and idx >= len(self.model.parameters) - 2:
+            # the own levels (the other motor's: the generic cost below)
             output = self.model.level_output(self.signals, full, idx)
             if output is not None:
                 return self._output_cost(output)
@@ -1092,7 +1186,7 @@ class _Counter:
             if (
                 cols is not None
                 and isinstance(self.model, _FromLevel)
-                and (np.asarray(cols) < len(self.model.parameters) - 2).all()
+                and (np.asarray(cols) < len(self.model.parameters) - self.model.levels).all()
             ):
                 # the profiled level's zero column is never asked for: not built
                 jac = self.model.inner_jacobian(self.signals, full, rows=self.used_idx)
@@ -1465,11 +1559,13 @@ def _fit_model(
         out = run(starts, 0)
     if k and out.cycle == 0:
         # the other start state: from the first one's end and from every start
-        carried = np.asarray([out.result.params[n] for n in out.names[:-2]], float)
+        carried = np.asarray([out.result.params[n] for n in out.names[: len(model.parameters)]])
         other = run([carried, *starts], k, spent=out.work)
         if other.cost < out.cost:
             out = other
-    return _without_level(out.result, model, v, out.full, out.cycle) if level else out.result
+    if not level:
+        return out.result
+    return _without_level(out.result, model, v, out.full, out.cycle, s.v_other)
 
 
 @dataclass(frozen=True)
@@ -1503,7 +1599,7 @@ def _searched(
     v = np.asarray(s.v, dtype=float)
     loss, method = opts["loss"], opts["method"]
     max_nfev, basin_hops = opts["max_nfev"], opts["basin_hops"]
-    fitted_model: Model = _FromLevel(model, v, cycle) if level else model
+    fitted_model: Model = _FromLevel(model, v, cycle, s.v_other) if level else model
     search = _Search.of(
         fitted_model, s, theta, used, loss, opts["f_scale_deg"], method, opts["ftol"],
         opts["screen_nfev"],
@@ -1663,9 +1759,9 @@ class _Search:
                     break  # least_squares' cost is half the counter's
             elif step in ("wide", "fine"):
                 full = _refine_profiled(c, full, self.pidx, self.v, lo, hi, wide=step == "wide")
-                if self.uidx is not None:
-                    full = _refine_level(c, full, self.uidx, lo, hi, wide=step == "wide")
-                    full = _refine_level(c, full, self.uidx - 1, lo, hi, wide=step == "wide")
+                for i in reversed(self.level_idx):  # v_from, v_turn, the other motor's
+                    if step == "wide" or i >= self.uidx - 1:  # the other motor's: wide only
+                        full = _refine_level(c, full, i, lo, hi, wide=step == "wide")
             elif step == "reopt" and self.lsq_free.size and self.pidx:
                 full = _reoptimised_profile(
                     c, full, self.pidx, self.lsq_free, self.v, lo, hi, how, self.screen_nfev,
@@ -1676,15 +1772,24 @@ class _Search:
     def outside(self, full: np.ndarray) -> list[int]:
         """Indices of the LM-fitted parameters of ``full`` outside their bounds (the
         initial-state levels excepted: :meth:`levels_inside` clips them)."""
-        levels = () if self.uidx is None else (self.uidx - 1, self.uidx)
+        levels = self.level_idx
         return [i for i in _outside(full, self.lsq_free, self.lower, self.upper) if i not in levels]
+
+    @property
+    def level_idx(self) -> tuple[int, ...]:
+        """Indices of the initial-state levels (the other motor's two, v_turn, v_from;
+        empty when the start state is not fitted)."""
+        if self.uidx is None:
+            return ()
+        k = self.counter.model.levels
+        return tuple(range(self.uidx - k + 1, self.uidx + 1))
 
     def without_levels(self) -> _Search:
         """This search with the initial-state levels left to the profile steps (not
         moved by LM)."""
         if self.uidx is None:
             return self
-        levels = (self.uidx - 1, self.uidx)
+        levels = self.level_idx
         return replace(self, lsq_free=np.array([i for i in self.lsq_free if i not in levels], int))
 
     def levels_inside(self, full: np.ndarray) -> np.ndarray:
@@ -1694,7 +1799,7 @@ class _Search:
         if self.uidx is None:
             return full
         out = np.asarray(full, dtype=float).copy()
-        for i in (self.uidx - 1, self.uidx):
+        for i in self.level_idx:
             out[i] = min(max(out[i], self.lower[i]), self.upper[i])
         return out
 
@@ -1726,15 +1831,22 @@ def _starts_with_level(search: _Search, starts, inner_fit) -> list[np.ndarray]:
     fits the first start best (scanned once over the whole range); the nested start
     (last, when ``inner_fit`` is given) at its base fit's level."""
     counter, uidx = search.counter, search.uidx
-    first = np.append(starts[0], [float(search.v[0])] * 2)
+    # the other motor's levels (a model with its state) start at its first value:
+    # relaxed there, as without them
+    vo = counter.signals.v_other
+    other = [float(vo[0])] * 2 if counter.model.levels == 4 else []
+    first = np.append(starts[0], [*other, float(search.v[0]), float(search.v[0])])
     u0 = _refine_level(counter, first, uidx, search.lower, search.upper)[-1]
-    u1 = _other_branch_level(search, np.append(starts[0], [u0, u0]))[-1]
+    u1 = _other_branch_level(search, np.append(starts[0], [*other, u0, u0]))[-1]
     st = inner_fit[1].initial_state if inner_fit is not None else None
     u_nested = (st.v_turn if st.v_turn is not None else st.v_from, st.v_from) if st else (u0, u0)
     # every other start on the other branch: which branch the recording starts on is
     # as much a basin of the cost as any parameter (measured on a two-tendon truth
     # starting mid-loop: 9 starts on one branch ended at 184.5, the other's at 182.1)
-    out = [np.append(x0, [u0, u0] if i % 2 == 0 else [u1, u1]) for i, x0 in enumerate(starts)]
+    out = [
+        np.append(x0, [*other, u0, u0] if i % 2 == 0 else [*other, u1, u1])
+        for i, x0 in enumerate(starts)
+    ]
     if inner_fit is not None:
         out[-1][-2:] = u_nested
     return out
@@ -1775,14 +1887,22 @@ def _plain_fit_end(model, s, theta, opts, starts, search: _Search) -> np.ndarray
     search.counter.n += plain.nfev
     x_plain = np.array([p.value for p in plain.model.parameters], dtype=float)
     if search.uidx is not None:
+        k = search.counter.model.levels
         st = plain.initial_state
-        levels = (
-            [st.v_from if st.v_turn is None else st.v_turn, st.v_from]
-            if st is not None
-            else starts[0][-2:]
-        )
+        levels = state_levels(st, k) if st is not None else starts[0][-k:]
         x_plain = np.append(x_plain, levels)
     return x_plain
+
+
+def state_levels(st: InitialState, k: int) -> list[float]:
+    """The ``k`` level values of :class:`_FromLevel` for the start state ``st``
+    ((other motor's turn and level,) v_turn, v_from)."""
+    own = [st.v_from if st.v_turn is None else st.v_turn, st.v_from]
+    if k == 2:
+        return own
+    o_from = st.v0_other if st.other_v_from is None else st.other_v_from
+    o_turn = o_from if st.other_v_turn is None else st.other_v_turn
+    return [o_turn, o_from, *own]
 
 
 #: Screening runs on at most about this many fitted samples: a fit with more screens
@@ -2025,7 +2145,7 @@ def _released(search: _Search, x: np.ndarray, typical: np.ndarray) -> np.ndarray
     is a search failure, not a fact about the data (measured on the README demo's
     pitch+: kappa at its bound 100 with cost 6.4, the interior basin kappa 4.1 at 0.55).
     """
-    levels = () if search.uidx is None else (search.uidx - 1, search.uidx)
+    levels = search.level_idx
     at = [
         int(i) for i in search.lsq_free
         if i not in levels  # a level on its bound: the input came from far, no accident
@@ -2321,18 +2441,35 @@ def _nested_fit(model, s, theta, starts, opts) -> tuple[np.ndarray, FitResult] |
 
 
 def _without_level(
-    result: FitResult, model: Model, v: np.ndarray, full: np.ndarray, cycle: int = 0
-) -> FitResult:
-    """``result`` of a :class:`_FromLevel` fit in terms of ``model``: the level
-    ``v_from`` (and the replayed ``cycle``) leave the parameters for
-    :attr:`FitResult.initial_state`."""
+    result: FitResult, model: Model, v: np.ndarray, full: np.ndarray, cycle: int = 0,
+    v_other=None,
+) -> FitResult:  # fmt: skip
+    """``result`` of a :class:`_FromLevel` fit in terms of ``model``: the levels
+    (v_turn, v_from, the other motor's) and the replayed ``cycle`` leave the parameters
+    for :attr:`FitResult.initial_state`."""
     ut, u = float(full[-2]), float(full[-1])
     p = len(model.parameters)
     names = tuple(pp.name for pp in model.parameters)
     branch = f"a falling branch that turned at {u:.6g}" if u > v[0] else "the loading branch"
     via = f" via {u:.6g}" if ut != u else ""
-    st = _FromLevel(model, v, cycle)
-    n_pre = st.prehistory(Signals(v=np.asarray(v, float)), (ut, u))[1]
+    st = _FromLevel(model, v, cycle, v_other)
+    sig = Signals(
+        v=np.asarray(v, float), v_other=None if v_other is None else np.asarray(v_other, float)
+    )
+    n_pre = st.prehistory(sig, full[-st.levels :])[1]
+    other = {}
+    if st.levels == 4:
+        o_turn, o_from = float(full[-4]), float(full[-3])
+        vo0 = float(np.asarray(v_other, float)[0])
+        other = dict(
+            other_v_turn=None if o_turn == o_from else o_turn, other_v_from=o_from, v0_other=vo0
+        )
+        if not (o_turn == o_from == vo0):
+            branch += (
+                f"; the other motor from {o_turn:.6g}"
+                + (f" via {o_from:.6g}" if o_turn != o_from else "")
+                + f" to {vo0:.6g}"
+            )
     replay = (
         f", then the recording's first {cycle} samples (its first cycle, both motors) replayed"
         if cycle
@@ -2350,7 +2487,7 @@ def _without_level(
         covariance=result.covariance[:p, :p],
         free=tuple(k for k in result.free if k in names),
         initial_state=InitialState(
-            u, int(n_pre), float(v[0]), text, int(cycle), None if ut == u else ut
+            u, int(n_pre), float(v[0]), text, int(cycle), None if ut == u else ut, **other
         ),
     )
 
@@ -2383,8 +2520,8 @@ def _result(
             "derivative and no covariance; it is placed at the centre of the best interval"
         )
     if uidx is not None:
-        stderr[names[uidx]] = float("nan")
-        stderr[names[uidx - 1]] = float("nan")
+        for i in range(uidx - model.levels + 1, uidx + 1):
+            stderr[names[i]] = float("nan")
     converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)
     message = "profile search only" if res is None else str(res.message)
     outside = [

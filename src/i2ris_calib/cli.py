@@ -299,7 +299,7 @@ def compensate(
         None,
         "--model",
         metavar="MODEL",
-        help=f"{_one_of((*_INVERSE_MODELS, 'diagnosed'))} (default: best held-out).",
+        help=f"{_one_of((*_INVERSE_MODELS, 'diagnosed'))} (default: fit.json's recommended model).",
     ),
     max_counts_per_s: float | None = typer.Option(
         None, "--max-counts-per-s", metavar="RATE", help="Motor rate limit (counts/s)."

@@ -77,14 +77,22 @@ def test_minus_dataset_signs_and_exact_prediction(files):
     assert "v_f" in saved["method"]
 
 
-def test_default_model_is_best_ranked_and_rate_limit(files):
+def test_default_model_is_the_fit_decision_and_rate_limit(files):
+    """One decision (issue 32): compensate inverts the model fit.json recommends, not
+    its own ranking's best; this hand-made fit.json has no ``decision`` (an older
+    file): its converged model with the lowest held-out RMSE."""
     tmp, _ = files
     doc = compensate_files(
         [tmp / "fit.json"], ["yaw-"], tmp / "target.csv", tmp / "c.csv",
         max_counts_per_s=2000.0, start_counts=0.0,
     )  # fmt: skip
     rec = doc["axes"]["yaw"]
-    assert rec["model"] == rec["ranking"][0]["model"] and rec["ranking"][0]["chosen"]
+    fit = json.loads((tmp / "fit.json").read_text())
+    (ds,) = [d for d in fit["datasets"] if d["name"] == "yaw-"]
+    held = {k: m["holdout_metrics"]["rmse_deg"] for k, m in ds["models"].items()}
+    assert rec["model"] == min(held, key=held.__getitem__) == rec["recommended_model"]
+    assert rec["model_choice"] == "fit decision" and rec["substitute"] is None
+    assert [r["model"] for r in rec["ranking"] if r["chosen"]] == [rec["model"]]
     assert {r["model"] for r in rec["ranking"]} == {"egpi", "egpi_c", "gpi"}
     enc = pd.read_csv(tmp / "c.csv")["enc_yaw"].to_numpy()
     assert np.max(np.abs(np.diff(np.concatenate(([0], enc))))) <= 2000 * 0.02 + 1e-9

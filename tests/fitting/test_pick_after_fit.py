@@ -12,7 +12,8 @@ import pandas as pd
 from through_zero import yaw_recording
 
 from i2ris_calib.cli import main
-from i2ris_calib.fitting.pipeline import ModelChoice, output_jump, pick_after_fit
+from i2ris_calib.fitting.decision import output_jump
+from i2ris_calib.fitting.pipeline import ModelChoice, pick_after_fit
 from i2ris_calib.hysteresis.models import gpi_model
 from i2ris_calib.hysteresis.presets import through_zero_trajectory
 from i2ris_calib.hysteresis.registry import SIGNED_KINDS
@@ -76,9 +77,9 @@ def test_pick_rules_jumps_simpler_within_five_percent_and_convergence():
     simpler = pick(fake(0.52, 7, theta), fake(0.5, 15, theta))
     assert simpler.main == "gpi" and "fewer parameters, within 5 % of agpi 0.5 deg" in simpler.why
     jumped = pick(fake(1.0, 7, theta), fake(0.5, 15, jumpy))
-    assert jumped.main == "gpi" and "output jumps: agpi by" in jumped.why
+    assert jumped.main == "gpi" and "agpi 0.5 deg (its output jumps by" in jumped.why
     lost = pick(fake(1.0, 7, theta), fake(0.5, 15, theta, converged=False))
-    assert lost.main == "gpi" and "not converged: agpi" in lost.why
+    assert lost.main == "gpi" and "agpi 0.5 deg (not converged" in lost.why
     assert output_jump(jumpy, theta) > 4.0 and output_jump(theta, theta) == 0.0
     # the paper's split and a single kind keep the choice made before fitting
     split = ModelChoice(False, ("gpi", "egpi", "egpi_c"), "default")

@@ -218,3 +218,12 @@ def test_fig6_band_columns_are_carried_and_drawn(pred):
     with_band = figures.fit_figure_png(band, "yaw+", "yaw", "+", dpi=40)
     assert with_band != figures.fit_figure_png(pred, "yaw+", "yaw", "+", dpi=40)
     assert png_size(with_band) == png_size(figures.fit_figure_png(pred, "yaw+", "yaw", "+", dpi=40))
+
+
+def test_every_fitted_kind_has_a_curve_so_the_recommended_model_is_drawn():
+    """Issue 32: Fig 6 drew only GPI and two-tendon GPI on a lab recording whose
+    recommended model was Bouc-Wen; every kind of the registry has a curve now."""
+    from i2ris_calib.hysteresis.registry import ALL_KINDS
+    from i2ris_calib.report.figures import MODEL_CURVES
+
+    assert {f"{k}_deg" for k in ALL_KINDS} <= {c for c, _, _ in MODEL_CURVES}

@@ -27,9 +27,11 @@ from i2ris_calib.io.fit import read_fit_json
 from i2ris_calib.io.fit_records import (
     dataset_names,
     dataset_record,
+    decided_kind,
     holdout_rmse,
     load_model,
     rate_limit,
+    record_decision,
 )
 from i2ris_calib.io.outputs import claim_output_file
 from i2ris_calib.io.provenance import provenance
@@ -416,7 +418,7 @@ def compensate_files(
     out : path
         COMMANDS.csv to write; compensate.json is written beside it.
     model : str, optional
-        Force a model kind; default: the best of :func:`rank_models` on this target.
+        Force a model kind; default: the model fit.json recommends (:func:`_choose_model`).
     max_counts_per_s : float, optional
         Motor rate limit (counts/s; ``inf``: none); default ``[compensate]
         max_counts_per_s``, else the fit's fastest input move (:func:`rate_limit`).
@@ -720,17 +722,42 @@ def _add_joint_candidates(setup: dict, t: np.ndarray, target) -> None:
 
 
 def _choose_model(a: dict, model: str | None) -> None:
-    """Rank the axis's candidates (:func:`rank_models`) and choose ``--model`` or the
-    best: adds ``kind`` and ``ranking`` (each row marked ``chosen``)."""
+    """Rank the axis's candidates (:func:`rank_models`, information: the predicted
+    tracking error on this target) and choose ``--model``, else the model fit.json
+    recommends (its ``decision``, :func:`~i2ris_calib.io.fit_records.decided_kind`; when
+    that one cannot be inverted here, the next of the decision's ranking that can, and
+    ``substitute`` says which and why): adds ``kind``, ``ranking`` (each row marked
+    ``chosen``), ``recommended`` and ``substitute``."""
     ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
     if model is not None and not ranking[0]["continuous"] and model not in COUPLED_KINDS:
         _rank_alternatives(a, model)  # the forced model steps: name the others
         ranking = rank_models(a["candidates"], a["record"], a["models"], a["v0"])
-    kind = model or ranking[0]["model"]
+    decision = record_decision(a["record"])
+    a["recommended"] = decision.model
+    a["substitute"] = None
+    if model is None:
+        kind, note = decided_kind(a["record"], lambda k: _refusal(a, k),
+                                  f"{a['path']} [{a['name']}]")  # fmt: skip
+        a["substitute"] = note or None
+    else:
+        kind = model
     for r in ranking:
         r["chosen"] = r["model"] == kind
     a["kind"] = kind
     a["ranking"] = ranking
+
+
+def _refusal(a: dict, kind: str) -> str | None:
+    """Why compensate cannot invert ``kind`` for axis ``a`` (None: it can)."""
+    if kind in a["candidates"] or (kind in COUPLED_KINDS and kind == a.get("coupled")):
+        return None
+    if kind == "diagnosed":
+        return "the diagnosed model needs its final_model.json (--model-file)"
+    if kind not in INVERSE_KINDS:
+        return f"{kind} has no inverse (compensate inverts {', '.join(INVERSE_KINDS)})"
+    if kind in COUPLED_KINDS:
+        return f"{kind} reads the other motor: give both axes' fit.json and target columns"
+    return f"{kind} could not be inverted"
 
 
 def _reinvert_coupled_choice(setup: dict, t: np.ndarray) -> None:
@@ -777,7 +804,7 @@ def output_step_warning(a: dict, summ: dict, stepped: np.ndarray | None = None) 
             )
         else:
             alt = (
-                f"{names} track it without steps but worse (predicted tracking error{cost}); "
+                f"{names} track it without steps (predicted tracking error{cost}); "
                 f"--model {smooth[0]['model']} if smooth output matters more"
             )
     elif a.get("forced"):
@@ -896,7 +923,9 @@ def _axis_doc(a, target_deg, t, fl, max_rate, n_cond, n_pre, dt0, unit) -> dict:
         "dataset": a["name"],
         "fit_json": str(a["path"]),
         "model": a["kind"],
-        "model_choice": "--model" if a.get("forced") else "ranking",
+        "model_choice": "--model" if a.get("forced") else "fit decision",
+        "recommended_model": a.get("recommended"),
+        "substitute": a.get("substitute"),
         "ranking": a["ranking"],
         "params": rec["models"][a["kind"]]["params"],
         "input_range_counts": [a["lo"], a["hi"]],
@@ -969,7 +998,12 @@ def summary_lines(doc: dict) -> list[str]:
             f"rate limit {rate:g} counts/s ({rec['max_counts_per_s_source']}; commands "
             f"reach {rec['max_command_rate_per_s']:.4g})"
         )  # fmt: skip
-        why = "forced by --model" if rec["model_choice"] == "--model" else "best predicted tracking"
+        if rec["model_choice"] == "--model":
+            why = "forced by --model"
+        elif rec.get("substitute"):
+            why = f"instead of the recommended {rec.get('recommended_model')}"
+        else:
+            why = "recommended by fit.json"
         start = _start_text(rec)
         lines.append(
             f"{rec['dataset']} ({rec['model']}, {why}): predicted RMSE {rec['rmse_deg']:.4f} "
@@ -979,4 +1013,6 @@ def summary_lines(doc: dict) -> list[str]:
             "counts"
             + "".join(f"; {w}" for w in rec.get("warnings", []) if "where the target passes (" in w)
         )
+        if rec.get("substitute"):
+            lines.append(f"note: {rec['substitute']}")
     return lines

@@ -20,6 +20,7 @@ from i2ris_calib.data.coupling import MotorsTogether, motors_together
 from i2ris_calib.data.dataset import Dataset, other_axis
 from i2ris_calib.data.excursions import Excursions, excursions
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.decision import decide_fits
 from i2ris_calib.fitting.fit import fit_model
 from i2ris_calib.fitting.pipeline import ModelChoice, choose_model, fit_dataset, pick_after_fit
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
@@ -172,8 +173,11 @@ def fit_files(
             bar.update(task, description=f"fitting {label}", advance=1)
 
         fitted = fit_every_kind(datasets, kinds, fit_config, progress=step, saved=saved)
-    choice = pick_after_fit(choice, fitted)  # the default model: from the held-out errors
-    doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice)
+    # the one decision per dataset (fitting/decision.py), read by every later stage
+    decided = [decide_fits(d, res) for d, res in fitted]
+    choice = pick_after_fit(choice, fitted, [ev for _, ev in decided])
+    decisions = [dec for dec, _ in decided]
+    doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice, decisions)
     with output_dir(out, "fit", inputs, OUTPUTS) as tmp:
         write_json(tmp / "fit.json", doc)
         predictions_frame(fitted).to_csv(tmp / "predictions.csv", index=False, float_format="%.10g")
@@ -182,6 +186,8 @@ def fit_files(
     labels = source_labels([d["source"] for d in doc["datasets"]])
     several = len(set(labels.values())) > 1
     console.print(choice.line)
+    for dec in decisions:
+        console.print(dec.line)
     for d in doc["datasets"]:
         r = d["rows"]
         name = f"{d['name']} [{labels[d['source']]}]" if several else d["name"]

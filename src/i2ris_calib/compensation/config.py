@@ -30,8 +30,8 @@ class CompensateConfig:
         per axis in the target, ``"+"`` when the target's median angle is >= 0, else
         ``"-"``.
     model : str
-        ``gpi``, ``egpi``, ``egpi_c`` or ``diagnosed``; empty: the model with the best
-        predicted tracking of this target (docs/compensate.md).
+        ``gpi``, ``egpi``, ``egpi_c`` or ``diagnosed``; empty: the model fit.json
+        recommends (its ``decision``; docs/compensate.md, "Which model").
     max_counts_per_s : float
         Motor rate limit (counts/s); 0: the fit's fastest input move (fit.json
         ``max_input_rate_counts_per_s``); ``inf``: none.

@@ -25,6 +25,7 @@ from i2ris_calib.data.dataset import Dataset, checked_dataset
 from i2ris_calib.data.excursions import Excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
+from i2ris_calib.fitting.decision import Evidence, decide, decide_fits, output_jump, pooled
 from i2ris_calib.fitting.fit import FitResult, fit_model, fit_notices, innermost
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import ParametricModel
@@ -126,100 +127,47 @@ class ModelChoice:
 
     def as_dict(self) -> dict:
         """The fit.json ``model_choice`` record (``main``: the default model, picked
-        after fitting on the signed input; ``prefit_main``: the one known before;
+        after fitting on the signed input (None on the paper's split: each dataset's
+        ``decision`` names its model); ``prefit_main``: the one known before;
         ``held_out_rmse_deg``: the figures that decided, by kind)."""
         return {"input": "signed" if self.signed else "split", "kinds": list(self.kinds),
-                "main": self.main, "prefit_main": self.prefit_main,
+                # the paper's split: each direction dataset has its own ``decision``
+                "main": self.main if self.signed else None, "prefit_main": self.prefit_main,
                 "picked_after_fit": self.picked is not None,
                 "held_out_rmse_deg": dict(self.held_out),
                 "why": self.why, "line": self.line,
                 "coupling": None if self.coupling is None else self.coupling.as_dict()}  # fmt: skip
 
 
-#: A model with fewer free parameters is picked when its held-out RMSE is within this
-#: share of the lowest one (:func:`pick_after_fit`).
-SIMPLER_WITHIN = 0.05
-
-#: A model's output "jumps" when its largest sample-to-sample change exceeds the data's
-#: own largest change by more than this many noise sd (:func:`output_jump`).
-JUMP_NOISE_SD = 3.0
-
-
-def output_jump(pred: np.ndarray, theta: np.ndarray) -> float:
-    """How far a model's largest output change between consecutive measured samples
-    exceeds the measured angle's own largest change there (deg; negative: within it).
-
-    ``pred``, ``theta``: shape (n,), the model output and the measured angle (NaN where
-    not measured); only pairs of consecutive samples both measured count."""
-    y, th = np.asarray(pred, dtype=float), np.asarray(theta, dtype=float)
-    both = np.isfinite(th[1:]) & np.isfinite(th[:-1]) & np.isfinite(y[1:]) & np.isfinite(y[:-1])
-    if not both.any():
-        return float("nan")
-    return float(np.abs(np.diff(y))[both].max() - np.abs(np.diff(th))[both].max())
-
-
 def pick_after_fit(
-    choice: ModelChoice, fitted: Sequence[tuple[Dataset, dict[str, FitResult]]]
+    choice: ModelChoice,
+    fitted: Sequence[tuple[Dataset, dict[str, FitResult]]],
+    evidence: Sequence[dict[str, Evidence]] | None = None,
 ) -> ModelChoice:
     """The choice with its default model picked from the fits (signed input only).
 
-    Among the converged fits of ``choice.kinds`` (all of them when none converged) the
-    lowest held-out RMSE (pooled over the datasets, by their held-out samples) wins,
-    unless its output jumps (:func:`output_jump` beyond :data:`JUMP_NOISE_SD` noise sd
-    on some dataset; the noise sd is bounded by the lowest fitted RMSE there): then the
-    best model that does not. A model with fewer free parameters within
-    :data:`SIMPLER_WITHIN` of the winner's held-out RMSE is preferred. ``why`` gets the
-    figures that decided, e.g. ``picked after fitting: agpi held-out 0.21 deg vs gpi
-    1.4 deg``. The paper's split (and one kind) is returned unchanged.
+    The one rule of :func:`i2ris_calib.fitting.decision.decide` on the fits of
+    ``choice.kinds`` pooled over the datasets (:func:`~i2ris_calib.fitting.decision.pooled`):
+    the lowest held-out RMSE among the usable models, a simpler one within 5 %
+    preferred; with none usable, the lowest held-out RMSE. ``why`` gets the figures
+    that decided, e.g. ``picked after fitting: agpi: held-out 0.21 deg vs gpi 1.4 deg``.
+    The paper's split (and one kind) is returned unchanged.
 
-    ``fitted``: (dataset, {kind: FitResult}) per dataset, as :func:`fit_dataset` gives.
+    ``fitted``: (dataset, {kind: FitResult}) per dataset, as :func:`fit_dataset` gives;
+    ``evidence``: each dataset's :func:`~i2ris_calib.fitting.decision.decide_fits`
+    evidence when already measured.
     """
     kinds = [k for k in choice.kinds if all(k in res for _, res in fitted)]
     if not choice.signed or len(kinds) < 2 or not fitted:
         return choice
-    rmse, jumps, n_free, converged = {}, {}, {}, {}
-    for k in kinds:
-        num = den = 0.0
-        for _, res in fitted:
-            m = res[k].holdout_metrics
-            w = max(int(m.n_samples), 1)
-            num, den = num + w * float(m.rmse_deg) ** 2, den + w
-        rmse[k] = float(np.sqrt(num / den)) if den else float("nan")
-        converged[k] = all(res[k].converged for _, res in fitted)
-        n_free[k] = max(len(res[k].free) for _, res in fitted)
-        jumps[k] = 0.0
-    for d, res in fitted:
-        sd = min(float(res[k].metrics.rmse_deg) for k in kinds)
-        for k in kinds:
-            excess = output_jump(res[k].predict(d.signals), d.theta_measured_deg)
-            if np.isfinite(excess) and sd > 0:
-                jumps[k] = max(jumps[k], excess / sd)
-    cands = [k for k in kinds if np.isfinite(rmse[k]) and converged[k]]
-    cands = cands or [k for k in kinds if np.isfinite(rmse[k])]
-    if not cands:
+    if evidence is None:
+        evidence = [decide_fits(d, {k: res[k] for k in kinds})[1] for d, res in fitted]
+    dec = decide("all", [pooled([ev[k] for ev in evidence]) for k in kinds])
+    pick = dec.model or dec.fallback
+    if pick is None:
         return choice
-    smooth = [k for k in cands if jumps[k] <= JUMP_NOISE_SD] or cands
-    best = min(smooth, key=lambda k: (rmse[k], n_free[k]))
-    simpler = [k for k in smooth if n_free[k] < n_free[best]]
-    simpler = [k for k in simpler if rmse[k] <= (1 + SIMPLER_WITHIN) * rmse[best]]
-    pick = min(simpler, key=lambda k: (n_free[k], rmse[k])) if simpler else best
-
-    def fig(k: str) -> str:
-        return f"{k} {rmse[k]:.3g} deg"
-
-    others = sorted((k for k in cands if k != pick), key=rmse.__getitem__)
-    text = f"picked after fitting: {pick}: held-out {rmse[pick]:.3g} deg"
-    if others:
-        text += " vs " + ", ".join(map(fig, others))
-    if pick != best:
-        text += f" (fewer parameters, within {100 * SIMPLER_WITHIN:.0f} % of {fig(best)})"
-    jumped = [k for k in cands if jumps[k] > JUMP_NOISE_SD]
-    if jumped:
-        text += "; output jumps: " + ", ".join(f"{k} by {jumps[k]:.1f} noise sd" for k in jumped)
-    unconverged = [k for k in kinds if not converged[k]]
-    if unconverged:
-        text += "; not converged: " + ", ".join(unconverged)
-    held = tuple((k, rmse[k]) for k in kinds)
+    text = f"picked after fitting: {dec.why}"
+    held = tuple((k, v) for k, v in dec.held_out_rmse_deg if k in kinds)
     return replace(choice, why=f"{choice.why}; {text}", picked=pick, held_out=held)
 
 

@@ -21,6 +21,7 @@ from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.effects import base_of
 from i2ris_calib.diagnosis.serialize import model_from_dict
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.decision import Decision
 from i2ris_calib.fitting.pipeline import (
     MIN_EXPLAINED_VARIANCE,
     MODEL_KINDS,
@@ -97,12 +98,20 @@ def _explained_elsewhere(models: dict[str, dict]) -> dict[str, dict]:
 
 
 def fit_document(
-    fitted, axis: str, kinds: Sequence[str], provenance: dict, choice: ModelChoice | None = None
+    fitted,
+    axis: str,
+    kinds: Sequence[str],
+    provenance: dict,
+    choice: ModelChoice | None = None,
+    decisions: Sequence[Decision] | None = None,
 ) -> dict[str, Any]:
     """The fit.json document (schema i2ris-calib.fit/1); ``choice``: which models on
-    which input and why (``model_choice``)."""
+    which input and why (``model_choice``); ``decisions``: the recommended model of
+    each dataset (``decision``, :mod:`i2ris_calib.fitting.decision`), in ``fitted``'s
+    order."""
     datasets = []
-    for d, results in fitted:
+    decisions = list(decisions) if decisions is not None else [None] * len(fitted)
+    for (d, results), dec in zip(fitted, decisions, strict=True):
         datasets.append(
             {
                 "name": d.name,
@@ -126,11 +135,15 @@ def fit_document(
                 ),
             }
         )
+        if dec is not None:
+            datasets[-1]["decision"] = dec.as_dict()
     doc: dict[str, Any] = {"schema": SCHEMA, "axis": axis, "datasets": datasets}
     if len(datasets) == 1:
         doc["direction"] = datasets[0]["direction"]
         doc["abs_fitted"] = datasets[0]["abs_fitted"]
         doc["models"] = datasets[0]["models"]
+        if "decision" in datasets[0]:
+            doc["decision"] = datasets[0]["decision"]
     if choice is not None:
         doc["model_choice"] = choice.as_dict()
     doc["provenance"] = provenance

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.decision import Decision
 from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.io.fit import read_model_file
 
@@ -17,6 +18,8 @@ __all__ = [
     "FALLBACK_RANGE_SHARE_PER_S",
     "dataset_names",
     "dataset_record",
+    "decided_kind",
+    "record_decision",
     "holdout_rmse",
     "load_model",
     "rate_limit",
@@ -137,3 +140,36 @@ def holdout_rmse(rec: dict) -> float | None:
         if x is not None and np.isfinite(x):
             return float(x)
     return None
+
+
+def record_decision(record: dict) -> Decision:
+    """The dataset record's recommended model (fit.json ``decision``, written by ``fit``:
+    :mod:`i2ris_calib.fitting.decision`). An older fit.json without one: its converged
+    models ranked by held-out RMSE, the lowest first, and ``why`` says the file predates
+    the decision (refit to get it)."""
+    name = str(record.get("name", "dataset"))
+    doc = record.get("decision")
+    if isinstance(doc, dict):
+        return Decision.from_dict(name, doc)
+    models = record.get("models") or {}
+    held = {k: holdout_rmse(rec) for k, rec in models.items() if isinstance(rec, dict)}
+    held = {k: v for k, v in held.items() if v is not None}
+    ok = [k for k in held if models[k].get("converged", True)]
+    ranking = tuple(sorted(ok, key=held.__getitem__)) + tuple(
+        sorted((k for k in held if k not in ok), key=held.__getitem__)
+    )
+    why = "fit.json has no decision (written by an older version; refit to get one): lowest held-out RMSE"
+    best = ranking[0] if ranking else None
+    return Decision(name, best, why, ranking, tuple(held.items()))
+
+
+def decided_kind(record: dict, refusal, where: str) -> tuple[str, str]:
+    """(kind, note) of the dataset record's recommended model for an entry point that
+    cannot use every kind (``refusal(kind)``: why not, None when it can;
+    :meth:`Decision.model_for`); ``note`` says which model it uses instead and why
+    (empty: the recommended one). A one-line CalibError (``where``: the file and
+    dataset) when it can use none."""
+    kind, note = record_decision(record).model_for(refusal)
+    if kind is None:
+        raise CalibError(f"{where}: {note}")
+    return kind, note

@@ -5,17 +5,16 @@ use"; schema :data:`~i2ris_calib.compensation.online.SCHEMA`)."""
 from __future__ import annotations
 
 import json
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
-
-import numpy as np
 
 from i2ris_calib.compensation import online
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.registry import KINDS
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import read_fit_json
-from i2ris_calib.io.fit_records import dataset_record, holdout_rmse, load_model, rate_limit
+from i2ris_calib.io.fit_records import dataset_record, decided_kind, load_model, rate_limit
 
 #: Kinds the online compensator inverts (``diagnosed``: with ``model_file``): every kind
 #: with an inverse in the registry, as the batch (a coupled kind: its kernel kind and its
@@ -60,9 +59,11 @@ class Compensator(online.Compensator):
             file when it has one, else its first dataset.
         model : str, optional
             ``gpi``, ``egpi``, ``egpi_c``, ``agpi``, ``agpi_coupled`` or ``diagnosed``
-            (with ``model_file``; its time delay is inverted); default: the dataset's
-            model with the lowest held-out RMSE among those (``agpi_coupled`` only when
-            both axes' fits are given: it reads the other motor's commands).
+            (with ``model_file``; its time delay is inverted); default: the model fit.json
+            recommends for the dataset (its ``decision``); when that one cannot be
+            inverted online (no inverse, or ``agpi_coupled`` with one axis's fit: it
+            reads the other motor's commands), the next of the decision's ranking, with a
+            warning saying which and why.
         max_counts_per_s : float, optional
             Rate limit (counts/s; ``inf``: none); default: the fit's fastest input move
             (as ``compensate``).
@@ -158,12 +159,17 @@ def _online_kind(record: dict, model: str | None, where: str, coupled_ok: bool) 
                 f"got '{model}'"
             )
         return model
-    fitted = [
-        k for k in record.get("models", {})
-        if k in ONLINE_KINDS and (coupled_ok or k not in _COUPLED)
-    ]  # fmt: skip
-    if not fitted:
-        raise CalibError(
-            f"{where}: none of its models can be compensated online ({', '.join(ONLINE_KINDS)})"
-        )
-    return min(fitted, key=lambda k: holdout_rmse(record["models"][k]) or np.inf)
+
+    def refusal(kind: str) -> str | None:
+        if kind not in ONLINE_KINDS:
+            return (
+                f"{kind} has no inverse (the online compensator inverts {', '.join(ONLINE_KINDS)})"
+            )
+        if kind in _COUPLED and not coupled_ok:
+            return f"{kind} reads the other motor: give both axes' fit.json"
+        return None
+
+    kind, note = decided_kind(record, refusal, where)
+    if note:
+        warnings.warn(f"Compensator.from_fit: {note}", stacklevel=3)
+    return kind

@@ -22,6 +22,8 @@ EGPI_C_COLOR = "#CC79A7"  # reddish purple
 DIAGNOSED_COLOR = "#009E73"  # bluish green
 AGPI_COLOR = "#56B4E9"  # sky blue
 AGPI_COUPLED_COLOR = "#E69F00"  # orange
+SLIP_COLOR = "#000000"  # black
+BOUC_WEN_COLOR = "0.35"  # dark grey
 HOLDOUT_COLOR = "#F0E442"
 OTHER_COLOR = "0.6"
 GAP_FACTOR = 1.5
@@ -88,9 +90,12 @@ MODEL_CURVES = (
     ("egpi_c_deg", "EGPI_C", EGPI_C_COLOR),
     ("agpi_deg", "two-tendon GPI", AGPI_COLOR),
     ("agpi_coupled_deg", "two-tendon GPI + coupling", AGPI_COUPLED_COLOR),
+    ("maxwell_slip_deg", "PI / Maxwell slip", SLIP_COLOR),
+    ("bouc_wen_deg", "Bouc-Wen", BOUC_WEN_COLOR),
     ("diagnosed_deg", "EGPI + effects", DIAGNOSED_COLOR),
 )
-"""(predictions.csv column, legend label, colour) of every model curve, drawing order."""
+"""(predictions.csv column, legend label, colour) of every model curve, drawing order:
+every fitted kind, so the recommended model is always drawn."""
 
 
 def _model_columns(pred: pd.DataFrame) -> list[tuple[str, str, str]]:

@@ -1,10 +1,11 @@
 """Which fitted model the report recommends per dataset, why, and where the data end.
 
-The rule (stated in the report): the default model ``fit`` picked after fitting on a
+The model is the one ``fit`` decided (fit.json ``datasets[].decision``, the rule of
+:mod:`i2ris_calib.fitting.decision`); this module adds the words around it. For an
+older fit.json without a decision: the default model ``fit`` picked after fitting on a
 signed input (fit.json ``model_choice``), else among the models that converged, the
-lowest held-out RMSE wins; the continuous EGPI_C is preferred over the paper's EGPI when its held-out
-RMSE is within :data:`CONTINUOUS_MARGIN` of it (EGPI's output steps at the flag point,
-which a feedforward inversion cannot follow). Parameters the data do not identify are
+lowest held-out RMSE wins; the continuous EGPI_C is preferred over the paper's EGPI when
+its held-out RMSE is within :data:`CONTINUOUS_MARGIN` of it. Parameters the data do not identify are
 named. The supported range is that of the dataset's own measured samples: outside
 it the model extrapolates.
 """
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.fitting.decision import CONTINUOUS_MARGIN, Decision
 from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info
 from i2ris_calib.report.tables import (
     FIT_MODELS,
@@ -29,8 +31,6 @@ from i2ris_calib.report.tables import (
     unidentified,
 )
 
-CONTINUOUS_MARGIN = 0.10
-"""EGPI_C is recommended over EGPI when its held-out RMSE is at most this much higher (relative)."""
 CONTINUOUS_KIND = "egpi_c"
 """The continuous EGPI: recommended over a kind whose output steps at its flag point
 (registry ``output_steps``: EGPI) within :data:`CONTINUOUS_MARGIN`."""
@@ -108,11 +108,21 @@ def recommend(
     name = str(d.get("name", "dataset"))
     support = supported_range(d, pred)
     cands = _holdout_candidates(d)
-    if not cands:
+    decided = d.get("decision")
+    if isinstance(decided, Mapping):  # the one decision, made by fit (fitting/decision.py)
+        dec = Decision.from_dict(name, decided)
+        if dec.model is None or dec.model not in d.get("models", {}):
+            return Recommendation(
+                name, None, float("nan"), f"no model recommended: {dec.why}.", support
+            )
+        best, why = dec.model, [dec.why]
+        cands.setdefault(best, _holdout(d, best))
+    elif not cands:
         return Recommendation(
             name, None, float("nan"), "no converged model with a held-out error", support
         )
-    best, why = _preferred_model(cands, choice)
+    else:  # an older fit.json without a decision
+        best, why = _preferred_model(cands, choice)
     why.append(_identification_note(d, best))
     info = kind_info(best) if best in ALL_KINDS else None
     if info is not None and info.coupled:

@@ -79,7 +79,8 @@ def test_fit_json_contract(fitted):
                         "message", "nfev", "n_samples", "v_f"):  # fmt: skip
                 assert key in m, (kind, key)
             assert set(m["metrics"]) == {
-                "rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance"
+                "rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance",
+                "p99_abs_err_deg", "rmse_without_worst_deg",
             }  # fmt: skip
             assert isinstance(m["warnings"], list)
         eg = d["models"]["egpi"]

@@ -29,9 +29,18 @@ def test_metrics_nan_and_mask():
     m = metrics(theta, pred, mask=np.array([True, True, True, False]))
     assert m.n_samples == 2 and m.max_abs_err_deg == pytest.approx(0.5)
     assert m.nrmse_pct == pytest.approx(math.sqrt(0.125) / 2 * 100)
+    # one sample's error beside the RMSE (issue 32): errors 0.5 and 0
+    assert m.p99_abs_err_deg == pytest.approx(0.495) and m.rmse_without_worst_deg == 0.0
     empty = metrics(theta, pred, mask=np.zeros(4, bool))
     assert empty.n_samples == 0 and math.isnan(empty.rmse_deg)
-    assert set(m.as_dict()) == {"rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance"}
+    assert set(m.as_dict()) == {
+        "rmse_deg",
+        "nrmse_pct",
+        "max_abs_err_deg",
+        "explained_variance",
+        "p99_abs_err_deg",
+        "rmse_without_worst_deg",
+    }
 
 
 @pytest.mark.parametrize("n_cycles", [1, 3, 6])

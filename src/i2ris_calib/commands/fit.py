@@ -22,6 +22,7 @@ from i2ris_calib.data.excursions import Excursions, excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import decide_fits
 from i2ris_calib.fitting.fit import fit_model
+from i2ris_calib.fitting.limits import dataset_limits
 from i2ris_calib.fitting.pipeline import ModelChoice, choose_model, fit_dataset, pick_after_fit
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
@@ -177,7 +178,11 @@ def fit_files(
     decided = [decide_fits(d, res) for d, res in fitted]
     choice = pick_after_fit(choice, fitted, [ev for _, ev in decided])
     decisions = [dec for dec, _ in decided]
-    doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice, decisions)
+    limits = [
+        dataset_limits(d, res, dec, fit_config)
+        for (d, res), dec in zip(fitted, decisions, strict=True)
+    ]
+    doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice, decisions, limits)
     with output_dir(out, "fit", inputs, OUTPUTS) as tmp:
         write_json(tmp / "fit.json", doc)
         predictions_frame(fitted).to_csv(tmp / "predictions.csv", index=False, float_format="%.10g")
@@ -186,8 +191,9 @@ def fit_files(
     labels = source_labels([d["source"] for d in doc["datasets"]])
     several = len(set(labels.values())) > 1
     console.print(choice.line)
-    for dec in decisions:
+    for dec, lim in zip(decisions, limits, strict=True):
         console.print(dec.line)
+        console.print(f"{dec.dataset}: {lim.verdict}")
     for d in doc["datasets"]:
         r = d["rows"]
         name = f"{d['name']} [{labels[d['source']]}]" if several else d["name"]

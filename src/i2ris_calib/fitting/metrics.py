@@ -26,6 +26,11 @@ class Metrics:
         variance the model explains (1 perfect, 0 no better than a constant, NaN when
         the angle is constant). Not in the paper; a fit can have a small RMSE and
         explain nothing (an angle column of noise around a constant).
+    p99_abs_err_deg : float
+        99th percentile of the absolute error (deg): beside the RMSE and the maximum,
+        so one sample (an onset, a tracking glitch) can be told from a general misfit.
+    rmse_without_worst_deg : float
+        The RMSE with the single worst sample left out (deg).
     """
 
     rmse_deg: float
@@ -33,9 +38,12 @@ class Metrics:
     max_abs_err_deg: float
     n_samples: int = 0
     explained_variance: float = float("nan")
+    p99_abs_err_deg: float = float("nan")
+    rmse_without_worst_deg: float = float("nan")
 
     def as_dict(self) -> dict[str, float]:
-        """``{"rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance"}`` (fit.json)."""
+        """``{"rmse_deg", "nrmse_pct", "max_abs_err_deg", "explained_variance",
+        "p99_abs_err_deg", "rmse_without_worst_deg"}`` (fit.json)."""
         d = asdict(self)
         d.pop("n_samples")
         return d
@@ -75,7 +83,11 @@ def metrics(
     nrmse = rmse / span * 100.0 if span > 0 else float("nan")
     tss = float(np.sum((theta[ok] - theta[ok].mean()) ** 2))
     ev = 1.0 - float(np.sum(err**2)) / tss if tss > 0 else float("nan")
-    return Metrics(rmse, nrmse, float(np.max(np.abs(err))), int(ok.sum()), ev)
+    a = np.abs(err)
+    rest = np.delete(err, int(np.argmax(a)))
+    without = float(np.sqrt(np.mean(rest**2))) if rest.size else float("nan")
+    p99 = float(np.percentile(a, 99.0))
+    return Metrics(rmse, nrmse, float(a.max()), int(ok.sum()), ev, p99, without)
 
 
 def information_criteria(rss: float, n: int, k: int) -> tuple[float, float]:

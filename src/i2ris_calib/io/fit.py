@@ -22,6 +22,7 @@ from i2ris_calib.diagnosis.effects import base_of
 from i2ris_calib.diagnosis.serialize import model_from_dict
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import Decision
+from i2ris_calib.fitting.limits import RecordingLimits
 from i2ris_calib.fitting.pipeline import (
     MIN_EXPLAINED_VARIANCE,
     MODEL_KINDS,
@@ -104,14 +105,17 @@ def fit_document(
     provenance: dict,
     choice: ModelChoice | None = None,
     decisions: Sequence[Decision] | None = None,
+    limits: Sequence[RecordingLimits] | None = None,
 ) -> dict[str, Any]:
     """The fit.json document (schema i2ris-calib.fit/1); ``choice``: which models on
     which input and why (``model_choice``); ``decisions``: the recommended model of
     each dataset (``decision``, :mod:`i2ris_calib.fitting.decision`), in ``fitted``'s
-    order."""
+    order; ``limits``: each dataset's noise, repeatability, baselines and
+    cross-validation (``limits``, :mod:`i2ris_calib.fitting.limits`)."""
     datasets = []
     decisions = list(decisions) if decisions is not None else [None] * len(fitted)
-    for (d, results), dec in zip(fitted, decisions, strict=True):
+    limits = list(limits) if limits is not None else [None] * len(fitted)
+    for (d, results), dec, lim in zip(fitted, decisions, limits, strict=True):
         datasets.append(
             {
                 "name": d.name,
@@ -137,6 +141,8 @@ def fit_document(
         )
         if dec is not None:
             datasets[-1]["decision"] = dec.as_dict()
+        if lim is not None:
+            datasets[-1]["limits"] = lim.as_dict()
     doc: dict[str, Any] = {"schema": SCHEMA, "axis": axis, "datasets": datasets}
     if len(datasets) == 1:
         doc["direction"] = datasets[0]["direction"]

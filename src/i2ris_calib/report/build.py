@@ -126,6 +126,9 @@ def overview_section(run: RunData) -> Section:
     recs = recommendation_table(run.fits)
     if recs is not None:
         blocks.append(recs)
+    limits = limits_table(run.fits)
+    if limits is not None:
+        blocks.append(limits)
     headline = _headline(run.fits)
     if headline is not None:
         blocks.append(headline)
@@ -211,12 +214,80 @@ def recommendation_table(fits: tuple[FitData, ...]) -> Table | None:
             "data cover (outside: extrapolation)",
         ),
         tuple(rows),
-        "Recommended model per dataset: among converged models the lowest held-out RMSE; "
-        "EGPI_C (continuous) over EGPI when within "
-        f"{100 * CONTINUOUS_MARGIN:.0f} % of it. The last column is the range of the "
+        "Recommended model per dataset, decided once by fit (fit.json decision; compensate "
+        "and the Python API use the same): among the usable models (converged, some "
+        "parameter identified, no search-box bound that moves the output, held-out error "
+        "from rest within 2x that from the fitted start, no output jumps) the lowest "
+        "held-out RMSE, fewer parameters within 5 %, EGPI_C (continuous) over EGPI within "
+        f"{100 * CONTINUOUS_MARGIN:.0f} %. The last column is the range of the "
         "dataset's own measured samples: no data were seen outside it, so the model is "
         "not supported there.",
         align=("l", "l", "r", "l", "l"),
+    )
+
+
+def limits_table(fits: tuple[FitData, ...]) -> Table | None:
+    """The recommended model's held-out error against the recording's own limits
+    (fit.json ``limits``: noise, repeatability, model-free baselines, the worst sample,
+    cross-validation); None when no fit.json has them (older files)."""
+    rows = []
+    for fd in fits:
+        for d in tables.fit_datasets(fd.fit):
+            lim = d.get("limits")
+            if not isinstance(lim, dict):
+                continue
+            cv = lim.get("crossval") or {}
+            cv_cell = (
+                f"{tables.fmt_sig(cv['mean_deg'], 2)} ± {tables.fmt_sig(cv['sd_deg'], 2)} "
+                f"({len(cv.get('folds_rmse_deg', []))} folds)"
+                if cv.get("mean_deg") is not None
+                else tables.DASH
+            )
+            rec = (d.get("models", {}).get(lim.get("model")) or {}).get("holdout_metrics") or {}
+            worst = lim.get("worst_sample") or {}
+            worst_cell = (
+                f"{tables.fmt_sig(worst['error_deg'], 2)} at {tables.fmt_sig(worst['time_s'], 4)} s"
+                if worst.get("error_deg") is not None
+                else tables.DASH
+            )
+            rows.append((
+                str(d.get("name", fd.axis)),
+                str(lim.get("model") or tables.DASH),
+                tables.fmt(lim.get("model_rmse_deg"), 3),
+                cv_cell,
+                tables.fmt(rec.get("p99_abs_err_deg"), 3),
+                worst_cell,
+                tables.fmt(lim.get("noise_sd_deg"), 3),
+                tables.fmt(lim.get("repeatability_deg"), 3),
+                tables.fmt(lim.get("line_rmse_deg"), 3),
+                tables.fmt(lim.get("phase_rmse_deg"), 3),
+                str(lim.get("verdict", "")),
+            ))  # fmt: skip
+    if not rows:
+        return None
+    return Table(
+        (
+            "dataset",
+            "model",
+            "held-out RMSE (deg)",
+            "cross-validated (deg)",
+            "99th pct |error| (deg)",
+            "worst sample (deg)",
+            "noise sd (deg)",
+            "repeatability (deg)",
+            "straight line (deg)",
+            "function of phase (deg)",
+            "verdict",
+        ),  # fmt: skip
+        tuple(rows),
+        "The recording's own limits: the angle noise (from the model residual's "
+        "sample-to-sample changes), the cycle-to-cycle repeatability at the same input "
+        "(cycles of the same range), and two model-free baselines on the held-out "
+        "samples: a straight line on the inputs, and for a periodic input the best "
+        "function of the loop's phase. Cross-validated: each cycle held out once (short "
+        "recordings), mean ± sd. The worst held-out sample and the 99th percentile of "
+        "|error| sit beside the RMSE so one glitch cannot hide in it.",
+        align=("l", "l", "r", "r", "r", "r", "r", "r", "r", "r", "l"),
     )
 
 

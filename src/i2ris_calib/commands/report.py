@@ -101,6 +101,8 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     root = Path(run_dir)
     cfg = config if config is not None else load_config(None)
     out_dir = Path(out) if out is not None else root / "report"
+    if not root.is_dir():  # before the lock below makes parent folders for itself
+        raise CalibError(f"run folder not found: {root} (give the folder written by 'run')")
     _check_out(out_dir, root)
     with output_lock(out_dir, command="report"):  # one report at a time into ``out``
         run, inputs = load_run(root)

@@ -163,7 +163,9 @@ def simulate(
     seed: int | None = typer.Option(
         None, metavar="N", help="Random seed (overrides [simulate] seed)."
     ),
-    force: bool = typer.Option(False, "--force", help="Replace an existing session folder."),
+    force: bool = typer.Option(
+        False, "--force", help="Replace a folder simulate wrote (never a recording)."
+    ),
 ) -> None:
     """Render a synthetic two-microscope session with known ground truth."""
     cfg = _config(config)

@@ -92,20 +92,22 @@ def test_start_at_rest_when_the_fit_knows_it_and_older_files(tmp, capsys):
     assert rec["start_state"] == "rest" and rec["n_conditioning"] == 0
     assert "started at rest" in rec["start_state_reason"]
     assert not df["flags"].fillna("").str.contains("conditioning").any()
-    rec, _ = _run(tmp, "old.json", out="d.csv")
+    rec, _ = _run(tmp, "old.json")  # c.csv again: one compensate.json per commands file
     assert rec["start_state"] == "rest" and "does not say" in rec["start_state_reason"]
     # forced either way
-    rec, _ = _run(tmp, "old.json", out="e.csv", conditioning="sweep")
+    rec, _ = _run(tmp, "old.json", conditioning="sweep")
     assert rec["start_state"] == "conditioning_sweep" and rec["n_conditioning"] > 0
     _fit_json(tmp / "mid.json", MID_LOOP)
-    rec, _ = _run(tmp, "mid.json", out="f.csv", conditioning="none")
+    rec, _ = _run(tmp, "mid.json", conditioning="none")
     assert rec["start_state"] == "rest" and rec["n_conditioning"] == 0
 
 
 def test_history_gives_the_state_and_the_start_counts(tmp):
     P = _fit_json(tmp / "fit.json", MID_LOOP)
     _run(tmp, "fit.json", out="first.csv", model="gpi")  # with its sweep
-    rec, df = _run(tmp, "fit.json", out="second.csv", model="gpi", history=tmp / "first.csv")
+    rec, df = _run(
+        tmp, "fit.json", out="second/second.csv", model="gpi", history=tmp / "first.csv"
+    )  # its own folder: first.csv keeps its compensate.json
     first = pd.read_csv(tmp / "first.csv")["enc_yaw"].to_numpy(float)
     assert rec["start_state"] == "history" and rec["n_history"] == first.size
     assert rec["start_counts"] == first[-1] and rec["n_conditioning"] == 0

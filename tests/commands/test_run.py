@@ -231,3 +231,29 @@ def test_moved_session_with_changed_inputs_is_another_session(tmp_path):
     with pytest.raises(CalibError, match="another session") as exc:
         claim_run_dir(other, run_dir)
     assert "\n" not in str(exc.value) and str(moved.resolve()) in str(exc.value)
+
+
+def test_another_recording_with_the_same_names_and_sizes_is_refused(tmp_path, monkeypatch, capsys):
+    """Issue 33 item 2: B has A's folder name, file names and sizes but other contents;
+    ``run B`` into A's run folder is refused and A's outputs stay. A itself moved to
+    another folder (same contents) still keeps its run folder."""
+    from i2ris_calib.commands.run import claim_run_dir
+    from i2ris_calib.errors import CalibError
+
+    calls = []
+    run = _stub_run(monkeypatch, calls)
+    a = _fake_session(tmp_path / "x" / "take", "take", b"recording A")
+    run_dir = tmp_path / "runs" / "take"
+    run(a, run_dir)
+    before = {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()}
+    b = _fake_session(tmp_path / "y" / "take", "take", b"recording B")  # same size
+    (b / "encoders.csv").write_text("time_s,enc_yaw,enc_pitch\n0.0,9,9\n")  # same size
+    with pytest.raises(CalibError, match="another session") as exc:
+        claim_run_dir(b, run_dir)
+    assert "\n" not in str(exc.value) and str(a.resolve()) in str(exc.value)
+    assert {p: p.read_bytes() for p in run_dir.rglob("*") if p.is_file()} == before
+    assert calls == ["track", "sync"]
+    moved = tmp_path / "z" / "take"
+    moved.parent.mkdir()
+    a.rename(moved)
+    assert "session moved from" in claim_run_dir(moved, run_dir)

@@ -114,11 +114,16 @@ def test_folder_of_another_command_or_of_the_user_is_refused(tmp_path):
 
 
 def test_unmarked_folder_of_own_names_is_accepted(tmp_path):
-    """A folder written by an older version (no marker) holds only the command's names."""
+    """A folder written by an older version (no marker) holds only the command's names,
+    and one of its JSON files carries the tool's provenance (issue 33 item 3)."""
     out = tmp_path / "track"
     out.mkdir()
     (out / "angles.csv").write_text("old")
     (out / ".stamp.json").write_text("{}")
+    with pytest.raises(CalibError, match="no sign that i2ris-calib wrote them"):
+        claim_output_dir(out, "track", outputs=("angles.csv", "track.json"))
+    prov = {"schema": "i2ris-calib.track/1", "provenance": {"package": "i2ris-calib"}}
+    (out / "track.json").write_text(json.dumps(prov))
     claim_output_dir(out, "track", outputs=("angles.csv", "track.json"))
     with output_dir(out, "track", outputs=("angles.csv", "track.json")) as tmp:
         (tmp / "angles.csv").write_text("new")

@@ -33,7 +33,7 @@ from i2ris_calib.io.fit_records import (
     rate_limit,
     record_decision,
 )
-from i2ris_calib.io.outputs import claim_output_file
+from i2ris_calib.io.outputs import claim_output_file, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.target_csv import read_history, read_target
 
@@ -448,6 +448,19 @@ def compensate_files(
     )
     extra = [*([model_file] if model_file else []), *([history] if history is not None else [])]
     out = _claimed_output(out, [*fit_paths, target, *extra])
+    # one compensate at a time writes this COMMANDS.csv and the compensate.json beside it
+    with output_lock(out, out.with_name("compensate.json"), command="compensate"):
+        return _compensate_into(
+            fit_paths, target, out, config, datasets, model, max_counts_per_s, start_counts,
+            model_file, unit, conditioning, history, extra,
+        )  # fmt: skip
+
+
+def _compensate_into(
+    fit_paths, target, out: Path, config, datasets, model, max_counts_per_s, start_counts,
+    model_file, unit, conditioning, history, extra,
+) -> dict:  # fmt: skip
+    """The body of :func:`compensate_files` once ``out`` is claimed and locked."""
     docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
     if not datasets:
         datasets = _chosen_datasets(docs, target, unit)
@@ -456,7 +469,7 @@ def compensate_files(
         raise CalibError("give at most one --dataset per axis (the direction of each motor)")
     frame = read_target(target, axes, unit)
     t = frame["time_s"].to_numpy()
-    configured = float(getattr(cc, "max_counts_per_s", 0.0) or 0.0)
+    configured = float(getattr(getattr(config, "compensate", None), "max_counts_per_s", 0.0) or 0.0)
     setup = {
         axis: _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configured)
         for name, axis in zip(datasets, axes, strict=True)

@@ -28,7 +28,7 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
 from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
+from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
 
@@ -167,25 +167,26 @@ def diagnose_dataset(
     out = claim_output_dir(
         Path(out) if out is not None else Path("diagnose_out"), "diagnose", sources, OUTPUTS
     )
-    auto = _diagnosed(dset, start, cfg, show_progress)
-    diag = auto.diagnosis
-    models = [diag.start_model] + [s.model_after for s in diag.steps]
-    labels = ["start"] + [s.effect for s in diag.steps]
-    figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
-    record = diagnosis_record(diag, figures, auto=auto)
-    record.update(_dataset_fields(dset, axis, start, auto, sources, cfg))
-    with output_dir(out, "diagnose", sources, OUTPUTS) as tmp:
-        for i, (m, name) in enumerate(zip(models, figures, strict=True)):
-            title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
-            _save(_figure(m, dset, dset.holdout, title), tmp / name)
-        write_json(tmp / "diagnosis.json", record)
-        final = model_to_dict(diag.final_model)
-        final.update(
-            axis=axis, dataset=dset.name, direction=dset.direction, abs_input=dset.abs_fitted
-        )
-        write_json(tmp / "final_model.json", final)
-        write_text(tmp / "diagnosis.md", diagnosis_markdown(record))
-    return record
+    with output_lock(out, command="diagnose"):  # one diagnose at a time into ``out``
+        auto = _diagnosed(dset, start, cfg, show_progress)
+        diag = auto.diagnosis
+        models = [diag.start_model] + [s.model_after for s in diag.steps]
+        labels = ["start"] + [s.effect for s in diag.steps]
+        figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
+        record = diagnosis_record(diag, figures, auto=auto)
+        record.update(_dataset_fields(dset, axis, start, auto, sources, cfg))
+        with output_dir(out, "diagnose", sources, OUTPUTS) as tmp:
+            for i, (m, name) in enumerate(zip(models, figures, strict=True)):
+                title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
+                _save(_figure(m, dset, dset.holdout, title), tmp / name)
+            write_json(tmp / "diagnosis.json", record)
+            final = model_to_dict(diag.final_model)
+            final.update(
+                axis=axis, dataset=dset.name, direction=dset.direction, abs_input=dset.abs_fitted
+            )
+            write_json(tmp / "final_model.json", final)
+            write_text(tmp / "diagnosis.md", diagnosis_markdown(record))
+        return record
 
 
 def _diagnosed(dset: Dataset, start: str, cfg, show_progress: bool):

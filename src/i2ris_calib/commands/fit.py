@@ -27,7 +27,7 @@ from i2ris_calib.fitting.pipeline import ModelChoice, choose_model, fit_dataset,
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import fit_document, predictions_frame, read_model_file
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
+from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
 
@@ -161,9 +161,15 @@ def fit_files(
     if not paths:
         raise CalibError("give at least one synced CSV to fit")
     saved = read_model_file(model_file) if model_file is not None else None
-    fit_config = config.fit
     inputs = [*paths, *([model_file] if model_file is not None else [])]
     out = claim_output_dir(out, "fit", inputs, OUTPUTS)
+    with output_lock(out, command="fit"):  # one fit at a time into ``out``, until written
+        return _fit_into(paths, axis, model, out, config, saved, inputs)
+
+
+def _fit_into(paths, axis: str, model: str, out: Path, config, saved, inputs: list) -> dict:
+    """The body of :func:`fit_files` once ``out`` is claimed and locked."""
+    fit_config = config.fit
     datasets, choice = datasets_for_fit(paths, axis, fit_config, model, config.columns)
     kinds = (*choice.kinds, *(["diagnosed"] if saved is not None else []))
     console = Console(stderr=True)

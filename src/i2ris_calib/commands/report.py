@@ -16,7 +16,7 @@ from rich.progress import Progress
 from i2ris_calib import __version__
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.config_io import load_config
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
+from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.run_folder import FIT_FILES, is_fit_folder, load_run
 from i2ris_calib.report.build import build_document, section_count
@@ -101,17 +101,20 @@ def write_report(run_dir: str | Path, out: str | Path | None = None, config: Any
     root = Path(run_dir)
     cfg = config if config is not None else load_config(None)
     out_dir = Path(out) if out is not None else root / "report"
+    if not root.is_dir():  # before the lock below makes parent folders for itself
+        raise CalibError(f"run folder not found: {root} (give the folder written by 'run')")
     _check_out(out_dir, root)
-    run, inputs = load_run(root)
-    prov = report_provenance(root, inputs, cfg)
-    doc = _build_with_progress(run, cfg.report, prov)
-    page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
-    markdown, files = render_markdown(doc, FIGURE_DIR)
-    with output_dir(out_dir, "report", _inputs(root), REPORT_FILES) as tmp:
-        tmp.chmod(0o755)  # mkdtemp makes it private; a report is meant to be shared
-        (tmp / "report.html").write_text(page, encoding="utf-8")
-        (tmp / "report.md").write_text(markdown, encoding="utf-8")
-        (tmp / FIGURE_DIR).mkdir()
-        for rel, png in files.items():
-            (tmp / rel).write_bytes(png)
-    return out_dir / "report.html"
+    with output_lock(out_dir, command="report"):  # one report at a time into ``out``
+        run, inputs = load_run(root)
+        prov = report_provenance(root, inputs, cfg)
+        doc = _build_with_progress(run, cfg.report, prov)
+        page = render_html(doc, _template("report.html"), _template("report.css"), __version__)
+        markdown, files = render_markdown(doc, FIGURE_DIR)
+        with output_dir(out_dir, "report", _inputs(root), REPORT_FILES) as tmp:
+            tmp.chmod(0o755)  # mkdtemp makes it private; a report is meant to be shared
+            (tmp / "report.html").write_text(page, encoding="utf-8")
+            (tmp / "report.md").write_text(markdown, encoding="utf-8")
+            (tmp / FIGURE_DIR).mkdir()
+            for rel, png in files.items():
+                (tmp / rel).write_bytes(png)
+        return out_dir / "report.html"

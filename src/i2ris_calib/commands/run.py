@@ -44,7 +44,7 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_bytes, write_json
 from i2ris_calib.io.config_io import dataclass_to_dict
 from i2ris_calib.io.encoders import encoder_log_path
-from i2ris_calib.io.outputs import check_not_input, output_dir
+from i2ris_calib.io.outputs import check_not_input, check_out_path, output_dir
 from i2ris_calib.io.provenance import file_sha256
 from i2ris_calib.io.session import check_cameras, load_session, session_file
 from i2ris_calib.io.synced import load_datasets
@@ -420,6 +420,7 @@ def check_run_dir(session: Path, run_dir: Path) -> None:
     checked by :func:`claim_run_dir`.
     """
     check_not_input(run_dir, [session], what="--out")
+    check_out_path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise CalibError(f"--out: {run_dir} is a file; give a folder for the run outputs")
     for parent in run_dir.parents:
@@ -443,9 +444,9 @@ def session_record(session: Path) -> dict[str, Any]:
     ``settings`` (:func:`session_settings`) and, per file the pipeline reads
     (:func:`stage_input_files`, named relative to the session folder), its ``stage``,
     ``size`` and ``sha256``; ``identity`` is the SHA-256 of the settings and the files'
-    names and sizes: the same for the session moved to another folder, different for
-    another recording. Comments, ``notes`` and files session.toml does not name are
-    in none of them.
+    names, sizes and contents (SHA-256): the same for the session moved to another
+    folder, different for another recording even with the same names and sizes.
+    Comments, ``notes`` and files session.toml does not name are in none of them.
     """
     spec = load_session(session)
     files: dict[str, dict[str, Any]] = {}
@@ -457,8 +458,8 @@ def session_record(session: Path) -> dict[str, Any]:
                 key = str(p)
             files[key] = {"stage": stage, "size": p.stat().st_size, "sha256": cached_sha256(p)}
     settings = session_settings(spec)
-    sizes = {k: v["size"] for k, v in files.items()}
-    body = json.dumps({"settings": settings, "sizes": sizes}, sort_keys=True, default=str)
+    contents = {k: [v["size"], v["sha256"]] for k, v in files.items()}
+    body = json.dumps({"settings": settings, "files": contents}, sort_keys=True, default=str)
     return {
         "identity": hashlib.sha256(body.encode()).hexdigest(),
         "session": str(session.resolve()),
@@ -494,9 +495,10 @@ def claim_run_dir(session: Path, run_dir: Path) -> str | None:
     ``run_dir/.session.json`` holds the session's record (:func:`session_record`), first
     written with exclusive creation (two runs at once cannot both claim it). The same
     session folder with changed inputs, or the same recording moved to another folder
-    (the same ``identity`` in its record), keeps its run folder: the record is updated
-    and the stages whose inputs changed re-run (their stamps). Only another folder with
-    other inputs is refused.
+    (the same ``identity`` in its record: same settings, file names and contents),
+    keeps its run folder: the record is updated and the stages whose inputs changed
+    re-run (their stamps). Another folder with other inputs is refused, also when
+    its files have the same names and sizes.
 
     Returns
     -------

@@ -21,7 +21,7 @@ from rich.progress import Progress
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json, write_text
 from i2ris_calib.io.camera_yaml import write_camera_yaml
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
+from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.video import open_writer
 from i2ris_calib.io.workers import quiet_pool
@@ -75,9 +75,10 @@ def write_simulated_session(
             f"{out} already exists (choose another --out or pass --force to replace it)"
         )
     claim_output_dir(out, "simulate", (), OUTPUTS)
-    with output_dir(out, "simulate", (), OUTPUTS) as tmp:
-        build_session(tmp, cfg, name=out.name, progress=True)
-    return out
+    with output_lock(out, command="simulate"):  # one simulate at a time into ``out``
+        with output_dir(out, "simulate", (), OUTPUTS) as tmp:
+            build_session(tmp, cfg, name=out.name, progress=True)
+        return out
 
 
 def build_session(

@@ -17,7 +17,7 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.io.angles import read_angles
 from i2ris_calib.io.atomic import write_csv, write_json
 from i2ris_calib.io.encoders import encoder_log_path, read_encoder_log
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
+from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import SESSION_FILE, load_session
 from i2ris_calib.sync.axes import axis_check
@@ -102,38 +102,39 @@ def sync_session(
     log_path = encoder_log_path(root, spec.encoder)
     inputs = provenance_files(root, log_path, angles_path)
     claim_output_dir(out_dir, "sync", [root, *inputs], OUTPUTS)
-    log = read_encoder_log(root, spec.encoder, cfg.sync.max_gap_s)
-    log = replace(log, interpolation=cfg.sync.encoder_interpolation)
-    df = read_angles(angles_path)
-    with Progress(
-        SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), transient=True
-    ) as bar:
-        bar.add_task(
-            f"sync {root.name}: estimating the clock (method {cfg.sync.method})", total=None
+    with output_lock(out_dir, command="sync"):  # one sync at a time into ``out``
+        log = read_encoder_log(root, spec.encoder, cfg.sync.max_gap_s)
+        log = replace(log, interpolation=cfg.sync.encoder_interpolation)
+        df = read_angles(angles_path)
+        with Progress(
+            SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(), transient=True
+        ) as bar:
+            bar.add_task(
+                f"sync {root.name}: estimating the clock (method {cfg.sync.method})", total=None
+            )
+            clock = estimate_clock(df, log, cfg.sync, cfg.fit)
+            comparison = xcorr_comparison(df, log, cfg.sync) if clock.method != "xcorr" else None
+        table, n_dropped = synced_table(df, clock, log)
+        t_cam = df["time_s"].to_numpy(dtype=float)
+        check_overlap(len(table), n_dropped, clock, log, t_cam, cfg.sync)
+        summary = sync_summary(clock, table, n_dropped, log, t_cam, cfg)
+        summary["n_backward_rejected"] = int(df.attrs.get("n_backward_rejected", 0))
+        summary["axis_check"] = axis_check(table)
+        summary["encoder_glitches"] = glitch_summary(log, table)
+        summary["frames_outside_log"] = outside_log_summary(df, clock, log)
+        summary["warnings"] = (
+            axis_warnings(summary["axis_check"], root)
+            + glitch_warnings(summary["encoder_glitches"], log_path)
+            + outside_log_warnings(summary["frames_outside_log"], log_path)
         )
-        clock = estimate_clock(df, log, cfg.sync, cfg.fit)
-        comparison = xcorr_comparison(df, log, cfg.sync) if clock.method != "xcorr" else None
-    table, n_dropped = synced_table(df, clock, log)
-    t_cam = df["time_s"].to_numpy(dtype=float)
-    check_overlap(len(table), n_dropped, clock, log, t_cam, cfg.sync)
-    summary = sync_summary(clock, table, n_dropped, log, t_cam, cfg)
-    summary["n_backward_rejected"] = int(df.attrs.get("n_backward_rejected", 0))
-    summary["axis_check"] = axis_check(table)
-    summary["encoder_glitches"] = glitch_summary(log, table)
-    summary["frames_outside_log"] = outside_log_summary(df, clock, log)
-    summary["warnings"] = (
-        axis_warnings(summary["axis_check"], root)
-        + glitch_warnings(summary["encoder_glitches"], log_path)
-        + outside_log_warnings(summary["frames_outside_log"], log_path)
-    )
-    for line in summary["warnings"]:
-        typer.echo(f"warning: {line}", err=True)
-    summary["xcorr_comparison"] = comparison
-    summary["provenance"] = provenance(inputs, cfg)
-    with output_dir(out_dir, "sync", [root, *inputs], OUTPUTS) as tmp:
-        write_csv(tmp / "synced.csv", table, float_format="%.6f")
-        write_json(tmp / "sync.json", summary)
-    return out_dir
+        for line in summary["warnings"]:
+            typer.echo(f"warning: {line}", err=True)
+        summary["xcorr_comparison"] = comparison
+        summary["provenance"] = provenance(inputs, cfg)
+        with output_dir(out_dir, "sync", [root, *inputs], OUTPUTS) as tmp:
+            write_csv(tmp / "synced.csv", table, float_format="%.6f")
+            write_json(tmp / "sync.json", summary)
+        return out_dir
 
 
 GLITCH_ACTION = (

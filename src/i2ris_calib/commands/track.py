@@ -22,7 +22,7 @@ from rich.progress import Progress
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_csv, write_json
 from i2ris_calib.io.camera_yaml import read_camera_yaml
-from i2ris_calib.io.outputs import claim_output_dir, output_dir
+from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.session import check_cameras, load_session, session_file
 from i2ris_calib.io.timestamps import read_timestamps
@@ -91,14 +91,15 @@ def track_session(session: Path, out: Path | None, config) -> Path:
         for n, c in spec.cameras.items()
     ]
     claim_output_dir(out, "track", [session, *inputs], OUTPUTS)
-    result = track(session, spec, cfg, progress=True)
-    summary = {**result["summary"], "provenance": provenance(inputs, cfg)}
-    for line in track_warnings(summary):
-        typer.echo(f"warning: {line}", err=True)
-    with output_dir(out, "track", [session, *inputs], OUTPUTS) as tmp:
-        write_csv(tmp / "angles.csv", result["angles"], "%.6f")
-        write_json(tmp / "track.json", summary)
-    return out
+    with output_lock(out, command="track"):  # one track at a time into ``out``
+        result = track(session, spec, cfg, progress=True)
+        summary = {**result["summary"], "provenance": provenance(inputs, cfg)}
+        for line in track_warnings(summary):
+            typer.echo(f"warning: {line}", err=True)
+        with output_dir(out, "track", [session, *inputs], OUTPUTS) as tmp:
+            write_csv(tmp / "angles.csv", result["angles"], "%.6f")
+            write_json(tmp / "track.json", summary)
+        return out
 
 
 def track_warnings(summary: dict) -> list[str]:

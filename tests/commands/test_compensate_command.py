@@ -695,3 +695,23 @@ def test_ranking_steps_double_the_score_not_last_whatever_the_error():
     assert [r["model"] for r in rows] == ["agpi_coupled", "gpi", "egpi"]
     assert rows[0]["rank_score_deg"] == pytest.approx(2 * rows[0]["score_deg"])
     assert not rows[0]["continuous"] and rows[1]["continuous"]
+
+
+# ---------------------------------------------------------------- issue 33: numbers kept
+
+
+def test_epoch_clock_target_times_written_exactly(files):
+    """A target on an epoch clock (~1.7e9 s, 5 Hz): every row of COMMANDS.csv keeps its
+    own time (``%.10g`` wrote whole seconds: 2216 rows, 23 distinct times)."""
+    tmp, _ = files
+    t = 1.7e9 + 0.123 + np.arange(0, 60, 0.2)
+    target = pd.DataFrame({"time_s": t, "yaw_deg": 14 + 8 * np.sin(t - t[0])})
+    target.to_csv(tmp / "epoch.csv", index=False, float_format="%.17g")
+    doc = compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "epoch.csv", tmp / "c.csv",
+                           max_counts_per_s=5000.0)  # fmt: skip
+    df = pd.read_csv(tmp / "c.csv")
+    n_pre = df["time_s"].size - t.size
+    assert doc["axes"]["yaw"]["n_entry"] <= n_pre
+    assert df["time_s"].nunique() == df["time_s"].size
+    np.testing.assert_array_equal(df["time_s"].to_numpy()[n_pre:], t)
+    assert np.all(np.diff(df["time_s"]) > 0)

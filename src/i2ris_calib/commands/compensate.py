@@ -506,7 +506,10 @@ def _choose_models(setup: dict, t: np.ndarray, target, model: str | None, mf) ->
 
 def _write_outputs(out: Path, table, doc: dict) -> None:
     """COMMANDS.csv and compensate.json beside it, both or neither: compensate.json is
-    renamed into place after the CSV."""
+    renamed into place after the CSV. ``time_s`` is written exactly (the shortest text
+    that reads back to the same float): an epoch clock (~1.7e9 s) keeps its fraction of
+    a second; the other numbers with 10 significant digits."""
+    table = table.assign(time_s=[repr(float(x)) for x in table["time_s"].to_numpy()])
     with atomic_path(out.with_name("compensate.json")) as tmp_json:
         write_json(tmp_json, doc)
         with atomic_path(out) as tmp_csv:

@@ -715,3 +715,25 @@ def test_epoch_clock_target_times_written_exactly(files):
     assert df["time_s"].nunique() == df["time_s"].size
     np.testing.assert_array_equal(df["time_s"].to_numpy()[n_pre:], t)
     assert np.all(np.diff(df["time_s"]) > 0)
+
+
+@pytest.mark.parametrize(
+    ("write", "match"),
+    [
+        (lambda p: p.write_text("time_s,yaw_deg\n0,5\n0.1,6\n", encoding="utf-16"),
+         "not a readable CSV"),
+        (lambda p: p.write_bytes(b""), "not a readable CSV"),
+        (lambda p: None, "target file not found"),
+    ],
+)  # fmt: skip
+def test_unreadable_target_without_dataset_is_one_line(files, capsys, write, match):
+    """Without --dataset the target's header is read to choose the datasets: a UTF-16
+    or empty file was an internal UnicodeDecodeError / EmptyDataError there."""
+    tmp, _ = files
+    write(tmp / "bad.csv")
+    code = main(["compensate", str(tmp / "fit.json"), "--target", str(tmp / "bad.csv"),
+                 "--out", str(tmp / "o" / "c.csv")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("error:") and "\n" not in err
+    assert match in err and "bad.csv" in err and "internal" not in err
+    assert not (tmp / "o").exists() or not any((tmp / "o").iterdir())

@@ -23,6 +23,7 @@ from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
 from i2ris_calib.interrupts import deferred
 from i2ris_calib.io.atomic import atomic_path, write_json
+from i2ris_calib.io.csv_file import read_csv_header
 from i2ris_calib.io.fit import read_fit_json
 from i2ris_calib.io.fit_records import (
     dataset_names,
@@ -548,9 +549,8 @@ def _checked_options(fit_paths, datasets, model, time_unit_s, conditioning, hist
 def _chosen_datasets(docs: list, target, unit: float) -> list[str]:
     """The datasets ``--dataset`` omitted: one per axis with a fit.json and an
     ``<axis>_deg`` column in the target (:func:`choose_dataset`)."""
-    head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns if Path(
-        target).is_file() else []  # fmt: skip
-    present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in map(str.strip, head)]
+    head = read_csv_header(target, "target file not found (a CSV with time_s and <axis>_deg)")
+    present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in head]
     if not present:
         raise CalibError(
             f"{target}: no <axis>_deg column for the fit(s) given (axes "

@@ -737,3 +737,17 @@ def test_unreadable_target_without_dataset_is_one_line(files, capsys, write, mat
     assert code == 2 and err.startswith("error:") and "\n" not in err
     assert match in err and "bad.csv" in err and "internal" not in err
     assert not (tmp / "o").exists() or not any((tmp / "o").iterdir())
+
+
+def test_epoch_seconds_target_read_as_ms_refused(files):
+    """--time-unit-s 0.001 on an epoch-second 5 Hz target would pace it at 5 kHz."""
+    tmp, _ = files
+    t = 1.7e9 + np.arange(0, 60, 0.2)
+    pd.DataFrame({"time_s": t, "yaw_deg": 14 + 8 * np.sin(t - t[0])}).to_csv(
+        tmp / "epoch.csv", index=False, float_format="%.17g"
+    )
+    with pytest.raises(CalibError, match=r"1970-01-20 at 5000 Hz; as epoch s .* at 5 Hz") as exc:
+        compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "epoch.csv", tmp / "c.csv",
+                         time_unit_s=0.001)  # fmt: skip
+    assert "--time-unit-s" in str(exc.value) and "\n" not in str(exc.value)
+    assert not (tmp / "c.csv").exists()

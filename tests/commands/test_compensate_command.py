@@ -751,3 +751,20 @@ def test_epoch_seconds_target_read_as_ms_refused(files):
                          time_unit_s=0.001)  # fmt: skip
     assert "--time-unit-s" in str(exc.value) and "\n" not in str(exc.value)
     assert not (tmp / "c.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--max-counts-per-s", "1e-9"], ["--max-counts-per-s", "1e-6", "--conditioning", "sweep"]],
+    ids=["entry", "sweep"],
+)
+def test_absurd_rate_limit_is_one_line_not_a_memory_error(files, capsys, extra):
+    """'internal error: MemoryError: Unable to allocate 610 TiB' before."""
+    tmp, _ = files
+    code = main(["compensate", str(tmp / "fit.json"), "--dataset", "yaw+", "--target",
+                 str(tmp / "target.csv"), "--out", str(tmp / "o" / "c.csv"), *extra])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("error:") and "\n" not in err, err
+    assert "--max-counts-per-s" in err and "yaw+ fit's input range 0..6000" in err
+    assert "give a rate limit of at least 0.03 counts/s" in err
+    assert not (tmp / "o").exists() or not any((tmp / "o").iterdir())

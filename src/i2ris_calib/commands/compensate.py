@@ -15,7 +15,11 @@ import pandas as pd
 from i2ris_calib.compensation import STATUS_NAMES, compensate
 from i2ris_calib.compensation.config import CONDITIONING
 from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
-from i2ris_calib.compensation.safety import conditioning_sweep
+from i2ris_calib.compensation.safety import (
+    MAX_RAMP_COMMANDS,
+    conditioning_sweep,
+    ramp_commands,
+)
 from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Signals
@@ -460,6 +464,7 @@ def compensate_files(
         axis: _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configured)
         for name, axis in zip(datasets, axes, strict=True)
     }
+    _check_ramp_lengths(setup, t)
     past = None if history is None else _history_start(setup, history, start_counts)
     _prepend_start(setup, start_state(setup, conditioning, history), past, t)
     _choose_models(setup, t, target, model, None if model_file is None else Path(model_file))
@@ -609,6 +614,26 @@ def _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configu
         "v0": v0, "start_source": start_source,
         "goal": sign * frame[f"{axis}_deg"].to_numpy(), "t": frame["time_s"].to_numpy(),
     }  # fmt: skip
+
+
+def _check_ramp_lengths(setup: dict, t: np.ndarray) -> None:
+    """CalibError, before any ramp is built, when an axis's rate limit is so slow that
+    a ramp across its fitted input range (the entry ramp or a leg of the conditioning
+    sweep) would take more than :data:`MAX_RAMP_COMMANDS` commands at the target's
+    sample interval (``--max-counts-per-s 1e-9`` asked for 610 TiB)."""
+    dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
+    for a in setup.values():
+        span = a["hi"] - a["lo"]
+        need = ramp_commands(span, a["rate"], dt0)
+        if need > MAX_RAMP_COMMANDS:
+            rng = sorted((a["sign"] * a["lo"] + 0.0, a["sign"] * a["hi"] + 0.0))
+            raise CalibError(
+                f"rate limit {a['rate']:g} counts/s ({a['rate_source']}) is too slow for the "
+                f"{a['name']} fit's input range {rng[0]:g}..{rng[1]:g} counts: a ramp across "
+                f"it at one command every {dt0:g} s (the target's interval) would take "
+                f"{need:.3g} commands (at most {MAX_RAMP_COMMANDS:.0e}); give a rate limit of "
+                f"at least {span / (MAX_RAMP_COMMANDS * dt0):.3g} counts/s"
+            )
 
 
 def _history_start(setup: dict, history, start_counts) -> dict:

@@ -295,6 +295,15 @@ def test_wrong_argument_types_are_one_line_calib_errors(call, needle):
     c.step(np.float32(12.0), dt_s=np.float64(0.01))  # numpy scalars are numbers
 
 
+def test_history_of_strings_is_one_line():
+    model, lim, _, _ = make("egpi")
+    for bad, needle in (("abc", "is the str 'abc'"), ([1.0, "x"], "is not numeric"),
+                        ([], "has 0 samples; give at least 1")):  # fmt: skip
+        with pytest.raises(CalibError, match=r"^Compensator: history\['yaw'\] ") as exc:
+            Compensator({"yaw": model}, {"yaw": lim}, history={"yaw": bad})
+        assert needle in str(exc.value)
+
+
 def test_reset_to_a_state_outside_the_range_refused():
     model, lim, _, _ = make("egpi")
     c = Compensator({"yaw": model}, {"yaw": lim})

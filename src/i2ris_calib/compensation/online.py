@@ -663,10 +663,8 @@ def _checked_history(history, models) -> dict[str, np.ndarray]:
         raise CalibError(f"Compensator: history needs the counts of {', '.join(missing)} too")
     out = {}
     for name in sorted(need):
-        h = np.asarray(history[name], dtype=float)
-        if h.ndim != 1 or h.size == 0 or not np.all(np.isfinite(h)):
-            raise CalibError(f"Compensator: history['{name}'] must be non-empty, 1-D and finite")
-        out[name] = h
+        out[name] = as_1d_float("Compensator", f"history['{name}']", history[name], min_size=1,
+                                hint="give the signed counts sent, all finite")  # fmt: skip
     if len({h.size for h in out.values()}) != 1:
         raise CalibError("Compensator: every motor's history needs the same number of counts")
     return out

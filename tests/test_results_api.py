@@ -202,6 +202,58 @@ def test_load_refuses_other_files(tmp_path, egpi_fit):
         egpi_fit.save(tmp_path)
 
 
+def _edited(path, edit):
+    import json
+
+    doc = json.loads(path.read_text())
+    edit(doc)
+    path.write_text(json.dumps(doc))  # NaN written as the JSON extension NaN
+    return path
+
+
+def _decl(doc, name):
+    return next(d for d in doc["model"]["parameters"] if d["name"] == name)
+
+
+@pytest.mark.parametrize(
+    ("edit", "needle"),
+    [
+        (lambda d: _decl(d, "a1").update(value=float("nan")), "parameter a1 is nan"),
+        (lambda d: _decl(d, "r1").update(value=80.0),
+         "parameter r1 = 80 is outside its bounds 0..50"),
+        (lambda d: _decl(d, "r1").update(lower=60.0), "parameter r1 has bounds 60 > 50"),
+        (lambda d: d["params"].update(a1=1.5), "'params' says a1 = 1.5 but the model"),
+        (lambda d: d["params"].update(a1=None), "'params' says a1 = nan but the model"),
+        (lambda d: d["params"].pop("a1"), "missing: a1"),
+    ],
+    ids=["nan", "outside-bounds", "bounds-reversed", "params-disagree", "params-nan",
+         "params-missing"],
+)  # fmt: skip
+def test_load_refuses_values_no_fit_gives(fits, tmp_path, edit, needle):
+    """A NaN parameter (predict NaN, the repr 'converged'), a value outside its bounds
+    and a ``params`` copy that disagrees with the model were all loaded."""
+    res, _ = fits["egpi"]
+    path = _edited(res.save(tmp_path / "fit.json"), edit)
+    with pytest.raises(CalibError) as exc:
+        FitResult.load(path)
+    msg = str(exc.value)
+    assert needle in msg and "fit.json" in msg and "\n" not in msg, msg
+
+
+def test_load_keeps_a_value_the_fit_reported_outside_its_bounds(fits, tmp_path):
+    """An unbounded method may leave a free parameter outside its bounds; the fit lists
+    it in ``outside_bounds`` and such a file still loads."""
+    res, _ = fits["egpi"]
+
+    def edit(d):
+        _decl(d, "r1").update(value=80.0)
+        d["params"]["r1"] = 80.0
+        d["outside_bounds"] = ["r1"]
+
+    back = FitResult.load(_edited(res.save(tmp_path / "fit.json"), edit))
+    assert back.params["r1"] == 80.0
+
+
 # ---------------------------------------------------------------------- the figure
 
 

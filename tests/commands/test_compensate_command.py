@@ -703,3 +703,76 @@ def test_ranking_steps_double_the_score_not_last_whatever_the_error():
     assert [r["model"] for r in rows] == ["agpi_coupled", "gpi", "egpi"]
     assert rows[0]["rank_score_deg"] == pytest.approx(2 * rows[0]["score_deg"])
     assert not rows[0]["continuous"] and rows[1]["continuous"]
+
+
+# ---------------------------------------------------------------- issue 33: numbers kept
+
+
+def test_epoch_clock_target_times_written_exactly(files):
+    """A target on an epoch clock (~1.7e9 s, 5 Hz): every row of COMMANDS.csv keeps its
+    own time (``%.10g`` wrote whole seconds: 2216 rows, 23 distinct times)."""
+    tmp, _ = files
+    t = 1.7e9 + 0.123 + np.arange(0, 60, 0.2)
+    target = pd.DataFrame({"time_s": t, "yaw_deg": 14 + 8 * np.sin(t - t[0])})
+    target.to_csv(tmp / "epoch.csv", index=False, float_format="%.17g")
+    doc = compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "epoch.csv", tmp / "c.csv",
+                           max_counts_per_s=5000.0)  # fmt: skip
+    df = pd.read_csv(tmp / "c.csv")
+    n_pre = df["time_s"].size - t.size
+    assert doc["axes"]["yaw"]["n_entry"] <= n_pre
+    assert df["time_s"].nunique() == df["time_s"].size
+    np.testing.assert_array_equal(df["time_s"].to_numpy()[n_pre:], t)
+    assert np.all(np.diff(df["time_s"]) > 0)
+
+
+@pytest.mark.parametrize(
+    ("write", "match"),
+    [
+        (lambda p: p.write_text("time_s,yaw_deg\n0,5\n0.1,6\n", encoding="utf-16"),
+         "not a readable CSV"),
+        (lambda p: p.write_bytes(b""), "not a readable CSV"),
+        (lambda p: None, "target file not found"),
+    ],
+)  # fmt: skip
+def test_unreadable_target_without_dataset_is_one_line(files, capsys, write, match):
+    """Without --dataset the target's header is read to choose the datasets: a UTF-16
+    or empty file was an internal UnicodeDecodeError / EmptyDataError there."""
+    tmp, _ = files
+    write(tmp / "bad.csv")
+    code = main(["compensate", str(tmp / "fit.json"), "--target", str(tmp / "bad.csv"),
+                 "--out", str(tmp / "o" / "c.csv")])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("error:") and "\n" not in err
+    assert match in err and "bad.csv" in err and "internal" not in err
+    assert not (tmp / "o").exists() or not any((tmp / "o").iterdir())
+
+
+def test_epoch_seconds_target_read_as_ms_refused(files):
+    """--time-unit-s 0.001 on an epoch-second 5 Hz target would pace it at 5 kHz."""
+    tmp, _ = files
+    t = 1.7e9 + np.arange(0, 60, 0.2)
+    pd.DataFrame({"time_s": t, "yaw_deg": 14 + 8 * np.sin(t - t[0])}).to_csv(
+        tmp / "epoch.csv", index=False, float_format="%.17g"
+    )
+    with pytest.raises(CalibError, match=r"1970-01-20 at 5000 Hz; as epoch s .* at 5 Hz") as exc:
+        compensate_files([tmp / "fit.json"], ["yaw+"], tmp / "epoch.csv", tmp / "c.csv",
+                         time_unit_s=0.001)  # fmt: skip
+    assert "--time-unit-s" in str(exc.value) and "\n" not in str(exc.value)
+    assert not (tmp / "c.csv").exists()
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [["--max-counts-per-s", "1e-9"], ["--max-counts-per-s", "1e-6", "--conditioning", "sweep"]],
+    ids=["entry", "sweep"],
+)
+def test_absurd_rate_limit_is_one_line_not_a_memory_error(files, capsys, extra):
+    """'internal error: MemoryError: Unable to allocate 610 TiB' before."""
+    tmp, _ = files
+    code = main(["compensate", str(tmp / "fit.json"), "--dataset", "yaw+", "--target",
+                 str(tmp / "target.csv"), "--out", str(tmp / "o" / "c.csv"), *extra])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.startswith("error:") and "\n" not in err, err
+    assert "--max-counts-per-s" in err and "yaw+ fit's input range 0..6000" in err
+    assert "give a rate limit of at least 0.03 counts/s" in err
+    assert not (tmp / "o").exists() or not any((tmp / "o").iterdir())

@@ -57,3 +57,19 @@ def test_missing_target_and_bad_config():
         CompensateConfig(datasets=("yaw+", "yaw-")).validate()
     with pytest.raises(ValueError, match="max_counts_per_s"):
         CompensateConfig(max_counts_per_s=-1).validate()
+
+
+@pytest.mark.parametrize(
+    "write",
+    [lambda p: p.write_text("time_s,yaw_deg\n0,5\n0.1,6\n", encoding="utf-16"),
+     lambda p: p.write_bytes(b"")],
+    ids=["utf16", "empty"],
+)  # fmt: skip
+def test_unreadable_target_is_one_line_in_run(run_dir, tmp_path, write):
+    """The target's header, read to pick the axes: UnicodeDecodeError / EmptyDataError."""
+    write(tmp_path / "bad.csv")
+    cfg = PipelineConfig(compensate=CompensateConfig(target=str(tmp_path / "bad.csv")))
+    out = tmp_path / "compensate"
+    with pytest.raises(CalibError, match="bad.csv: not a readable CSV") as exc:
+        compensate_run(run_dir, tmp_path / "bad.csv", out, cfg)
+    assert "\n" not in str(exc.value) and not out.exists()

@@ -118,6 +118,17 @@ def test_rate_limit_respected(kind):
     assert np.max(np.abs(np.diff(free.commands))) > rate * 0.01
 
 
+def test_absurdly_slow_rate_refused_before_the_ramp_is_built():
+    """max_rate 1e-9 counts/s: the entry ramp asked numpy for 610 TiB (MemoryError)."""
+    model = make_model("egpi", paper_like_params("yaw+"))
+    t = np.arange(200) * 0.02
+    with pytest.raises(CalibError, match=r"would take .* commands \(at most 1e\+07\); give a "
+                       r"rate limit of at least") as exc:  # fmt: skip
+        compensate(model, np.full(200, 20.0), t, v_limits=(0, V_MAX), max_rate=1e-9,
+                   v_initial=0.0)  # fmt: skip
+    assert "\n" not in str(exc.value) and "--" not in str(exc.value)
+
+
 @pytest.mark.parametrize("frac", [0.3, 0.7])
 def test_output_step_is_flagged_and_nearest_side_taken(frac):
     # the r = 0 operator jumps from gamma_l to gamma_r at a reversal: the output steps

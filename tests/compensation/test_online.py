@@ -211,3 +211,104 @@ def test_online_kinds_are_the_registrys_inverse_kinds():
     for k in io_online.ONLINE_KINDS:
         info = kind_info(k)
         assert (info.nested if info.coupled else info.inverse) in KIND_NAMES.values()
+
+
+# ---------------------------------------------------------------- issue 33: values checked
+
+
+def _saved(tmp_path):
+    model, lim, target, _ = make("egpi")
+    c = Compensator({"yaw": model}, {"yaw": lim}, max_counts_per_s=4000.0)
+    for x in target[:20]:
+        c.step(x, dt_s=0.01)
+    c.to_json(tmp_path / "c.json")
+    return json.loads((tmp_path / "c.json").read_text())
+
+
+def _nan_c(a):
+    a["c"][0] = float("nan")
+
+
+@pytest.mark.parametrize(
+    ("edit", "needle"),
+    [
+        (lambda a: a.update(start_counts=99999.0), "start input 99999"),
+        (lambda a: a["state"].update(last_input=1e9), "state last_input 1e+09 is outside"),
+        (_nan_c, "c[0] is nan"),
+        (lambda a: a["p"].__setitem__(3, float("inf")), "p[3] is inf"),
+        (lambda a: a.update(v_limits=[6000.0, 0.0]), "v_limits must be finite with lo < hi"),
+        (lambda a: a.update(max_counts_per_s=-5.0), "max_counts_per_s must be > 0"),
+        (lambda a: a.update(quantum=-1.0), "quantum must be >= 0"),
+        (lambda a: a.update(tol_deg=-0.1), "tol_deg = -0.1 is not valid"),
+        (lambda a: a.update(deadband_counts=-2.0), "deadband_counts = -2 is not valid"),
+        (lambda a: a["params"].update(lam=float("nan")), "params['lam'] is nan"),
+    ],
+    ids=["start", "last-input", "nan-coefficient", "inf-weight", "reversed-limits",
+         "negative-rate", "quantum", "tol", "deadband", "nan-param"],
+)  # fmt: skip
+def test_from_json_checks_values_as_from_fit_does(tmp_path, edit, needle):
+    """Types were checked, values not: a start of 99999 counts in 0..6000, a state at
+    1e9 counts, a NaN coefficient ("reached" with a NaN angle), reversed limits, a
+    negative rate were all loaded."""
+    doc = _saved(tmp_path)
+    edit(doc["axes"]["yaw"])
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(CalibError) as exc:
+        Compensator.from_json(tmp_path / "bad.json")
+    msg = str(exc.value)
+    assert needle in msg and "bad.json" in msg and "axis 'yaw'" in msg and "\n" not in msg, msg
+
+
+def test_from_json_of_a_good_file_still_loads(tmp_path):
+    doc = _saved(tmp_path)
+    (tmp_path / "ok.json").write_text(json.dumps(doc))
+    c = Compensator.from_json(tmp_path / "ok.json")
+    assert c.state["yaw"].last_input == doc["axes"]["yaw"]["state"]["last_input"]
+
+
+@pytest.mark.parametrize(
+    ("call", "needle"),
+    [
+        (lambda c: c.step("12"), "target_yaw_deg is the str '12'; give a number"),
+        (lambda c: c.step(np.array([12.0])), "target_yaw_deg is an array of shape (1,)"),
+        (lambda c: c.step([12.0]), "target_yaw_deg is a list of 1 item"),
+        (lambda c: c.step(12.0, dt_s="0.01"), "dt_s is the str '0.01'; give a number"),
+        (lambda c: c.step(12.0, dt_s=np.array([0.01])), "dt_s is an array of shape (1,)"),
+        (lambda c: c.reset({"yaw": "x"}), "state['yaw'] is the str 'x'; give a AxisState"),
+        (lambda c: c.advance({"yaw": "abc"}), "commands['yaw'] is the str 'abc'"),
+        (lambda c: c.advance({"yaw": [1.0, "a"]}), "commands['yaw'] is not numeric"),
+        (lambda c: c.advance({"yaw": [1.0]}, dt_s="x"), "dt_s is the str 'x'"),
+    ],
+    ids=["str-target", "array-target", "list-target", "str-dt", "array-dt", "reset-str",
+         "advance-str", "advance-mixed", "advance-dt"],
+)  # fmt: skip
+def test_wrong_argument_types_are_one_line_calib_errors(call, needle):
+    """Raw TypeError / AttributeError / ValueError before."""
+    model, lim, _, _ = make("egpi")
+    c = Compensator({"yaw": model}, {"yaw": lim})
+    before = c.state
+    with pytest.raises(CalibError) as exc:
+        call(c)
+    msg = str(exc.value)
+    assert needle in msg and "\n" not in msg and msg.startswith("Compensator."), msg
+    assert c.state == before  # nothing stepped
+    c.step(np.float32(12.0), dt_s=np.float64(0.01))  # numpy scalars are numbers
+
+
+def test_history_of_strings_is_one_line():
+    model, lim, _, _ = make("egpi")
+    for bad, needle in (("abc", "is the str 'abc'"), ([1.0, "x"], "is not numeric"),
+                        ([], "has 0 samples; give at least 1")):  # fmt: skip
+        with pytest.raises(CalibError, match=r"^Compensator: history\['yaw'\] ") as exc:
+            Compensator({"yaw": model}, {"yaw": lim}, history={"yaw": bad})
+        assert needle in str(exc.value)
+
+
+def test_reset_to_a_state_outside_the_range_refused():
+    model, lim, _, _ = make("egpi")
+    c = Compensator({"yaw": model}, {"yaw": lim})
+    from dataclasses import replace
+
+    bad = {"yaw": replace(c.state["yaw"], last_input=1e9)}
+    with pytest.raises(CalibError, match=r"^Compensator.reset: yaw: state last_input 1e\+09"):
+        c.reset(bad)

@@ -261,3 +261,83 @@ def test_sample_lab_export_reads_with_its_config():
     np.testing.assert_array_equal(df["pitch_deg"], raw["pitches"])
     noise = (df["pitch_deg"] - truth["pitch_true_deg"]).std()
     assert 0.25 < noise < 0.35  # the export's 0.3 deg tracker noise
+
+
+# ---------------------------------------------------------------- issue 33: units checked
+
+
+def test_epoch_seconds_read_as_ms_refused_with_both_readings(lab_csv, tmp_path, capsys):
+    """time_unit_s=0.001 on epoch seconds at 5 Hz made them 5 kHz (fit.json's rate x1000,
+    compensate's default safety limit with it): refused naming both readings."""
+    out = tmp_path / "fit"
+    err = _error(capsys, ["fit", str(lab_csv), "--axis", "yaw", "--columns",
+                          MAPPING + ",time_unit_s=0.001", "--out", str(out)])  # fmt: skip
+    for needle in ("lab export.csv", "'Img TS'", "1970-01-20 at 5000 Hz", "2023-11-14 at 5 Hz",
+                   "the unit is 1 s", "set time_unit_s"):  # fmt: skip
+        assert needle in err, (needle, err)
+    assert not out.exists()
+
+
+def test_epoch_units_that_fit_are_accepted(tmp_path):
+    """Epoch ms / ns given their unit, and a clock that is no epoch clock, still read."""
+    from i2ris_calib.io.columns import ColumnsConfig
+    from i2ris_calib.io.epoch import epoch_unit_problem
+
+    assert epoch_unit_problem(1.7e12, 200.0, 1e-3) is None
+    assert epoch_unit_problem(1.7e18, 2e8, 1e-9) is None
+    assert epoch_unit_problem(1.7e9, 0.2, 1.0) is None
+    assert epoch_unit_problem(5e5, 0.2, 1.0) is None  # seconds since boot: not an epoch
+    assert "as epoch ms" in epoch_unit_problem(1.7e12, 200.0, 1.0)
+    lab = lab_frame()
+    lab["Img TS"] = np.round(lab["Img TS"] * 1e6).astype(np.int64)
+    lab.to_csv(tmp_path / "us.csv", index=False)
+    cols = ColumnsConfig(time_s="Img TS", enc_yaw="Encoder counts 0", yaw_deg="yaws",
+                         time_unit_s=1e-6)  # fmt: skip
+    df = read_synced(tmp_path / "us.csv", "yaw", cols)
+    np.testing.assert_allclose(np.diff(df["time_s"]), 0.2, atol=1e-9)
+
+
+def test_degrees_read_as_radians_refused(lab_csv, tmp_path, capsys):
+    """angle_unit = "rad" on degree data: angles x57, fitted without a word before."""
+    out = tmp_path / "fit"
+    err = _error(capsys, ["fit", str(lab_csv), "--axis", "yaw", "--columns",
+                          MAPPING + ",angle_unit=rad", "--out", str(out)])  # fmt: skip
+    for needle in ("lab export.csv", "'yaws' (yaw_deg)", 'angle_unit = "rad"',
+                   "beyond +-180 deg", 'set angle_unit = "deg"'):  # fmt: skip
+        assert needle in err, (needle, err)
+    assert not out.exists()
+    yaws = pd.read_csv(lab_csv)["yaws"]
+    k = int(yaws.abs().argmax())
+    assert f"= {yaws[k]:.6g} at line {k + 2} is {np.rad2deg(yaws[k]):.5g} deg with" in err
+
+
+def test_radians_of_unmeasured_rows_are_not_checked(tmp_path):
+    """Only measured angles count: a tracker's placeholder on a lost row is no reason."""
+    from i2ris_calib.io.columns import ColumnsConfig
+
+    lab = lab_frame()
+    lab["yaws"] = np.deg2rad(lab["yaws"])
+    lab["status"] = "measured"
+    lab.loc[3, ["yaws", "status"]] = [999.0, "lost"]
+    lab.to_csv(tmp_path / "rad.csv", index=False)
+    cols = ColumnsConfig(time_s="Img TS", enc_yaw="Encoder counts 0", yaw_deg="yaws",
+                         angle_unit="rad")  # fmt: skip
+    df = read_synced(tmp_path / "rad.csv", "yaw", cols)
+    assert np.isnan(df["yaw_deg"].iloc[3]) and np.nanmax(np.abs(df["yaw_deg"])) < 180
+
+
+@pytest.mark.parametrize("command", ["fit", "diagnose"])
+@pytest.mark.parametrize("mapped", [False, True], ids=["standard", "columns"])
+def test_header_only_synced_csv_is_one_line(tmp_path, capsys, command, mapped):
+    """A synced CSV with its header and no row: an internal IndexError before."""
+    csv = tmp_path / "empty.csv"
+    if mapped:
+        csv.write_text("Img TS,Enc TS,Encoder counts 0,Encoder counts 1,yaws,pitches\n")
+        extra = ["--columns", MAPPING]
+    else:
+        csv.write_text("time_s,enc_yaw,enc_pitch,yaw_deg,pitch_deg,status\n")
+        extra = []
+    out = tmp_path / "out"
+    err = _error(capsys, [command, str(csv), "--axis", "yaw", *extra, "--out", str(out)])
+    assert "empty.csv" in err and "no samples" in err and "internal" not in err
+    assert not out.exists()

@@ -15,7 +15,11 @@ import pandas as pd
 from i2ris_calib.compensation import STATUS_NAMES, compensate
 from i2ris_calib.compensation.config import CONDITIONING
 from i2ris_calib.compensation.inverse import FLAG_NAMES, forward
-from i2ris_calib.compensation.safety import conditioning_sweep
+from i2ris_calib.compensation.safety import (
+    MAX_RAMP_COMMANDS,
+    conditioning_sweep,
+    ramp_commands,
+)
 from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Signals
@@ -23,6 +27,7 @@ from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
 from i2ris_calib.interrupts import deferred
 from i2ris_calib.io.atomic import atomic_path, write_json
+from i2ris_calib.io.csv_file import read_csv_header
 from i2ris_calib.io.fit import read_fit_json
 from i2ris_calib.io.fit_records import (
     dataset_names,
@@ -474,6 +479,7 @@ def _compensate_into(
         axis: _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configured)
         for name, axis in zip(datasets, axes, strict=True)
     }
+    _check_ramp_lengths(setup, t)
     past = None if history is None else _history_start(setup, history, start_counts)
     _prepend_start(setup, start_state(setup, conditioning, history), past, t)
     _choose_models(setup, t, target, model, None if model_file is None else Path(model_file))
@@ -521,7 +527,10 @@ def _choose_models(setup: dict, t: np.ndarray, target, model: str | None, mf) ->
 
 def _write_outputs(out: Path, table, doc: dict) -> None:
     """COMMANDS.csv and compensate.json beside it, both or neither: compensate.json is
-    renamed into place after the CSV."""
+    renamed into place after the CSV. ``time_s`` is written exactly (the shortest text
+    that reads back to the same float): an epoch clock (~1.7e9 s) keeps its fraction of
+    a second; the other numbers with 10 significant digits."""
+    table = table.assign(time_s=[repr(float(x)) for x in table["time_s"].to_numpy()])
     with atomic_path(out.with_name("compensate.json")) as tmp_json:
         write_json(tmp_json, doc)
         with atomic_path(out) as tmp_csv:
@@ -560,9 +569,8 @@ def _checked_options(fit_paths, datasets, model, time_unit_s, conditioning, hist
 def _chosen_datasets(docs: list, target, unit: float) -> list[str]:
     """The datasets ``--dataset`` omitted: one per axis with a fit.json and an
     ``<axis>_deg`` column in the target (:func:`choose_dataset`)."""
-    head = pd.read_csv(target, nrows=0, skipinitialspace=True).columns if Path(
-        target).is_file() else []  # fmt: skip
-    present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in map(str.strip, head)]
+    head = read_csv_header(target, "target file not found (a CSV with time_s and <axis>_deg)")
+    present = [d.get("axis") for _, d in docs if f"{d.get('axis')}_deg" in head]
     if not present:
         raise CalibError(
             f"{target}: no <axis>_deg column for the fit(s) given (axes "
@@ -621,6 +629,26 @@ def _axis_setup(name, axis, docs, frame, start_counts, max_counts_per_s, configu
         "v0": v0, "start_source": start_source,
         "goal": sign * frame[f"{axis}_deg"].to_numpy(), "t": frame["time_s"].to_numpy(),
     }  # fmt: skip
+
+
+def _check_ramp_lengths(setup: dict, t: np.ndarray) -> None:
+    """CalibError, before any ramp is built, when an axis's rate limit is so slow that
+    a ramp across its fitted input range (the entry ramp or a leg of the conditioning
+    sweep) would take more than :data:`MAX_RAMP_COMMANDS` commands at the target's
+    sample interval (``--max-counts-per-s 1e-9`` asked for 610 TiB)."""
+    dt0 = float(t[1] - t[0]) if t.size > 1 else 1.0
+    for a in setup.values():
+        span = a["hi"] - a["lo"]
+        need = ramp_commands(span, a["rate"], dt0)
+        if need > MAX_RAMP_COMMANDS:
+            rng = sorted((a["sign"] * a["lo"] + 0.0, a["sign"] * a["hi"] + 0.0))
+            raise CalibError(
+                f"rate limit {a['rate']:g} counts/s ({a['rate_source']}) is too slow for the "
+                f"{a['name']} fit's input range {rng[0]:g}..{rng[1]:g} counts: a ramp across "
+                f"it at one command every {dt0:g} s (the target's interval) would take "
+                f"{need:.3g} commands (at most {MAX_RAMP_COMMANDS:.0e}); give a rate limit of "
+                f"at least {span / (MAX_RAMP_COMMANDS * dt0):.3g} counts/s"
+            )
 
 
 def _history_start(setup: dict, history, start_counts) -> dict:

@@ -43,6 +43,7 @@ from i2ris_calib.diagnosis.workflow import check_dataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.atomic import write_bytes, write_json
 from i2ris_calib.io.config_io import dataclass_to_dict
+from i2ris_calib.io.csv_file import read_csv_header
 from i2ris_calib.io.encoders import encoder_log_path
 from i2ris_calib.io.outputs import check_not_input, check_out_path, output_dir
 from i2ris_calib.io.provenance import file_sha256
@@ -355,7 +356,9 @@ def compensate_run(run_dir: Path, target: Path, out_dir: Path, config: PipelineC
     datasets = list(cc.datasets)
     axes = [d[:-1] for d in datasets]
     if not datasets:  # every axis of the target; compensate chooses the dataset
-        head = [str(c).strip() for c in pd.read_csv(target, nrows=0).columns]
+        head = read_csv_header(
+            target, "[compensate] target file not found (a CSV with time_s and <axis>_deg)"
+        )
         axes = [axis for axis in AXES if f"{axis}_deg" in head]
     fits = [run_dir / "fit" / a / "fit.json" for a in axes]
     missing = [str(f) for f in fits if not f.is_file()]

@@ -34,6 +34,7 @@ from typing import NamedTuple
 import numpy as np
 
 import i2ris_calib._display as _display
+from i2ris_calib._validate import as_1d_float, as_real, check_instance
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation.inverse import (
     STATUS_NAMES,
@@ -172,6 +173,8 @@ class _Axis:
                 raise CalibError(f"{name}: coupling arrays c, r, p do not fit a two-tendon GPI")
             if self.delay > 0:
                 raise CalibError(f"{name}: a coupled model with a time delay is not inverted")
+        _check_axis_values(name, self.c, self.r, self.p, self.cfg, self.sign * self.start,
+                           coupling, self.other_start, self.params)  # fmt: skip
         self.coupling = coupling
         self.prm, self.mem = K.pack(self.c, self.r, self.p, self.cfg, self.sign, coupling)
         self.w, self.state, self.out, self.wc, self.cstate = K.views(self.prm, self.mem)
@@ -234,6 +237,12 @@ class _Axis:
                 st.last_move_s, st.time_s)  # fmt: skip
         if not all(math.isfinite(float(x)) for x in vals) or int(st.direction) not in (-1, 1):
             raise CalibError(f"{self.name}: state values must be finite, direction +1 or -1")
+        lo, hi = float(self.cfg[3]), float(self.cfg[4])
+        if not lo <= float(st.last_input) <= hi:
+            raise CalibError(
+                f"{self.name}: state last_input {float(st.last_input):g} is outside the input "
+                f"range {lo:g}..{hi:g} (the model's convention): the model is not known there"
+            )
         if self.coupling is not None:
             wc = np.asarray(
                 st.coupling_operators if st.coupling_operators is not None else [], dtype=float
@@ -408,6 +417,7 @@ class Compensator:
         dict
             Axis -> :class:`AxisCommand` (signed counts, predicted angle, status, flags).
         """
+        dt_s = _number("Compensator.step", "dt_s", dt_s)
         if not 0 < dt_s < math.inf:
             raise CalibError(f"Compensator.step: dt_s must be a time > 0 s, got {dt_s!r}")
         if self._pair:
@@ -420,7 +430,9 @@ class Compensator:
                 tk = self._target(name, target_yaw_deg if name == "yaw" else target_pitch_deg)
                 vo = 0.0
                 if ax.coupling is not None:
-                    if other_counts is None or not math.isfinite(other_counts):
+                    if other_counts is None or not math.isfinite(
+                        _number("Compensator.step", "other_counts", other_counts)
+                    ):
                         raise CalibError(
                             f"Compensator.step: the {name} model reads the {_OTHER[name]} "
                             f"motor: give other_counts (its signed counts at this step), got "
@@ -432,9 +444,9 @@ class Compensator:
 
     @staticmethod
     def _target(name, tk):
-        if tk is None or not math.isfinite(tk):
+        if tk is None or not math.isfinite(_number("Compensator.step", f"target_{name}_deg", tk)):
             raise CalibError(f"Compensator.step: give a finite target_{name}_deg, got {tk!r}")
-        return tk
+        return float(tk)
 
     def _plan(self) -> None:
         """The axes in order and whether a step solves them jointly (one compiled call)."""
@@ -449,6 +461,7 @@ class Compensator:
         same number. The kernel's :func:`~i2ris_calib.compensation.kernel.advance`,
         the update the batch applies to ``compensate(v_history=...)``; the time moves
         on by ``dt_s`` per sample and the last one counts as a move."""
+        dt_s = _number("Compensator.advance", "dt_s", dt_s)
         if not dt_s > 0 or dt_s == math.inf:
             raise CalibError(f"Compensator.advance: dt_s must be a time > 0 s, got {dt_s!r}")
         need = set(self._axes) | {
@@ -459,11 +472,10 @@ class Compensator:
                 f"Compensator.advance: give the counts of {', '.join(sorted(need))} (a dict)"
             )
         arrs = {}
-        for name in need:
-            v = np.ascontiguousarray(commands[name], dtype=float)
-            if v.ndim != 1 or not np.all(np.isfinite(v)):
-                raise CalibError(f"Compensator.advance: {name} counts must be 1-D and finite")
-            arrs[name] = v
+        for name in sorted(need):
+            v = as_1d_float("Compensator.advance", f"commands['{name}']", commands[name],
+                            hint="give the signed counts sent, all finite")  # fmt: skip
+            arrs[name] = np.ascontiguousarray(v)
         sizes = {v.size for v in arrs.values()}
         if len(sizes) != 1:
             raise CalibError("Compensator.advance: every motor needs the same number of counts")
@@ -499,7 +511,18 @@ class Compensator:
         if not isinstance(state, dict) or set(state) != set(self._axes):
             raise CalibError(f"Compensator.reset: give a state of the axes {', '.join(self._axes)}")
         for name, st in state.items():
-            self._axes[name].set(st)
+            check_instance("Compensator.reset", f"state['{name}']", st, AxisState,
+                           hint="as Compensator.state returned it")  # fmt: skip
+        for name, st in state.items():
+            try:
+                self._axes[name].set(st)
+            except CalibError as exc:
+                raise CalibError(f"Compensator.reset: {exc}") from None
+            except (TypeError, ValueError) as exc:
+                raise CalibError(
+                    f"Compensator.reset: state['{name}'] has a value that is not a number "
+                    f"({exc}); give a state as Compensator.state returned it"
+                ) from None
 
     def to_dict(self) -> dict:
         """Everything a controller needs, in plain numbers (docs/compensate.md, "Online
@@ -549,6 +572,8 @@ class Compensator:
                     other_counts=None if sc is None else float(sc["other_counts"]),
                     coupling_deg=0.0 if sc is None else float(sc["coupling_deg"]),
                 ))  # fmt: skip
+            except CalibError as exc:
+                raise CalibError(f"compensator document: axis '{name}': {exc}") from None
             except (KeyError, TypeError, ValueError) as exc:
                 raise CalibError(
                     f"compensator document: axis '{name}': missing or bad {exc}"
@@ -583,6 +608,50 @@ class Compensator:
         return _display.table(header, rows, title)
 
 
+def _number(func: str, name: str, x) -> float:
+    """``x`` as a float (NaN and inf kept: the caller says what it needs), CalibError
+    for a str, an array (a 1-element one included), None or a bool."""
+    if type(x) is float:  # the control loop's common case, one check
+        return x
+    return as_real(func, name, x, finite=False, none_ok=False) if x is not None else math.nan
+
+
+def _check_axis_values(name, c, r, p, cfg, v0, coupling, other_start, params) -> None:
+    """CalibError when an axis's numbers cannot be a fitted model's (a JSON edited or
+    damaged): kernel arrays and parameters finite, limits ordered, rate > 0, quantum
+    >= 0, tolerance > 0, the start input ``v0`` (model convention) inside the limits
+    (:meth:`Compensator.from_dict` checks what the constructor's model checks)."""
+    arrays = {"c": c, "r": r, "p": p}
+    if coupling is not None:
+        arrays.update({"coupling.c": coupling[0], "coupling.r": coupling[1],
+                       "coupling.p": coupling[2]})  # fmt: skip
+    for key, a in arrays.items():
+        bad = np.flatnonzero(~np.isfinite(a))
+        if bad.size:
+            raise CalibError(
+                f"{name}: {key}[{bad[0]}] is {a[bad[0]]}; the kernel coefficients must be "
+                "finite (re-create the compensator from its fit)"
+            )
+    for key, x in params.items():
+        if not isinstance(x, (int, float)) or isinstance(x, bool) or not math.isfinite(x):
+            raise CalibError(f"{name}: params['{key}'] is {x!r}; give a finite number")
+    kappa, vf, db, lo, hi, rate, quantum, tol = (float(x) for x in cfg)
+    checked_limits((lo, hi), rate, quantum, f"{name}: ")
+    for key, ok in (("kappa", math.isfinite(kappa)), ("v_f", vf > 0),
+                    ("deadband_counts", math.isfinite(db) and db >= 0),
+                    ("tol_deg", math.isfinite(tol) and tol >= 0),
+                    ("other_start_counts", math.isfinite(other_start))):  # fmt: skip
+        if not ok:
+            value = {"kappa": kappa, "v_f": vf, "deadband_counts": db, "tol_deg": tol,
+                     "other_start_counts": other_start}[key]  # fmt: skip
+            raise CalibError(f"{name}: {key} = {value:g} is not valid (see docs/compensate.md)")
+    if not lo <= v0 <= hi:
+        raise CalibError(
+            f"{name}: start input {v0:g} (the model's convention) is outside the input range "
+            f"{lo:g}..{hi:g}"
+        )
+
+
 def _checked_history(history, models) -> dict[str, np.ndarray]:
     """Axis -> counts of a ``history`` (dict), every compensated axis and the other
     motor of a coupled one, non-empty, finite, of one length (one-line CalibError)."""
@@ -594,10 +663,8 @@ def _checked_history(history, models) -> dict[str, np.ndarray]:
         raise CalibError(f"Compensator: history needs the counts of {', '.join(missing)} too")
     out = {}
     for name in sorted(need):
-        h = np.asarray(history[name], dtype=float)
-        if h.ndim != 1 or h.size == 0 or not np.all(np.isfinite(h)):
-            raise CalibError(f"Compensator: history['{name}'] must be non-empty, 1-D and finite")
-        out[name] = h
+        out[name] = as_1d_float("Compensator", f"history['{name}']", history[name], min_size=1,
+                                hint="give the signed counts sent, all finite")  # fmt: skip
     if len({h.size for h in out.values()}) != 1:
         raise CalibError("Compensator: every motor's history needs the same number of counts")
     return out

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from i2ris_calib.errors import CalibError
+
 #: Percentile of |dv/dt| over the moving samples taken as a recording's fastest input
 #: move (robust to a few glitches, :func:`max_input_rate`)
 RATE_PERCENTILE = 99.0
@@ -20,6 +22,19 @@ SPIKE_TOL_FACTOR = 10.0
 #: A command excursion that returns is a spike when both its steps exceed this share of
 #: the input range (and 3 quanta)
 SPIKE_RANGE_SHARE = 0.01
+#: The most commands one ramp (the entry ramp, a leg of the conditioning sweep) may take
+#: (28 h at 100 Hz): a rate limit that needs more is a mistake (counts/min for counts/s?),
+#: refused before the ramp is allocated (:func:`ramp_commands`)
+MAX_RAMP_COMMANDS = 10_000_000
+
+
+def ramp_commands(dist: float, max_rate: float, dt_s: float) -> float:
+    """How many commands, one every ``dt_s`` s, a ramp over ``dist`` input units takes at
+    ``max_rate`` per second (a float: ``inf`` for a rate of 0; 0 without a limit)."""
+    if not np.isfinite(max_rate) or dist == 0:
+        return 0.0
+    per = float(max_rate) * float(dt_s)
+    return float(np.ceil(abs(float(dist)) / per)) if per > 0 else float("inf")
 
 
 def max_input_rate(v: np.ndarray, t_s: np.ndarray) -> float | None:
@@ -108,10 +123,19 @@ def entry_ramp(
 
     A monotone ramp leaves the operators of a play-type model where one step would,
     so the inverse can take the first target sample as one step from ``v_start``.
+    CalibError when it would take more than :data:`MAX_RAMP_COMMANDS` commands.
     """
     dist = float(v_first) - float(v_start)
     if dist == 0 or not np.isfinite(max_rate):
         return np.zeros(0)
+    need = ramp_commands(dist, max_rate, dt_s)
+    if need > MAX_RAMP_COMMANDS:
+        raise CalibError(
+            f"a ramp of {abs(dist):g} counts at the rate limit {max_rate:g} counts/s, one "
+            f"command every {dt_s:g} s, would take {need:.3g} commands (at most "
+            f"{MAX_RAMP_COMMANDS:.0e}); give a rate limit of at least "
+            f"{abs(dist) / (MAX_RAMP_COMMANDS * dt_s):.3g} counts/s"
+        )
     per = max_rate * dt_s
     if quantum > 0 and per >= quantum:
         per = np.floor(per / quantum + 1e-9) * quantum

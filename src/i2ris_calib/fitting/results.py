@@ -562,9 +562,11 @@ def fit_fields(obj: Mapping, where: str = "fit file") -> dict:
         def numbers(d):
             return {k: _number(v) for k, v in d.items()}
 
+        params = numbers(obj["params"])
+        _check_saved_values(model, params, list(obj.get("outside_bounds", [])))
         return {
             "model": model,
-            "params": numbers(obj["params"]),
+            "params": params,
             "stderr": numbers(obj["stderr"]),
             "covariance": _array(obj["covariance"]).reshape(len(model.parameters), -1)
             if obj["covariance"]
@@ -591,6 +593,41 @@ def fit_fields(obj: Mapping, where: str = "fit file") -> dict:
         raise CalibError(f"{where}: {exc}") from None
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise CalibError(f"{where}: bad fit record ({type(exc).__name__}: {exc})") from None
+
+
+def _check_saved_values(model, params: Mapping[str, float], outside: list) -> None:
+    """CalibError when a saved fit's numbers cannot be a fit's: a parameter of the model
+    that is not finite or whose bounds are not ordered, a free one outside its bounds
+    (unless the fit itself reported it: ``outside``, an unbounded method's result), or
+    a ``params`` copy that is not the model's values (names and numbers)."""
+    for p in model.parameters:
+        value, lo, hi = float(p.value), float(p.lower), float(p.upper)
+        if not math.isfinite(value):
+            raise CalibError(
+                f"parameter {p.name} is {value}; a saved fit's values are finite (the file "
+                "was edited or damaged: fit again)"
+            )
+        if not lo <= hi:
+            raise CalibError(f"parameter {p.name} has bounds {lo:g} > {hi:g}; give lower <= upper")
+        if not p.fixed and not lo <= value <= hi and p.name not in outside:
+            raise CalibError(
+                f"parameter {p.name} = {value:g} is outside its bounds {lo:g}..{hi:g} (the fit "
+                "reported no such value: the file was edited or damaged; fit again)"
+            )
+    values = {p.name: float(p.value) for p in model.parameters}
+    if set(params) != set(values):
+        extra = sorted(set(params) - set(values))
+        missing = sorted(set(values) - set(params))
+        raise CalibError(
+            f"'params' does not name the model's parameters (extra: {', '.join(extra) or '-'}; "
+            f"missing: {', '.join(missing) or '-'}); the two copies must agree"
+        )
+    for name, value in values.items():
+        if not (params[name] == value or abs(params[name] - value) <= 1e-12 * abs(value)):
+            raise CalibError(
+                f"'params' says {name} = {params[name]:.10g} but the model {value:.10g}; the two "
+                "copies must agree (the file was edited: fit again)"
+            )
 
 
 def write_record(path: str | os.PathLike, record: dict) -> Path:

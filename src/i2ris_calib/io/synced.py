@@ -18,11 +18,12 @@ from i2ris_calib.data.dataset import AXES, Dataset, direction_datasets, input_ba
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.columns import STANDARD_COLUMNS, ColumnsConfig, parse_columns_option
 from i2ris_calib.io.csv_file import read_csv_file
+from i2ris_calib.io.epoch import EPOCH_MIN_S, epoch_unit_problem
 from i2ris_calib.sync.log import find_glitches, speed_limit
 
-#: a first time at or above this (s) is an epoch clock (1970 + 11.6 days or later, no
-#: recording's own clock): such times are counted from the first sample
-EPOCH_MIN_S = 1e6
+#: the largest |angle| (deg) the I2RIS can show (it bends about +-90 deg): angles read
+#: as radians (``angle_unit = "rad"``) beyond it are degrees read x57
+MAX_PLAUSIBLE_ANGLE_DEG = 180.0
 #: median sample intervals a synced recording can plausibly have, s (10 kHz .. 0.1 Hz);
 #: a slower one that becomes plausible in ms/us/ns is refused naming the time_unit_s to set
 PLAUSIBLE_STEP_S = (1e-4, 10.0)
@@ -62,6 +63,11 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     source = cols.mapping()
     _check_mapped_columns(p, raw, cols)
     _check_needed(p, raw, [source[c] for c in need], need)
+    if raw.empty:
+        raise CalibError(
+            f"{p}: no samples (the file has only its header line); give a synced CSV with "
+            "one row per sample (docs/formats.md)"
+        )
     present = [c for c in STANDARD_COLUMNS if source[c] in raw.columns]
     df = pd.DataFrame({c: raw[source[c]] for c in present})
     label = {c: f"'{c}'" if source[c] == c else f"'{source[c]}' ({c})" for c in present}
@@ -79,9 +85,11 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     df.attrs["time_origin_s"] = origin
     _check_increasing(p, t, label["time_s"], origin)
     _check_time_unit(p, t, label["time_s"], cols.time_unit_s)
+    _check_epoch_unit(p, numeric["time_s"].to_numpy(dtype=float), label["time_s"], cols.time_unit_s)
     for col in encoders:
         check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
-    _angles_in_deg(df, [c for c in (f"{axis}_deg", f"{other}_deg") if c in df.columns], cols)
+    angles = [c for c in (f"{axis}_deg", f"{other}_deg") if c in df.columns]
+    _angles_in_deg(p, df, angles, cols, label)
     return df
 
 
@@ -107,16 +115,39 @@ def _check_finite(p: Path, df: pd.DataFrame, names: list[str], label: dict) -> N
             )
 
 
-def _angles_in_deg(df: pd.DataFrame, angles: list[str], cols: ColumnsConfig) -> None:
+def _angles_in_deg(
+    p: Path, df: pd.DataFrame, angles: list[str], cols: ColumnsConfig, label: dict
+) -> None:
     """The ``angles`` columns of ``df`` in deg (from rad when ``cols.angle_unit`` says so),
-    NaN on rows whose ``status`` (when present) is not ``measured``; in place."""
-    if cols.angle_unit == "rad":
-        for col in angles:
-            df[col] = np.rad2deg(df[col].to_numpy(dtype=float))
+    NaN on rows whose ``status`` (when present) is not ``measured``; in place.
+
+    Measured radians beyond :data:`MAX_PLAUSIBLE_ANGLE_DEG` are refused naming the
+    largest, its line and the fix: degrees read as radians (x57)."""
+    measured = np.ones(len(df), dtype=bool)
     if "status" in df.columns:
-        not_measured = df["status"].astype(str).str.strip() != "measured"
-        for col in angles:
-            df.loc[not_measured, col] = np.nan
+        measured = (df["status"].astype(str).str.strip() == "measured").to_numpy()
+    for col in angles:
+        x = df[col].to_numpy(dtype=float)
+        if cols.angle_unit == "rad":
+            x = np.rad2deg(x)
+            _check_radians(p, x, measured, label[col])
+        df[col] = np.where(measured, x, np.nan)
+
+
+def _check_radians(p: Path, deg: np.ndarray, measured: np.ndarray, label: str) -> None:
+    """CalibError when a measured angle read as radians is beyond +-
+    :data:`MAX_PLAUSIBLE_ANGLE_DEG` deg (``deg``: the angles converted)."""
+    size = np.where(measured & np.isfinite(deg), np.abs(deg), 0.0)
+    big = int(np.count_nonzero(size > MAX_PLAUSIBLE_ANGLE_DEG))
+    if not big:
+        return
+    k = int(np.argmax(size))
+    raise CalibError(
+        f"{p}: {label} = {np.deg2rad(deg[k]):.6g} at line {k + 2} is {deg[k]:.5g} deg with "
+        f'angle_unit = "rad" ({big} row(s) beyond +-{MAX_PLAUSIBLE_ANGLE_DEG:g} deg; the '
+        'I2RIS bends about +-90 deg): the angles look like degrees; set angle_unit = "deg" '
+        "in [columns] or --columns (docs/formats.md)"
+    )
 
 
 def _numeric_columns(p: Path, df: pd.DataFrame, names: list[str], label: dict) -> dict:
@@ -222,6 +253,19 @@ def _check_time_unit(p: Path, t: np.ndarray, label: str, unit_s: float) -> None:
                 f"{unit_s:g}): the times look like {name}; set time_unit_s = {unit_s * unit:g} "
                 f"in [columns] or --columns (docs/formats.md)"
             )
+
+
+def _check_epoch_unit(p: Path, raw: np.ndarray, label: str, unit_s: float) -> None:
+    """CalibError when the time column (``raw``, as written in the file) is an epoch
+    clock that ``unit_s`` puts outside 2000..2100 while another unit puts it inside
+    (:func:`~i2ris_calib.io.epoch.epoch_unit_problem`): epoch seconds read as ms would
+    make 5 Hz data 5 kHz and every rate derived from it 1000x too high."""
+    step = float(np.median(np.diff(raw))) if raw.size > 1 else None
+    why = epoch_unit_problem(float(raw[0]), step, unit_s)
+    if why:
+        raise CalibError(
+            f"{p}: {label} {why}; set time_unit_s to it in [columns] or --columns (docs/formats.md)"
+        )
 
 
 # --- encoder glitches (issue 9): 'sync' repairs them; a synced CSV made elsewhere is checked

@@ -11,6 +11,7 @@ import pandas as pd
 
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.csv_file import read_csv_file
+from i2ris_calib.io.epoch import epoch_unit_problem
 
 __all__ = ["PLAUSIBLE_TARGET_STEP_S", "read_history", "read_target"]
 
@@ -25,7 +26,8 @@ def read_target(path: str | Path, axes: Sequence[str], time_unit_s: float = 1.0)
     ``time_s`` is multiplied by ``time_unit_s`` (seconds per unit of the column: 1e-3
     for ms). One-line CalibError for: unreadable file, missing columns, non-numeric or
     NaN values, time not strictly increasing, a median sample interval outside
-    :data:`PLAUSIBLE_TARGET_STEP_S` (naming the ``time_unit_s`` that fits).
+    :data:`PLAUSIBLE_TARGET_STEP_S` (naming the ``time_unit_s`` that fits), an epoch
+    clock read in the wrong unit (:func:`~i2ris_calib.io.epoch.epoch_unit_problem`).
     """
     p = Path(path)
     df = read_csv_file(p, "target file not found (a CSV with time_s and <axis>_deg)")
@@ -53,6 +55,12 @@ def read_target(path: str | Path, axes: Sequence[str], time_unit_s: float = 1.0)
         raise CalibError(
             f"{p}: time_s must increase strictly; line {d[0] + 3} (t = {t[d[0] + 1]:g} s) "
             f"does not (previous t = {t[d[0]]:g} s)"
+        )
+    why = epoch_unit_problem(t[0], float(np.median(np.diff(t))) if t.size > 1 else None,
+                             float(time_unit_s))  # fmt: skip
+    if why:
+        raise CalibError(
+            f"{p}: time_s {why}; give it with --time-unit-s (or [compensate] time_unit_s)"
         )
     df["time_s"] = t * float(time_unit_s)
     _check_target_step(p, df["time_s"].to_numpy(), float(time_unit_s))

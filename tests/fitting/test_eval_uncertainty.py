@@ -1,4 +1,5 @@
-"""FitResult.eval_uncertainty: the prediction band from the parameter covariance."""
+"""FitResult.eval_uncertainty (the confidence band of the curve, from the parameter
+covariance) and eval_prediction_band (a new measurement: that plus the noise)."""
 
 from __future__ import annotations
 
@@ -148,3 +149,22 @@ def test_no_covariance_gives_zeros_and_misuse_is_one_line():
     # the fit's own input, when recorded, is the default
     rec = replace(res, extra={"signals": Signals(v=np.arange(4.0))})
     assert rec.eval_uncertainty().shape == (4,)
+
+
+def test_prediction_band_covers_new_measurements_where_the_confidence_band_does_not():
+    """Issue 32 item 6: the band about the curve is not where new data fall. For a line
+    with noise 0.3, about 95 % of new measurements fall inside the 0.95 prediction
+    band; the confidence band alone holds far fewer."""
+    v, theta = _line_data(5, n=400)
+    res = fit_model(LineModel(), v, theta)
+    rng = np.random.default_rng(9)
+    new = 0.02 * v + 1.5 + rng.normal(0, 0.3, v.size)
+    y = res.predict(v)
+    pred = res.eval_prediction_band(v, sigma=0.95)
+    conf = res.eval_uncertainty(v, sigma=0.95)
+    inside = np.mean(np.abs(new - y) <= pred)
+    assert 0.92 <= inside <= 0.98
+    assert np.mean(np.abs(new - y) <= conf) < 0.5
+    np.testing.assert_allclose(
+        res.eval_prediction_band(v, 2), 2 * np.sqrt(res.eval_uncertainty(v) ** 2
+                                                    + res.metrics.rmse_deg**2), rtol=1e-12)  # fmt: skip

@@ -94,3 +94,26 @@ def test_verdict_words_match_the_numbers():
                           without_worst_deg=0.0077, **base)  # fmt: skip
     assert "one sample carries much of it (t = 20 s, -1.9 deg" in verdict(one)
     assert "nan" not in (at + off + verdict(one)).lower()
+
+
+def test_a_rest_off_the_loop_is_named_with_its_numbers():
+    """Issue 32 item 5 (the piezo file): a 3 s rest at input 0 whose angle sits far
+    from the loop's centre there is warned; a rest on the loop is not."""
+    from i2ris_calib.fitting.limits import rest_anomalies
+
+    rng = np.random.default_rng(3)
+    v, _, cyc = loops(4, 0.0, 0.0)
+    v = v - 500.0  # loops through 0
+    theta = 0.01 * v + 0.3 * np.sign(np.gradient(v)) + rng.normal(0, 0.01, v.size)
+    t = np.arange(v.size) * 0.01
+    rest_v, rest_t = np.zeros(300), t[-1] + 0.01 * np.arange(1, 301)
+    on = np.r_[theta, 0.3 + rng.normal(0, 0.01, 300)]  # on the falling branch
+    off = np.r_[theta, -1.68 + rng.normal(0, 0.01, 300)]
+    vv, tt = np.r_[v, rest_v], np.r_[t, rest_t]
+    assert rest_anomalies(vv, on, tt, 0.01) == []
+    (w,) = rest_anomalies(vv, off, tt, 0.01)
+    assert (
+        w.startswith("a rest of 2.99 s at input 0 (t = ") and "sits at -1.68 deg, 1.6 deg from" in w
+    )
+    half = float(w.split("half-width ")[1].split(" deg")[0])
+    assert 0.2 <= half <= 0.3  # the loop's half-width at 0 is 0.3 deg (branch means)

@@ -63,5 +63,9 @@ def test_lockstep_motors_cannot_separate_coupling():
     assert together.moves_together and together.cannot_separate and not together.coupled
     choice = choose_model(None, model="all", together=together)
     assert "agpi_coupled" not in choice.kinds
+    # --model agpi_coupled fits coupling terms: the words say so (issue 32 item 6)
+    forced = choose_model(None, model="agpi_coupled", together=together)
+    assert forced.kinds == ("agpi_coupled",) and "no coupling term" not in forced.why
+    assert "coupling terms fitted as --model asks" in forced.why
     free = simulate_two_motor(7, n_samples=900, rate_hz=30.0, coupling=0.6)
     assert motors_together(free.enc_pitch, free.enc_yaw, "yaw").coupled

@@ -189,6 +189,9 @@ def _fit_into(paths, axis: str, model: str, out: Path, config, saved, inputs: li
         for (d, res), dec in zip(fitted, decisions, strict=True)
     ]
     doc = fit_document(fitted, axis, kinds, provenance(inputs, config), choice, decisions, limits)
+    for d, dec in zip(doc["datasets"], decisions, strict=True):
+        for kind, reason in dec.rejected:  # the numbers behind "not recommendable"
+            d["models"][kind]["warnings"].append(f"not recommended: {reason}")
     with output_dir(out, "fit", inputs, OUTPUTS) as tmp:
         write_json(tmp / "fit.json", doc)
         predictions_frame(fitted).to_csv(tmp / "predictions.csv", index=False, float_format="%.10g")
@@ -200,6 +203,8 @@ def _fit_into(paths, axis: str, model: str, out: Path, config, saved, inputs: li
     for dec, lim in zip(decisions, limits, strict=True):
         console.print(dec.line)
         console.print(f"{dec.dataset}: {lim.verdict}")
+        for w in lim.anomalies:
+            console.print(f"warning: {dec.dataset}: {w}")
     for d in doc["datasets"]:
         r = d["rows"]
         name = f"{d['name']} [{labels[d['source']]}]" if several else d["name"]

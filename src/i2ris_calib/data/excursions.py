@@ -26,6 +26,9 @@ import numpy as np
 
 #: An excursion's peak must reach this fraction of the largest |input| to count
 SUBSTANTIAL = 0.1
+#: The signed input chosen on at most this many odd excursions (crossing zero or not
+#: starting at rest), and at most a fifth of them, is flagged as marginal
+MARGINAL_EXCURSIONS = 2
 #: A rest lasts at least this many samples ...
 REST_SAMPLES = 3
 #: ... and at least this long (s)
@@ -88,7 +91,28 @@ class Excursions:
                 if not_rest == self.n_excursions
                 else f"{not_rest} of {self.n_excursions} excursions do not start at rest"
             )
-        return "; ".join(parts)
+        text = "; ".join(parts)
+        if self.marginal:
+            text += f" ({self.marginal})"
+        return text
+
+    @property
+    def marginal(self) -> str:
+        """A warning when the signed-vs-split choice hinges on a few excursions: signed
+        because at most :data:`MARGINAL_EXCURSIONS` (and at most a fifth) of them cross
+        zero or start away from rest; empty otherwise."""
+        if not self.signed:
+            return ""
+        odd = max(self.n_crossings, self.n_excursions - self.n_from_rest)
+        if odd > MARGINAL_EXCURSIONS or odd > 0.2 * self.n_excursions:
+            return ""
+        return (
+            f"warning: the choice hinges on {odd} of {self.n_excursions} excursions; the "
+            f"other {self.n_excursions - odd} start at rest at zero, as in the paper's "
+            f"protocol. A rest needs {REST_SAMPLES} samples and {REST_S} s inside the zero "
+            "band: a ramp passing zero faster looks like a crossing. Fit --split to keep "
+            "a recording of the same protocol on the paper's split"
+        )
 
 
 def excursions(enc: np.ndarray, zero_band: float, time_s: np.ndarray | None = None) -> Excursions:

@@ -99,6 +99,11 @@ def step_verdict(effect: str, alternatives) -> str:
     return text + (" (" + "; ".join(exps) + ")" if exps else "")
 
 
+#: |z| below this: the alternative "fits as well" as the named effect on the held-out
+#: cycles; z at or below minus this: it "fits better" (the test could not exclude it)
+AS_WELL_Z = 2.0
+
+
 def not_excluded_sentence(alternatives) -> str:
     """One sentence on the effects the data cannot tell from the final model, e.g.
     ``"backlash not excluded (width_counts = 151 moves the angle by 0.37 deg RMS as
@@ -106,10 +111,21 @@ def not_excluded_sentence(alternatives) -> str:
     parts = []
     for a in alternatives:
         params = ", ".join(f"{k} = {v:.3g}" for k, v in a.params.items())
-        text = (
-            f"{a.effect} not excluded ({params} moves the angle by {a.effect_rms_deg:.2g} deg "
-            f"RMS and fits as well, z = {a.z:.1f}"
+        moves = (
+            f" moves the angle by {a.effect_rms_deg:.2g} deg RMS and"
+            if np.isfinite(a.effect_rms_deg)
+            else ""
         )
+        # the words follow z (the named effect's held-out SSE reduction over it)
+        how = (
+            "fits better"
+            if a.z <= -AS_WELL_Z
+            else "fits as well"
+            if a.z < AS_WELL_Z
+            else "fits almost as well"
+        )
+        held = f", held-out {a.holdout_rmse_deg:.3g} deg" if np.isfinite(a.holdout_rmse_deg) else ""
+        text = f"{a.effect} not excluded ({params}{moves} {how}{held}, z = {a.z:.1f}"
         parts.append(text + (f"; to separate it: {a.experiment})" if a.experiment else ")"))
     return "; ".join(parts)
 

@@ -109,6 +109,8 @@ class Evidence:
         Parameters on a bound other than 0 that move the output (:data:`BOUND_STEP`).
     jump_sd : float
         :func:`output_jump` in noise sd (NaN: not measured).
+    jump_deg : float
+        :func:`output_jump` in deg.
     start_ratio : float
         Held-out RMSE from rest or after a conditioning sweep (the lower) over that
         from the fitted start state (1 when the fit starts at rest; NaN: unknown).
@@ -125,6 +127,7 @@ class Evidence:
     n_identified: int | None = None
     bound_moving: tuple[str, ...] = ()
     jump_sd: float = float("nan")
+    jump_deg: float = float("nan")
     start_ratio: float = float("nan")
     rest_rmse_deg: float = float("nan")
 
@@ -152,7 +155,10 @@ class Evidence:
                 "a user cannot reproduce"
             )
         if math.isfinite(self.jump_sd) and self.jump_sd > JUMP_NOISE_SD:
-            out.append(f"its output jumps by {self.jump_sd:.1f} noise sd beyond the data's")
+            out.append(
+                f"its output jumps by {self.jump_deg:.3g} deg more than the data's largest "
+                f"sample-to-sample change ({self.jump_sd:.1f} noise sd)"
+            )
         return out
 
 
@@ -343,6 +349,7 @@ def evidence_of(kind: str, result, data, noise: float) -> Evidence:
         n_identified=n_ident,
         bound_moving=_bounds_moving(result, data, pred, noise),
         jump_sd=jump / noise if math.isfinite(jump) and noise > 0 else float("nan"),
+        jump_deg=jump,
         start_ratio=ratio,
         rest_rmse_deg=rest,
     )
@@ -451,6 +458,7 @@ def pooled(evidence: Sequence[Evidence]) -> Evidence:
         n_identified=min(idents) if idents else None,
         bound_moving=tuple(dict.fromkeys(n for e in evidence for n in e.bound_moving)),
         jump_sd=worst([e.jump_sd for e in evidence]),
+        jump_deg=worst([e.jump_deg for e in evidence]),
         start_ratio=worst([e.start_ratio for e in evidence]),
         rest_rmse_deg=worst([e.rest_rmse_deg for e in evidence]),
     )

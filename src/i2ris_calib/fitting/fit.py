@@ -836,7 +836,8 @@ class FitResult:
     def eval_uncertainty(
         self, signals: Signals | np.ndarray | None = None, sigma: float = 1.0
     ) -> np.ndarray:
-        """Prediction band of the fitted model from the parameter covariance (deg), per sample.
+        """Confidence band of the fitted model curve from the parameter covariance (deg),
+        per sample (where the curve may lie; a new measurement: :meth:`eval_prediction_band`).
 
         As lmfit's ``ModelResult.eval_uncertainty``: ``sigma_y = sqrt(diag(J C J^T))``
         with ``J`` the Jacobian of the model output with respect to the parameters the
@@ -906,6 +907,31 @@ class FitResult:
         c = cov[np.ix_(idx, idx)]
         var = np.einsum("ij,jk,ik->i", jac, c, jac)
         return sigma * np.sqrt(np.maximum(var, 0.0))
+
+    def eval_prediction_band(
+        self, signals: Signals | np.ndarray | None = None, sigma: float = 1.0
+    ) -> np.ndarray:
+        """Prediction band of a new measurement (deg), per sample: the confidence band
+        of the model curve (:meth:`eval_uncertainty`) and the scatter of the data about
+        it (the fitted RMSE, :attr:`metrics`) together,
+        ``sigma * sqrt(sd_curve^2 + rmse^2)``. Where :meth:`eval_uncertainty` says
+        where the curve may lie, this says where a new measured angle may.
+
+        Parameters and errors as :meth:`eval_uncertainty`.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+        """
+        curve = self.eval_uncertainty(signals, sigma)  # checks sigma
+        width = float(sigma)
+        if width < 1:  # a two-sided probability, as eval_uncertainty reads it
+            from scipy.special import ndtri
+
+            width = float(ndtri(0.5 + 0.5 * width))
+        noise = float(self.metrics.rmse_deg)
+        noise = noise if np.isfinite(noise) else 0.0
+        return np.sqrt(curve**2 + (width * noise) ** 2)
 
     @property
     def chisqr(self) -> float:

@@ -46,6 +46,14 @@ MAX_HARMONICS = 12
 """Most harmonics :func:`phase_baseline` tries."""
 MAD_SD = 1.4826
 """MAD -> sd of a normal distribution."""
+REST_MIN_S = 1.0
+"""A rest (input still) this long or longer is compared with the loop (:func:`rest_anomalies`)."""
+REST_NEAR = 0.02
+"""Moving samples within this share of the input span of a rest's input describe the
+loop there."""
+REST_OFF_FLOOR = 5.0
+"""A rest is off the loop when its mean angle lies more than the loop's half-width plus
+this many times the recording's floor from the loop's centre at its input."""
 
 
 @dataclass(frozen=True)
@@ -117,6 +125,8 @@ class RecordingLimits:
         Cross-validated held-out error (short recordings).
     without_worst_deg : float
         The model's held-out RMSE without its worst sample (deg).
+    anomalies : tuple of str
+        Warnings with numbers on the recording itself (:func:`rest_anomalies`).
     verdict : str
         Plain words: at the limit of this recording, or what the model leaves.
     """
@@ -132,6 +142,7 @@ class RecordingLimits:
     worst_sample: dict = field(default_factory=dict)
     crossval: CrossValidation | None = None
     without_worst_deg: float = math.nan
+    anomalies: tuple[str, ...] = ()
     verdict: str = ""
 
     @property
@@ -162,6 +173,7 @@ class RecordingLimits:
             "worst_sample": self.worst_sample,
             "without_worst_deg": num(self.without_worst_deg),
             "crossval": None if self.crossval is None else self.crossval.as_dict(),
+            "anomalies": list(self.anomalies),
             "verdict": self.verdict,
         }
 
@@ -392,7 +404,54 @@ def recording_limits(data, result, model: str | None, crossval: CrossValidation 
         else math.nan
     )
     lim = RecordingLimits(model, m, noise, rep, n_rep, line, phase_rmse, k, worst, crossval, ww)
-    return RecordingLimits(**{**lim.__dict__, "verdict": verdict(lim)})
+    odd = rest_anomalies(v, theta, t, lim.floor_deg)
+    return RecordingLimits(**{**lim.__dict__, "anomalies": tuple(odd), "verdict": verdict(lim)})
+
+
+def _runs(still: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of every run of True in ``still``."""
+    edges = np.flatnonzero(np.diff(np.r_[0, still.astype(np.int8), 0]))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def rest_anomalies(v: np.ndarray, theta: np.ndarray, t: np.ndarray, floor: float) -> list[str]:
+    """Warnings for rests whose angle is far from the loop's at the same input.
+
+    A rest is a run of at least :data:`REST_MIN_S` s (and 5 samples) with the input
+    still; the loop at its input is described by the moving samples within
+    :data:`REST_NEAR` of the span: its centre (the mean of the rising and the falling
+    branch's mean angle) and half-width. A rest whose mean measured angle lies more
+    than the half-width plus :data:`REST_OFF_FLOOR` x ``floor`` (the recording's noise
+    or repeatability, deg) from the centre is named with its numbers."""
+    v, theta, t = (np.asarray(x, dtype=float) for x in (v, theta, t))
+    if v.size < 10 or not math.isfinite(floor):
+        return []
+    span = float(np.ptp(v)) or 1.0
+    dv = np.r_[0.0, np.diff(v)]
+    still = np.abs(dv) <= 1e-9 * span
+    out = []
+    for a, b in _runs(still):
+        a = max(a - 1, 0)  # the sample the input stopped at
+        if b - a < 5 or t[b - 1] - t[a] < REST_MIN_S:
+            continue
+        level = float(np.median(v[a:b]))
+        at_rest = theta[a:b][np.isfinite(theta[a:b])]
+        near = ~still & np.isfinite(theta) & (np.abs(v - level) <= REST_NEAR * span)
+        rising, falling = near & (dv > 0), near & (dv < 0)
+        if at_rest.size < 3 or not rising.any() or not falling.any():
+            continue
+        up, down = float(theta[rising].mean()), float(theta[falling].mean())
+        centre, half = 0.5 * (up + down), 0.5 * abs(up - down)
+        off = abs(float(at_rest.mean()) - centre)
+        if off > half + REST_OFF_FLOOR * floor:
+            out.append(
+                f"a rest of {t[b - 1] - t[a]:.3g} s at input {level:.4g} (t = {t[a]:.4g}-"
+                f"{t[b - 1]:.4g} s) sits at {at_rest.mean():.3g} deg, {off:.2g} deg from the "
+                f"loop's centre there ({centre:.3g} deg, half-width {half:.2g} deg): not on "
+                "the loop (drift, a slipped marker or another experiment?); if it is not part "
+                "of the experiment, leave it out (a status column) and refit"
+            )
+    return out
 
 
 def cv_folds(cycles: np.ndarray, v: np.ndarray, own: np.ndarray) -> list[int]:

@@ -223,6 +223,11 @@ def choose_model(
             # one-loop kinds, without the other motor's input, are left out)
             kinds = (*signed_kinds(coupled=True), COUPLED_DEFAULT)
             why += f"; with coupling: {together.reason}"
+        elif together.cannot_separate and model != "all" and kind_info(model).coupled:
+            why += (
+                f"; coupling terms fitted as --model asks, though {together.reason}: "
+                "expect their values not to be identified"
+            )
         elif together.cannot_separate:
             why += f"; no coupling term: {together.reason}"
         elif not signed:
@@ -507,10 +512,15 @@ def fit_warnings(res: FitResult, v: np.ndarray) -> tuple[str, ...]:
     out = []
     ev = res.metrics.explained_variance
     if np.isfinite(ev) and ev < MIN_EXPLAINED_VARIANCE:
+        share = 100 * max(ev, 0.0)
+        than = (
+            "a constant does almost as well"
+            if share < 50
+            else f"a hysteresis model of the right input explains {100 * MIN_EXPLAINED_VARIANCE:.0f} % or more"
+        )
         out.append(
-            f"the model explains only {100 * max(ev, 0.0):.0f} % of the angle's variance "
-            "(a constant does almost as well): the angle may not follow this input "
-            "(check the axis, the columns and the tracking)"
+            f"the model explains only {share:.0f} % of the angle's variance ({than}): "
+            "the angle may not follow this input (check the axis, the columns and the tracking)"
         )
     a1 = res.params.get("a1")
     span_v = float(np.ptp(v)) if np.size(v) else 0.0

@@ -466,10 +466,13 @@ def _fig6_caption(name: str, direction: str, rows: pd.DataFrame) -> str:
     models = [lab for _, lab, _ in drawn]
     banded = [lab for col, lab, _ in drawn if figures.band_column(col) in rows]
     band = (
-        f" Shaded about {', '.join(banded)} (middle): the ±{figures.BAND_SIGMA:g} sd prediction "
-        "band from the parameter covariance (FitResult.eval_uncertainty)."
+        f" Shaded about {', '.join(banded)} (middle): dark, the ±{figures.BAND_SIGMA:g} sd "
+        "confidence band of the model curve from the parameter covariance "
+        "(FitResult.eval_uncertainty); light, the ±"
+        f"{figures.BAND_SIGMA:g} sd prediction band of a new measurement (that and the "
+        "model's residual sd together, FitResult.eval_prediction_band)."
         if banded
-        else " No prediction band: predictions.csv has no <model>_sd_deg column (the band "
+        else " No confidence band: predictions.csv has no <model>_sd_deg column (the band "
         "needs the parameter covariance, which fit.json does not store; "
         "FitResult.eval_uncertainty gives it in Python)."
     )

@@ -28,7 +28,9 @@ HOLDOUT_COLOR = "#F0E442"
 OTHER_COLOR = "0.6"
 GAP_FACTOR = 1.5
 BAND_SIGMA = 2.0
-"""Prediction bands are drawn at +-2 standard errors (about 95 %)."""
+"""Bands are drawn at +-2 standard errors (about 95 %): the confidence band of the
+model curve (parameter covariance) and, wider, the prediction band of a new
+measurement (that plus the model's residual sd)."""
 """A time step longer than this times the median step is a gap (no line across it)."""
 STATUS_COLORS = {"not_found": "#E69F00", "ambiguous": "#CC79A7", "rejected": "#D55E00"}
 
@@ -197,7 +199,7 @@ class Fig6Data:
         ``fit``, ``holdout`` (own samples with a measured angle), ``not_measured``
         (own samples without one), ``other`` (samples of the other direction).
     bands : dict
-        Model column -> its 1-sigma prediction band (deg), shape (m,), for every model
+        Model column -> its 1-sigma confidence band (deg, parameter covariance), shape (m,), for every model
         whose ``<model>_sd_deg`` column (:func:`band_column`) predictions.csv carries.
     """
 
@@ -273,7 +275,7 @@ def fig6_data(
 
 
 def band_column(model_column: str) -> str:
-    """predictions.csv column of a model's 1-sigma prediction band: ``egpi_deg`` ->
+    """predictions.csv column of a model's 1-sigma confidence band: ``egpi_deg`` ->
     ``egpi_sd_deg`` (deg; :meth:`i2ris_calib.fitting.fit.FitResult.eval_uncertainty`)."""
     return model_column.removesuffix("_deg") + "_sd_deg"
 
@@ -329,9 +331,15 @@ def fit_figure_png(
         ax_v.plot(data.v, y, "-", lw=1, color=color, label=label)
         ax_t.plot(data.time_s, y, "-", lw=1, color=color, label=label)
         if col in data.bands:
-            sd = BAND_SIGMA * data.bands[col]
-            ax_t.fill_between(data.time_s, y - sd, y + sd, color=color, alpha=0.25, lw=0,
-                              label=f"{label} ±{BAND_SIGMA:g} sd")  # fmt: skip
+            conf = data.bands[col]
+            err = np.asarray(data.errors[col], dtype=float)
+            noise = float(np.sqrt(np.nanmean(err**2))) if np.isfinite(err).any() else 0.0
+            wide = BAND_SIGMA * np.sqrt(conf**2 + noise**2)  # noise plus parameters
+            ax_t.fill_between(data.time_s, y - wide, y + wide, color=color, alpha=0.1, lw=0,
+                              label=f"{label} ±{BAND_SIGMA:g} sd prediction")  # fmt: skip
+            sd = BAND_SIGMA * conf
+            ax_t.fill_between(data.time_s, y - sd, y + sd, color=color, alpha=0.3, lw=0,
+                              label=f"{label} ±{BAND_SIGMA:g} sd confidence")  # fmt: skip
         ax_e.plot(
             data.meas_time_s,
             data.errors[col],

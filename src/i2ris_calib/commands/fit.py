@@ -24,7 +24,12 @@ from i2ris_calib.fitting.fit import fit_model
 from i2ris_calib.fitting.pipeline import ModelChoice, choose_model, fit_dataset, pick_after_fit
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
-from i2ris_calib.io.fit import fit_document, predictions_frame, read_model_file
+from i2ris_calib.io.fit import (
+    fit_document,
+    model_file_origin,
+    predictions_frame,
+    read_model_file,
+)
 from i2ris_calib.io.outputs import claim_output_dir, output_dir
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
@@ -159,6 +164,8 @@ def fit_files(
     if not paths:
         raise CalibError("give at least one synced CSV to fit")
     saved = read_model_file(model_file) if model_file is not None else None
+    if model_file is not None:
+        _check_model_axis(model_file, axis)
     fit_config = config.fit
     inputs = [*paths, *([model_file] if model_file is not None else [])]
     out = claim_output_dir(out, "fit", inputs, OUTPUTS)
@@ -198,6 +205,20 @@ def fit_files(
             "* not converged: see 'message' in fit.json (try more starts or --config [fit] max_nfev)"
         )
     return doc
+
+
+def _check_model_axis(model_file, axis: str) -> None:
+    """CalibError when the final_model.json was diagnosed on the other axis (its
+    effects and values belong to that motor)."""
+    origin = model_file_origin(model_file)
+    was = origin.get("axis")
+    if was is None or was == axis:
+        return
+    raise CalibError(
+        f"{model_file}: its model was diagnosed on {origin.get('dataset', was)} (axis {was}); "
+        f"this fit is --axis {axis}: give the final_model.json of a {axis} diagnosis "
+        f"('diagnose ... --axis {axis}'), or fit --axis {was}"
+    )
 
 
 def recording_summary(whole: Sequence[Dataset]) -> tuple[Excursions, MotorsTogether | None]:

@@ -108,7 +108,8 @@ def results_tables(fitted, kinds: Sequence[str], axis: str) -> list:
 
 def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = None):
     """A rich Table shaped like the paper's Tables 1-2: one row per model (fitted
-    cycles and held-out cycles), RMSE / NRMSE / MAE (= max |error|) per dataset. A
+    cycles and held-out cycles), RMSE / NRMSE / max |error| (the paper's MAE) per dataset,
+    titled with the models fitted. A
     ``*`` marks each cell group whose fit did not converge (per model and dataset).
     ``source``: the one input file of these datasets, in the title (the columns are
     then labelled by direction: one dataset per direction in a file)."""
@@ -117,8 +118,10 @@ def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = 
         return f"{d.axis}{d.direction}" if source else d.name
 
     absd = [label(d) for d, _ in fitted if d.abs_fitted]
+    names = [kind_info(k).label for k in fit_order(kinds)]
+    models = " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
     table = Table(
-        title=f"GPI and EGPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %"
+        title=f"{models}, {axis} motor: RMSE and max |error| in deg, NRMSE in %"
         + (f"\n{source}" if source else ""),
         caption="; ".join(
             [f"{', '.join(absd)}: fitted on |counts| -> |deg|"] * bool(absd)
@@ -129,7 +132,7 @@ def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = 
     )
     table.add_column("model", no_wrap=True)
     for d, _ in fitted:
-        for m in ("RMSE", "NRMSE", "MAE"):
+        for m in ("RMSE", "NRMSE", "max |error|"):
             table.add_column(f"{label(d)}\n{m}", justify="right", no_wrap=True)
     for kind in table_order(kinds):
         for label, attr in (("fit", "metrics"), ("hold", "holdout_metrics")):

@@ -259,6 +259,17 @@ def test_signed_direction_of_an_input_that_never_crosses_zero(tmp_path, capsys):
     assert not out.exists()
 
 
+def test_output_starts_with_the_verdict_not_a_blank_line(tmp_path, capsys):
+    csv = tmp_path / "s.csv"
+    t = np.arange(0, 20, 0.05)
+    enc = np.round(3000 * np.sin(2 * np.pi * t / 5))
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": enc / 200}).to_csv(csv, index=False)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(csv), "--axis", "yaw", "--start", "gpi", "--out", str(out)]) == 0
+    text, err = capsys.readouterr()
+    assert text.startswith("yaw±: ") and err == "", (text, err)
+
+
 def test_signed_direction_of_an_input_that_crosses_zero(tmp_path):
     """docs/diagnosis.md: ``±`` is the signed dataset of an input that crosses zero."""
     csv = tmp_path / "s.csv"

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from rich.console import Console
 from rich.progress import Progress
 
 from i2ris_calib.commands.fit import datasets_for_fit
@@ -227,7 +228,12 @@ def _diagnosed(dset: Dataset, start: str, cfg, show_progress: bool):
     """:func:`diagnose_from_starts` on ``dset`` (``start`` ``auto``: the model fit picks
     on the signed input) behind a progress line."""
     starts = None if start == "auto" else (start,)
-    with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
+    console = Console(stderr=True)  # off a terminal: no bar, so no blank line either
+    shown = show_progress and console.is_terminal
+    with (
+        Progress(console=console, transient=True, disable=not shown) as bar,
+        single_threaded_blas(),
+    ):
         task = bar.add_task(f"diagnose {dset.name}", total=None)
         return diagnose_from_starts(
             dset,

@@ -413,6 +413,22 @@ def test_run_diagnose_stage_writes_what_the_report_reads(tmp_path):
     assert [d.axis for d in load_run(run)[0].diagnoses] == ["yaw+"]
 
 
+def test_run_says_a_diagnose_stage_was_skipped_and_why(tmp_path):
+    """Was: "diagnose yaw±: ran" for a folder holding only skipped.json."""
+    from i2ris_calib.commands.run import Stage, diagnose_direction, run_stage
+    from i2ris_calib.config import PipelineConfig
+
+    csv = tmp_path / "synced.csv"
+    _synced_csv(csv, n_cycles=4)
+    cfg = PipelineConfig()
+    out = tmp_path / "diagnose" / "yaw±"
+    stage = Stage("diagnose yaw±", out, (csv,), (cfg.fit, cfg.diagnose),
+                  lambda: diagnose_direction(csv, "yaw", "±", out, cfg))  # fmt: skip
+    said = run_stage(stage, force=False)
+    assert said.startswith("skipped: the default fit of yaw fits yaw+ and yaw-"), said
+    assert run_stage(stage, force=False) == f"up to date ({said})"
+
+
 def test_run_diagnoses_what_the_default_fit_fits_through_zero(tmp_path):
     """A recording through zero: the default fit models the axis over its signed input,
     so `run` diagnoses yaw± and records for yaw+ and yaw- that the fit does not split."""

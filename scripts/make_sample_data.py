@@ -3,7 +3,8 @@
     .venv/bin/python scripts/make_sample_data.py
 
 - sample_data/session/: a small rendered two-microscope session (configs/sample_session.toml),
-  the input of the README's first command.
+  the input of the README's first command, and its target.csv: a yaw tip trajectory for
+  compensation (configs/compensate.example.toml).
 - sample_data/datasets/{yaw_pos,yaw_neg,pitch_pos,pitch_neg}.csv: four paper-like synced
   datasets (docs/formats.md, "The synced CSV"): EGPI truth with the fixed paper-like
   parameters of each motion direction, a Fig-5-like input (ramps out and back with pauses,
@@ -88,8 +89,21 @@ def write_session() -> None:
     write_simulated_session(OUT / "session", cfg, force=True)
 
 
+def write_target() -> None:
+    """session/target.csv: a yaw target for compensation (docs/compensate.md): 20 s at
+    50 Hz, from rest at 0 deg up to a slow sine between 10 and 20 deg, inside what the
+    sample session's yaw+ fit reaches (its loops go to ~37 deg)."""
+    t = np.arange(0.0, 20.0, 0.02)
+    ramp = np.clip(t / 4.0, 0.0, 1.0)
+    yaw = ramp * (15.0 + 5.0 * np.sin(2 * np.pi * t / 8.0))
+    pd.DataFrame({"time_s": t, "yaw_deg": yaw}).to_csv(
+        OUT / "session" / "target.csv", index=False, float_format="%.6f"
+    )
+
+
 if __name__ == "__main__":
     write_datasets()
     write_lab_export()
     if "--datasets-only" not in sys.argv:
         write_session()
+        write_target()

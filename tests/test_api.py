@@ -59,6 +59,15 @@ def test_fit_result_reports(data):
     rep = res.fit_report()
     for name in res.free:
         assert f"\n    {name} " in rep
+    # the held-out RMSE has its unit; v_f is profiled (no stderr by design), said so,
+    # and not counted with the least-squares parameters (as the report counts them)
+    assert re.search(r"held-out [0-9.]+ deg,", r), r
+    assert res.profiled == ("v_f",) and res.n_fitted == len(res.free) - 1
+    assert f"{res.n_fitted} free (+1 profiled)" in r
+    assert f"free parameters = {res.n_fitted} (+ v_f profiled)" in rep
+    assert "nan" not in rep and re.search(r"\n    v_f +=.*\(profiled\)", rep)
+    # why the optimiser stopped, in plain words (not scipy's "`ftol` termination ...")
+    assert "termination" not in rep and "`" not in res.message
     assert "<table>" in res._repr_html_()
     for (a, b), c in res.correlations.items():
         assert a in res.free and b in res.free and -1.0 - 1e-9 <= c <= 1.0 + 1e-9
@@ -235,3 +244,15 @@ def test_import_stays_cheap():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == []
+
+
+def test_help_of_fit_and_load_synced_reads_well():
+    """help(fit) shows no whole FitConfig(...) repr as a default; help(load_synced)
+    says what it returns."""
+    import inspect
+    import pydoc
+
+    assert inspect.signature(fit).parameters["config"].default is None
+    assert "FitConfig(method" not in pydoc.render_doc(fit, renderer=pydoc.plaintext)
+    doc = i2ris_calib.load_synced.__doc__
+    assert "a list of ``Dataset``" in doc and "``[0]`` is" in doc

@@ -228,6 +228,14 @@ MODELS = {
         lambda: egpi_model([("lin", "linear")], {}),
         [r"egpi_model: envelopes\[0\] kind_l 'lin'", "did you mean 'linear'"],
     ),
+    "general_no_arguments": (
+        lambda: egpi_model(),
+        ["egpi_model: envelopes and values not given", "call i2ris_egpi_model()"],
+    ),
+    "general_no_values": (
+        lambda: egpi_model([("linear", "linear")]),
+        ["egpi_model: values not given", "i2ris_egpi_model()"],
+    ),
     "general_envelopes_str": (
         lambda: egpi_model("linear", {}),
         ["egpi_model: envelopes is the str 'linear'"],

@@ -230,3 +230,14 @@ def test_the_count_reaches_the_xdist_controller(suite):
     result.stdout.fnmatch_lines(
         ["2 slow tests not run; run them with: bash scripts/test.sh -m slow"]
     )
+
+
+@pytest.mark.parametrize("columns", ["80", "100"])
+def test_top_level_help_shows_every_summary_whole(capsys, monkeypatch, columns):
+    """Each command's one-line summary fits: no "..." cut at 80 or 100 columns."""
+    monkeypatch.setenv("COLUMNS", columns)
+    out = _help(capsys)
+    listed = out.split("Commands:")[1].splitlines()[1:]
+    assert len([line for line in listed if line.strip()]) == len(COMMANDS)
+    for line in listed:
+        assert "..." not in line and line.rstrip().endswith("."), line

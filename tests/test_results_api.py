@@ -3,6 +3,7 @@ short reprs with a notebook display for datasets, models, fits, diagnoses, compe
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, replace
 
@@ -252,6 +253,18 @@ def test_load_keeps_a_value_the_fit_reported_outside_its_bounds(fits, tmp_path):
 
     back = FitResult.load(_edited(res.save(tmp_path / "fit.json"), edit))
     assert back.params["r1"] == 80.0
+
+
+def test_load_of_the_fit_commands_fit_json_says_what_to_use(tmp_path):
+    """Both formats declare schema i2ris-calib.fit/1: the fit command's file is named,
+    with the function that reads it, not a KeyError."""
+    doc = {"schema": "i2ris-calib.fit/1", "axis": "yaw", "datasets": [{"name": "yaw+"}]}
+    path = tmp_path / "fit.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(CalibError, match="the 'fit' command") as exc:
+        FitResult.load(path)
+    msg = str(exc.value)
+    assert "read_fit_json" in msg and "KeyError" not in msg and "\n" not in msg
 
 
 # ---------------------------------------------------------------------- the figure

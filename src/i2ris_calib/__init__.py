@@ -95,8 +95,13 @@ def _load(name: str):
             checked_directions = _import_module("i2ris_calib.data.dataset").checked_directions
 
             def load_synced(path, axis, config=None, directions=None, columns=None):  # .pyi
-                """Motion-direction datasets of ``axis`` in a synced CSV (whole history);
-                ``columns``: a lab file's column mapping (``ColumnsConfig``, docs/formats.md)."""
+                """The datasets of ``axis`` in a synced CSV: a list of ``Dataset``, one per
+                motion direction with enough motion, ``+`` before ``-`` (``[0]`` is
+                ``yaw+`` of a paper-like recording), or the one signed ``±`` dataset
+                (``config.signed``). Each holds the whole history (every sample, in time
+                order), its loss mask and held-out cycles; ``fit(model, data)`` takes one.
+                ``directions``: only these (``("-",)``); ``columns``: a lab file's column
+                mapping (``ColumnsConfig``, docs/formats.md)."""
                 func = "load_synced"
                 v.check_path(func, "path", path, "a synced CSV", _FRAME_HINT)
                 v.check_choice(func, "axis", axis, ("yaw", "pitch"))

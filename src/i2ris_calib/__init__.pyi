@@ -49,7 +49,11 @@ def load_synced(
     directions: Sequence[str] | None = None,
     columns: ColumnsConfig | None = None,
 ) -> list[Dataset]:
-    """Motion-direction datasets of ``axis`` in a synced CSV (whole history);
+    """The datasets of ``axis`` in a synced CSV: a list of ``Dataset``, one per
+    motion direction with enough motion, ``+`` before ``-`` (``[0]`` is ``yaw+`` of a
+    paper-like recording), or the one signed ``±`` dataset (``config.signed``). Each
+    holds the whole history (every sample, in time order), its loss mask and held-out
+    cycles; ``fit(model, data)`` takes one. ``directions``: only these (``("-",)``);
     ``columns``: a lab file's column mapping (``ColumnsConfig``, docs/formats.md)."""
 
 def load_config(path: str | os.PathLike[str] | None = None) -> PipelineConfig:

@@ -154,7 +154,7 @@ def _config(path: Path | None):
     return load_config(path)
 
 
-@app.command()
+@app.command(short_help="Render a synthetic two-microscope session (known truth).")
 def simulate(
     out: Path = typer.Option(
         ..., "--out", "-o", metavar="SESSION", help="Session folder to create."
@@ -171,10 +171,11 @@ def simulate(
     cfg = _config(config)
     from i2ris_calib.commands.simulate import write_simulated_session
 
-    write_simulated_session(out, cfg, seed=seed, force=force)
+    folder = write_simulated_session(out, cfg, seed=seed, force=force)
+    typer.echo(f"wrote {folder} (videos, timestamps, encoders.csv, session.toml; truth in truth/)")
 
 
-@app.command()
+@app.command(short_help="Track the cube in both videos: pitch and yaw per frame.")
 def track(
     session: Path = typer.Argument(
         ..., metavar="SESSION", help="Session folder (docs/session.md)."
@@ -191,7 +192,7 @@ def track(
     track_session(session, out, cfg)
 
 
-@app.command()
+@app.command(short_help="Camera intrinsics from ChArUco views or a ROS YAML.")
 def calibrate(
     inputs: list[Path] = typer.Argument(
         ..., metavar="INPUTS", help="ChArUco images/videos, or one ROS camera_info YAML."
@@ -208,7 +209,7 @@ def calibrate(
     calibrate_camera_files(inputs, out, cfg)
 
 
-@app.command()
+@app.command(short_help="Camera -> encoder clock (offset, drift); the synced CSV.")
 def sync(
     session: Path = typer.Argument(..., metavar="SESSION", help="Session folder."),
     angles: Path | None = typer.Option(
@@ -232,7 +233,7 @@ def sync(
     sync_session(session, angles, out, with_method(cfg, method))
 
 
-@app.command()
+@app.command(short_help="Fit hysteresis models (GPI, EGPI, two-tendon GPI).")
 def fit(
     data: list[Path] = typer.Argument(
         ..., metavar="DATA.csv", help="Synced CSV file(s) (docs/formats.md)."
@@ -280,7 +281,7 @@ def fit(
     typer.echo(f"wrote {out / 'fit.json'} and predictions.csv")
 
 
-@app.command()
+@app.command(short_help="Feedforward motor commands for a target tip angle.")
 def compensate(
     fit_json: list[Path] = typer.Argument(
         ..., metavar="FIT.json", help="fit.json file(s) from 'fit' (one per axis)."
@@ -358,7 +359,7 @@ def compensate(
     typer.echo(f"wrote {out} and {out.with_name('compensate.json')}")
 
 
-@app.command("paper-sim")
+@app.command("paper-sim", short_help="Reproduce the paper's simulation (Section 3.1, Fig 3-4).")
 def paper_sim(
     out: Path = typer.Option(..., "--out", "-o", metavar="DIR", help="Output folder."),
 ) -> None:
@@ -366,9 +367,10 @@ def paper_sim(
     from i2ris_calib.commands.paper_sim import write_paper_sim
 
     write_paper_sim(out)
+    typer.echo(f"wrote {out} (paper_sim.csv, paper_sim.json, fig3c.png, fig3d.png, fig4.png)")
 
 
-@app.command()
+@app.command(short_help="Find the missing effect where model and data disagree.")
 def diagnose(
     data: Path = typer.Argument(..., metavar="DATA.csv", help="Synced CSV with both axes."),
     axis: str = typer.Option(..., "--axis", metavar="AXIS", help="yaw or pitch."),
@@ -413,7 +415,7 @@ def diagnose(
     typer.echo(f"wrote {out} (details in {out / 'diagnosis.md'})")
 
 
-@app.command()
+@app.command(short_help="Write the HTML report and its Markdown twin.")
 def report(
     run_dir: Path = typer.Argument(
         ..., metavar="RUN_DIR", help="Run folder written by 'run' (or by track/sync/fit)."
@@ -431,7 +433,7 @@ def report(
     typer.echo(f"wrote {page} and {page.with_name('report.md')}")
 
 
-@app.command()
+@app.command(short_help="track -> sync -> fit -> report; up-to-date stages skipped.")
 def run(
     sessions: list[Path] = typer.Argument(..., metavar="SESSION", help="Session folder(s)."),
     out: Path = typer.Option(
@@ -450,7 +452,7 @@ def run(
     run_sessions(sessions, out=out, config=cfg, force=force, jobs=jobs)
 
 
-@app.command("config")
+@app.command("config", short_help="Print the effective configuration as TOML.")
 def show_config(config: Path | None = ConfigOpt) -> None:
     """Print the effective configuration (defaults merged with --config) as TOML."""
     from i2ris_calib.io.config_io import to_toml

@@ -113,6 +113,27 @@ def test_both_axes(files):
     assert {"enc_yaw", "enc_pitch", "reachable_yaw", "reachable_pitch", "reachable"} <= set(cols)
 
 
+@pytest.mark.parametrize("second", ["fit.json", "sub/../fit.json", "fit_yaw2.json"])
+def test_one_fit_per_axis_says_what_is_wrong(files, capsys, second):
+    """The same fit.json twice (or two yaw fits) with a two-axis target and no
+    --dataset: the message names the files, not --dataset."""
+    tmp, _ = files
+    (tmp / "sub").mkdir()
+    _fit_json(tmp / "fit_yaw2.json")
+    t = np.arange(0, 5, 0.02)
+    pd.DataFrame(
+        {"time_s": t, "yaw_deg": 12 + 5 * np.sin(t), "pitch_deg": 10 + 4 * np.cos(t)}
+    ).to_csv(tmp / "both.csv", index=False)
+    out = tmp / "o" / "c.csv"
+    rc = main(["compensate", str(tmp / "fit.json"), str(tmp / second), "--target",
+               str(tmp / "both.csv"), "--out", str(out)])  # fmt: skip
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.startswith("error:") and "\n" not in err
+    assert "--dataset" not in err and "per axis" in err
+    assert ("given twice" in err) == (second != "fit_yaw2.json")
+    assert not out.exists() and not (out.parent / "compensate.json").exists()
+
+
 @pytest.mark.parametrize(
     ("edit", "args", "match"),
     [

@@ -11,6 +11,9 @@ import pandas as pd
 import pytest
 
 from i2ris_calib.cli import main
+from i2ris_calib.commands.diagnose import diagnosis_dataset
+from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.config import FitConfig
 
 
 def _synced_csv(path, effect="time_delay", params=None, seed=3, n_cycles=8):
@@ -214,6 +217,69 @@ def test_bad_direction_is_a_one_line_error(tmp_path, capsys):
     assert rc == 2 and "--direction must be" in err
 
 
+def _one_direction_csv(path):
+    """A yaw recording whose input goes 0 -> 6000 -> 0 and never crosses zero."""
+    t = np.arange(0, 20, 0.05)
+    enc = np.round(3000 * (1 - np.cos(2 * np.pi * t / 5)))
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": enc / 200}).to_csv(path, index=False)
+
+
+@pytest.mark.parametrize("start", ["agpi", "bouc_wen", "maxwell_slip"])
+def test_signed_start_on_a_direction_dataset_is_refused(tmp_path, capsys, start):
+    """docs/diagnosis.md: agpi, maxwell_slip, bouc_wen start on the signed input only."""
+    csv = tmp_path / "s.csv"
+    _one_direction_csv(csv)
+    out = tmp_path / "o"
+    rc, err = _run_error(capsys, [str(csv), "--axis", "yaw", "--start", start, "--out", str(out)])
+    assert rc == 2 and "\n" not in err, err
+    assert f"--start {start}" in err and "yaw+" in err and "--start auto, gpi, egpi" in err
+    assert not out.exists()
+
+
+def test_signed_start_on_a_direction_dataset_is_refused_from_python(tmp_path):
+    from i2ris_calib import diagnose_from_starts, load_synced
+
+    csv = tmp_path / "s.csv"
+    _one_direction_csv(csv)
+    data = load_synced(csv, "yaw")[0]
+    with pytest.raises(CalibError, match=r"diagnose_from_starts: starts \('agpi',\)") as exc:
+        diagnose_from_starts(data, starts=("agpi",))
+    assert "--" not in str(exc.value)  # no CLI flag named to a Python caller
+
+
+def test_signed_direction_of_an_input_that_never_crosses_zero(tmp_path, capsys):
+    """It leaves the zero band (up to 6000): the message says it never crosses zero."""
+    csv = tmp_path / "s.csv"
+    _one_direction_csv(csv)
+    out = tmp_path / "o"
+    rc, err = _run_error(capsys, [str(csv), "--axis", "yaw", "--direction", "±", "--out", str(out)])
+    assert rc == 2 and "\n" not in err, err
+    assert "never crosses zero" in err and "0..6000" in err and "--direction +" in err
+    assert "zero band" not in err
+    assert not out.exists()
+
+
+def test_output_starts_with_the_verdict_not_a_blank_line(tmp_path, capsys):
+    csv = tmp_path / "s.csv"
+    t = np.arange(0, 20, 0.05)
+    enc = np.round(3000 * np.sin(2 * np.pi * t / 5))
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": enc / 200}).to_csv(csv, index=False)
+    out = tmp_path / "o"
+    assert main(["diagnose", str(csv), "--axis", "yaw", "--start", "gpi", "--out", str(out)]) == 0
+    text, err = capsys.readouterr()
+    assert text.startswith("yaw±: ") and err == "", (text, err)
+
+
+def test_signed_direction_of_an_input_that_crosses_zero(tmp_path):
+    """docs/diagnosis.md: ``±`` is the signed dataset of an input that crosses zero."""
+    csv = tmp_path / "s.csv"
+    t = np.arange(0, 20, 0.05)
+    enc = np.round(3000 * np.sin(2 * np.pi * t / 5))
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": enc / 200}).to_csv(csv, index=False)
+    dset = diagnosis_dataset(csv, "yaw", "±", FitConfig())
+    assert dset.name == "yaw±" and dset.rows["in_direction"] == t.size
+
+
 def _two_direction_csv(path, seed=4, tau_s=0.15, noise_deg=0.1):
     """A yaw recording with + then - loading cycles (paper-like EGPI per direction,
     driven by the direction's input over the whole history, a hidden delay)."""
@@ -345,6 +411,22 @@ def test_run_diagnose_stage_writes_what_the_report_reads(tmp_path):
     skipped = json.loads((run / "diagnose" / "yaw±" / "skipped.json").read_text())
     assert "fits yaw+ and yaw-, not yaw± (split: " in skipped["reason"]
     assert [d.axis for d in load_run(run)[0].diagnoses] == ["yaw+"]
+
+
+def test_run_says_a_diagnose_stage_was_skipped_and_why(tmp_path):
+    """Was: "diagnose yaw±: ran" for a folder holding only skipped.json."""
+    from i2ris_calib.commands.run import Stage, diagnose_direction, run_stage
+    from i2ris_calib.config import PipelineConfig
+
+    csv = tmp_path / "synced.csv"
+    _synced_csv(csv, n_cycles=4)
+    cfg = PipelineConfig()
+    out = tmp_path / "diagnose" / "yaw±"
+    stage = Stage("diagnose yaw±", out, (csv,), (cfg.fit, cfg.diagnose),
+                  lambda: diagnose_direction(csv, "yaw", "±", out, cfg))  # fmt: skip
+    said = run_stage(stage, force=False)
+    assert said.startswith("skipped: the default fit of yaw fits yaw+ and yaw-"), said
+    assert run_stage(stage, force=False) == f"up to date ({said})"
 
 
 def test_run_diagnoses_what_the_default_fit_fits_through_zero(tmp_path):

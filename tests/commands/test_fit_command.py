@@ -330,15 +330,31 @@ def test_same_file_name_in_two_folders_gets_one_table_per_file(tmp_path, capsys,
                "--axis", "yaw", "--model", "gpi", "--out", str(tmp_path / "o")])  # fmt: skip
     out = capsys.readouterr()
     assert rc == 0, out.err
-    tables = out.out.split("GPI and EGPI")[1:]
+    tables = out.out.split("yaw motor:")[1:]
     assert len(tables) == 2
     for folder, table in zip(("A", "B"), tables, strict=True):
         assert f"{folder}/synced.csv" in table
-        # every column whole: yaw+ and yaw-, RMSE / NRMSE / MAE each, two rows of numbers
+        # every column whole: yaw+ and yaw-, RMSE / NRMSE / max |error| each, two rows
         heads = [line.split("┃")[2:-1] for line in table.splitlines() if line.startswith("┃")]
         assert [[c.strip() for c in h] for h in heads] == [
-            ["yaw+"] * 3 + ["yaw-"] * 3, ["RMSE", "NRMSE", "MAE"] * 2
+            ["yaw+"] * 3 + ["yaw-"] * 3, ["RMSE", "NRMSE", "max |error|"] * 2
         ]  # fmt: skip
         assert len(re.findall(r"\b\d+\.\d\d\b", table)) == 12
     err = " ".join(out.err.split())
     assert "yaw+ [A/synced.csv]: " in err and "yaw- (synced) [B/synced.csv]: " in err
+
+
+def test_table_title_names_the_models_fitted(tmp_path, capsys, monkeypatch):
+    """A signed two-tendon fit is not titled "GPI and EGPI"; max |error|, not "MAE"."""
+    monkeypatch.setenv("COLUMNS", "120")
+    t = np.arange(0, 40, 0.05)
+    enc = np.round(3000 * np.sin(2 * np.pi * t / 8))
+    csv = tmp_path / "signed.csv"
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": enc / 200 + 0.3 * np.sign(np.cos(
+        2 * np.pi * t / 8))}).to_csv(csv, index=False)  # fmt: skip
+    rc = main(["fit", str(csv), "--axis", "yaw", "--model", "agpi", "--out", str(tmp_path / "o")])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    title = " ".join(out.out.split("yaw motor:")[0].split())
+    assert title.endswith("two-tendon GPI,") and "EGPI" not in title, title
+    assert "max |error|" in out.out and "MAE" not in out.out

@@ -72,3 +72,27 @@ def test_bad_model_file_is_one_line_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and "m.json" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_model_file_of_the_other_axis_is_refused(tmp_path, capsys):
+    """final_model.json records the axis it was diagnosed on: a pitch± model is not
+    refitted on yaw as "diagnosed"."""
+    from i2ris_calib.diagnosis.serialize import model_to_dict
+    from i2ris_calib.hysteresis.registry import model_for_kind
+
+    csv = tmp_path / "s.csv"
+    t = np.arange(400) / 30
+    v = np.round(3000 * np.sin(t / 2))
+    pd.DataFrame(
+        {"time_s": t, "enc_yaw": v, "enc_pitch": 0, "yaw_deg": v / 100, "pitch_deg": 0}
+    ).to_csv(csv, index=False)
+    rec = model_to_dict(model_for_kind("agpi"))
+    rec.update(axis="pitch", dataset="pitch±", direction="±", abs_input=False)
+    mf = tmp_path / "final_model.json"
+    mf.write_text(json.dumps(rec))
+    out = tmp_path / "o"
+    rc = main(["fit", str(csv), "--axis", "yaw", "--model-file", str(mf), "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.startswith("error:") and "\n" not in err
+    assert "pitch±" in err and "--axis yaw" in err and "final_model.json" in err
+    assert not out.exists()

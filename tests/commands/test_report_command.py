@@ -91,14 +91,27 @@ def test_report_is_deterministic(tmp_path):
         assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes()
 
 
-def test_empty_run_folder_gives_a_report_that_says_what_is_missing(tmp_path, capsys):
+def test_empty_run_folder_is_refused_every_time(tmp_path, capsys):
+    """Was: exit 0 with every stage "not found", then exit 2 on the second call (the
+    report/ folder it had written was "an unrelated folder")."""
     root = tmp_path / "empty"
     root.mkdir()
+    for _ in range(2):
+        assert main(["report", str(root)]) == 2
+        err = capsys.readouterr().err
+        assert "nothing to report" in err and err.count("\n") == 1
+        assert list(root.iterdir()) == []
+
+
+def test_a_stage_folder_alone_gives_a_report_that_says_what_is_missing(tmp_path, capsys):
+    root = tmp_path / "only_track"
+    (root / "track").mkdir(parents=True)
     assert main(["report", str(root)]) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("wrote ") and "report.html" in out and err == ""  # no blank line
     md = (root / "report" / "report.md").read_text()
     for label in runfolder.STAGE_FILES:
         assert f"{label}: not found" in md
-    assert "report.html" in capsys.readouterr().out
 
 
 def test_partial_run_and_header_only_csv(tmp_path):

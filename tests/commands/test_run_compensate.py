@@ -73,3 +73,24 @@ def test_unreadable_target_is_one_line_in_run(run_dir, tmp_path, write):
     with pytest.raises(CalibError, match="bad.csv: not a readable CSV") as exc:
         compensate_run(run_dir, tmp_path / "bad.csv", out, cfg)
     assert "\n" not in str(exc.value) and not out.exists()
+
+
+def test_the_example_config_runs_on_the_sample_session(run_dir, tmp_path):
+    """configs/compensate.example.toml names target.csv; the sample session ships one
+    (a reachable yaw target), so the example runs on it as is."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from i2ris_calib.io.config_io import load_config
+
+    root = Path(__file__).resolve().parents[2]
+    cfg = load_config(root / "configs" / "compensate.example.toml")
+    target = compensation_target(root / "sample_data" / "session", cfg.compensate.target)
+    assert target == root / "sample_data" / "session" / "target.csv"
+    (tmp_path / "c").mkdir()
+    # this module's fit recorded a slow motor (400 counts/s); the sample session's 3000
+    unlimited = replace(cfg, compensate=replace(cfg.compensate, max_counts_per_s=float("inf")))
+    compensate_run(run_dir, target, tmp_path / "c", unlimited)
+    doc = json.loads((tmp_path / "c" / "compensate.json").read_text())
+    assert doc["axes"]["yaw"]["dataset"] == "yaw+"
+    assert pd.read_csv(tmp_path / "c" / "commands.csv")["reachable"].mean() > 0.9

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import hashlib
+import io
+import sys
 
 import numpy as np
 import pandas as pd
@@ -35,10 +37,21 @@ drop_fraction = 0.1
 def sim(tmp_path_factory):
     root = tmp_path_factory.mktemp("sim")
     (root / "c.toml").write_text(TOML)
-    assert (
-        main(["simulate", "--out", str(root / "a"), "-c", str(root / "c.toml"), "--seed", "4"]) == 0
-    )
+    with pytest.MonkeyPatch.context() as mp:
+        out = io.StringIO()
+        mp.setattr(sys, "stdout", out)
+        assert (
+            main(["simulate", "--out", str(root / "a"), "-c", str(root / "c.toml"), "--seed", "4"])
+            == 0
+        )
+    (root / "stdout.txt").write_text(out.getvalue())
     return root
+
+
+def test_says_what_it_wrote(sim):
+    """Off a terminal too: the last line names the session folder."""
+    last = (sim / "stdout.txt").read_text().strip().splitlines()[-1]
+    assert last.startswith(f"wrote {sim / 'a'} ") and "session.toml" in last
 
 
 def test_layout_matches_docs(sim):

@@ -321,6 +321,17 @@ def test_from_fit_both_axes_coupled_after_a_history(tmp_path):
     assert Compensator.from_fit(fy).to_dict()["axes"]["yaw"]["model"] == "agpi"
 
 
+def test_from_fit_errors_name_its_arguments_not_cli_flags(tmp_path):
+    fy = _coupled_fit_json(tmp_path / "y.json", "yaw", coupled().value_dict())
+    for kwargs, needle in (
+        ({"dataset": "yaw+"}, "choose dataset= from those"),
+        ({"model": "gpi"}, "choose model= from those"),
+    ):
+        with pytest.raises(CalibError, match=needle) as exc:
+            Compensator.from_fit(fy, **kwargs)
+        assert "--" not in str(exc.value), str(exc.value)
+
+
 def test_reset_returns_to_the_state_after_the_history():
     model = model_from_params("egpi", paper_like_params("yaw+"), 30, 2.0)
     hist = {"yaw": conditioning_sweep(0.0, 0.0, 6000.0, 3000.0, 0.01, 1.0)}
@@ -345,8 +356,9 @@ def test_from_fit_diagnosed_model_with_its_delay(tmp_path):
           "max_input_rate_counts_per_s": 5000.0, "models": {"diagnosed": rec}}  # fmt: skip
     fit = tmp_path / "fit.json"
     fit.write_text(json.dumps({"schema": "i2ris-calib.fit/1", "axis": "yaw", "datasets": [ds]}))
-    with pytest.raises(CalibError, match="needs --model-file"):
+    with pytest.raises(CalibError, match="needs model_file=") as exc:
         Compensator.from_fit(fit, model="diagnosed")
+    assert "--" not in str(exc.value)  # a Python caller has no command-line flags
     c = Compensator.from_fit(fit, model="diagnosed", model_file=tmp_path / "final_model.json")
     assert c.delays == {"yaw": pytest.approx(0.1)}
     target = 15 + 5 * np.sin(T)

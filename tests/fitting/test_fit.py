@@ -224,3 +224,13 @@ def test_flag_point_profile_never_makes_the_fit_worse(shift):
     before = counter.cost(x)
     after = counter.cost(_refine_profiled(counter, x, pidx, v, lower, upper, wide=False))
     assert after <= before * (1 + 1e-12)
+
+
+def test_an_infinite_bound_is_never_reached():
+    """``at its bound`` is for a finite bound the fit sits on: a parameter bounded only
+    by +-inf is never "at its bound" (it used to be: inf - x <= 1e-6 * inf)."""
+    from i2ris_calib.fitting.fit import _on_bound
+
+    assert not _on_bound(5.0, -np.inf, np.inf)
+    assert not _on_bound(5.0, 0.0, np.inf)
+    assert _on_bound(6.67482e-10, 0.0, np.inf) and _on_bound(-1e-9, -np.inf, 0.0)

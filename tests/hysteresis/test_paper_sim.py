@@ -73,3 +73,11 @@ def test_paper_sim_files(tmp_path):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert summary["dead_zones"]["z"]
     assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_paper_sim_command_says_what_it_wrote(tmp_path, capsys):
+    from i2ris_calib.cli import main
+
+    assert main(["paper-sim", "--out", str(tmp_path / "p")]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith(f"wrote {tmp_path / 'p'} ") and "paper_sim.json" in last

@@ -33,6 +33,12 @@ def test_good_session_loads_with_camera_specs(tmp_path):
     assert spec.cameras["side"].marker_id == 1 and spec.cameras["top"].model == "weak_perspective"
 
 
+def test_session_toml_with_a_utf8_bom_loads(tmp_path):
+    """A Windows editor's byte-order mark before the first key is not a TOML error."""
+    (tmp_path / "session.toml").write_bytes(b"\xef\xbb\xbf" + GOOD.encode())
+    assert load_session(tmp_path).name == "s"
+
+
 @pytest.mark.parametrize(
     "text,match",
     [

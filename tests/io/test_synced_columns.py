@@ -231,6 +231,39 @@ def test_option_overrides_config_key_by_key(lab_csv, tmp_path):
         read_synced(lab_csv, "yaw")
 
 
+@pytest.mark.parametrize(
+    "status, needles",
+    [
+        ("Enc TS", ["'Enc TS' (status)", "not tracking statuses", "map status"]),
+        ("flag", ["'flag' (status)", "'ok' x", "not tracking statuses"]),
+    ],
+)
+def test_status_mapped_to_a_column_without_measured_says_why(lab_csv, tmp_path, capsys,
+                                                              status, needles):  # fmt: skip
+    """A status column with no row 'measured' leaves no angle: say so, not '0 usable
+    samples for 7 free parameters'."""
+    csv = tmp_path / "flagged.csv"
+    pd.read_csv(lab_csv).assign(flag="ok").to_csv(csv, index=False, float_format="%.6f")
+    out = tmp_path / "o"
+    err = _error(capsys, ["fit", str(csv), "--axis", "yaw", "--columns",
+                          f"{MAPPING},status={status}", "--out", str(out)])  # fmt: skip
+    assert "no row of" in err and "reads 'measured'" in err and "usable samples" not in err
+    for needle in needles:
+        assert needle in err, err
+    assert not out.exists()
+
+
+def test_status_never_measured_names_the_tracking(tmp_path):
+    t = np.arange(0, 20, 0.05)
+    enc = np.round(3000 * (1 - np.cos(t)))
+    csv = tmp_path / "s.csv"
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": enc / 200, "status": "not_found"}).to_csv(
+        csv, index=False
+    )
+    with pytest.raises(CalibError, match="'not_found' x400.*tracking measured no frame"):
+        read_synced(csv, "yaw")
+
+
 def test_too_little_motion_states_the_minimum(tmp_path, capsys):
     """Fewer than [fit] min_block_samples per direction: the counts, the minimum, and
     the minimum in seconds at the file's own rate."""

@@ -467,10 +467,12 @@ def _compensate_into(
 ) -> dict:  # fmt: skip
     """The body of :func:`compensate_files` once ``out`` is claimed and locked."""
     docs = [(Path(p), read_fit_json(p)) for p in fit_paths]
+    _check_one_fit_per_axis(docs)
+    given = bool(datasets)
     if not datasets:
         datasets = _chosen_datasets(docs, target, unit)
     axes = [n[:-1] for n in datasets]
-    if len(set(axes)) != len(axes):
+    if len(set(axes)) != len(axes) and given:
         raise CalibError("give at most one --dataset per axis (the direction of each motor)")
     frame = read_target(target, axes, unit)
     t = frame["time_s"].to_numpy()
@@ -564,6 +566,27 @@ def _checked_options(fit_paths, datasets, model, time_unit_s, conditioning, hist
     if not (np.isfinite(unit) and unit > 0):
         raise CalibError(f"--time-unit-s {unit:g}: give seconds per unit of time_s (> 0)")
     return datasets, unit, conditioning
+
+
+def _check_one_fit_per_axis(docs: list) -> None:
+    """CalibError when a fit.json is given twice, or two fit.json files fit one axis
+    (compensate takes one fit per motor)."""
+    seen: dict[str, Path] = {}
+    for path, doc in docs:
+        axis = str(doc.get("axis"))
+        if axis not in seen:
+            seen[axis] = path
+            continue
+        first = seen[axis]
+        if first.resolve() == path.resolve():
+            raise CalibError(
+                f"{path} is given twice; give each fit.json once (one per axis: a yaw fit "
+                "and a pitch fit)"
+            )
+        raise CalibError(
+            f"{first} and {path} are both {axis} fits; give one fit.json per axis (a yaw "
+            "fit and a pitch fit)"
+        )
 
 
 def _chosen_datasets(docs: list, target, unit: float) -> list[str]:

@@ -8,11 +8,13 @@ and one residual figure per model (``residual_00_start.png``,
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from rich.console import Console
 from rich.progress import Progress
 
 from i2ris_calib.commands.fit import datasets_for_fit
@@ -26,7 +28,7 @@ from i2ris_calib.diagnosis.serialize import model_to_dict
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.model import Model
-from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS
+from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts, kind_info
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
@@ -63,9 +65,42 @@ def diagnosis_dataset(
         )
     if direction == "auto":  # the dataset(s) the default fit fits: signed or split
         found, _ = datasets_for_fit([path], axis, fit_config, columns=columns)
+    elif direction == "±":  # the signed dataset, asked for: the input must cross zero
+        signed = replace(fit_config, signed=True, split=False)
+        found = load_datasets([path], axis, signed, ("±",), columns=columns)
+        if not fit_config.signed:
+            _check_crosses_zero(found[0], path)
     else:
         found = load_datasets([path], axis, fit_config, (direction,), columns=columns)
     return max(found, key=lambda d: d.rows["in_direction"])
+
+
+def _check_crosses_zero(dset: Dataset, path) -> None:
+    """CalibError when ``--direction ±`` names an input that stays on one side of its
+    zero band (one direction's data: one model across zero has nothing to cross)."""
+    enc = np.asarray(dset.enc, float)
+    band = dset.bands.zero_band
+    if (enc > band).any() and (enc < -band).any():
+        return
+    side = "+" if (enc > band).any() else "-"
+    raise CalibError(
+        f"--direction ±: enc_{dset.axis} in {path} never crosses zero (it stays in "
+        f"{enc.min():g}..{enc.max():g}, direction {side} only); ± is one model across zero: "
+        f"use --direction {side} (or auto), or set [fit] signed = true to force it"
+    )
+
+
+def check_start(start: str, dset: Dataset, path) -> None:
+    """CalibError before any fit when ``start`` needs the signed input (``agpi``,
+    ``maxwell_slip``, ``bouc_wen``) and ``dset`` is one motion direction's."""
+    if start == "auto" or dset.direction == "±" or not kind_info(start).signed:
+        return
+    ok = ", ".join(("auto", *diagnosis_starts(False)))
+    raise CalibError(
+        f"--start {start} fits the signed input (one model across zero), but the {dset.axis} "
+        f"dataset of {path} is {dset.name}, one motion direction; use --start {ok}, or "
+        "--direction ± on a recording whose input crosses zero"
+    )
 
 
 def _figure(model: Model, data: Dataset, holdout: np.ndarray, title: str):
@@ -146,6 +181,7 @@ def diagnose_file(
     claim_output_dir(Path(out) if out is not None else Path("diagnose_out"), "diagnose",
                      [Path(data)], OUTPUTS)  # fmt: skip
     dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit, cfg.columns)
+    check_start(start, dset, data)
     check_dataset(dset, cfg.diagnose)
     return diagnose_dataset(dset, axis, start, out, cfg, sources=[Path(data)])
 
@@ -193,7 +229,12 @@ def _diagnosed(dset: Dataset, start: str, cfg, show_progress: bool):
     """:func:`diagnose_from_starts` on ``dset`` (``start`` ``auto``: the model fit picks
     on the signed input) behind a progress line."""
     starts = None if start == "auto" else (start,)
-    with Progress(transient=True, disable=not show_progress) as bar, single_threaded_blas():
+    console = Console(stderr=True)  # off a terminal: no bar, so no blank line either
+    shown = show_progress and console.is_terminal
+    with (
+        Progress(console=console, transient=True, disable=not shown) as bar,
+        single_threaded_blas(),
+    ):
         task = bar.add_task(f"diagnose {dset.name}", total=None)
         return diagnose_from_starts(
             dset,

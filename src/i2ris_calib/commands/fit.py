@@ -26,7 +26,12 @@ from i2ris_calib.fitting.limits import dataset_limits
 from i2ris_calib.fitting.pipeline import ModelChoice, choose_model, fit_dataset, pick_after_fit
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
-from i2ris_calib.io.fit import fit_document, predictions_frame, read_model_file
+from i2ris_calib.io.fit import (
+    fit_document,
+    model_file_origin,
+    predictions_frame,
+    read_model_file,
+)
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import load_datasets
@@ -105,7 +110,8 @@ def results_tables(fitted, kinds: Sequence[str], axis: str) -> list:
 
 def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = None):
     """A rich Table shaped like the paper's Tables 1-2: one row per model (fitted
-    cycles and held-out cycles), RMSE / NRMSE / MAE (= max |error|) per dataset. A
+    cycles and held-out cycles), RMSE / NRMSE / max |error| (the paper's MAE) per dataset,
+    titled with the models fitted. A
     ``*`` marks each cell group whose fit did not converge (per model and dataset).
     ``source``: the one input file of these datasets, in the title (the columns are
     then labelled by direction: one dataset per direction in a file)."""
@@ -114,8 +120,10 @@ def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = 
         return f"{d.axis}{d.direction}" if source else d.name
 
     absd = [label(d) for d, _ in fitted if d.abs_fitted]
+    names = [kind_info(k).label for k in fit_order(kinds)]
+    models = " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
     table = Table(
-        title=f"GPI and EGPI, {axis} motor: RMSE, MAE (max |error|) in deg, NRMSE in %"
+        title=f"{models}, {axis} motor: RMSE and max |error| in deg, NRMSE in %"
         + (f"\n{source}" if source else ""),
         caption="; ".join(
             [f"{', '.join(absd)}: fitted on |counts| -> |deg|"] * bool(absd)
@@ -126,7 +134,7 @@ def results_table(fitted, kinds: Sequence[str], axis: str, source: str | None = 
     )
     table.add_column("model", no_wrap=True)
     for d, _ in fitted:
-        for m in ("RMSE", "NRMSE", "MAE"):
+        for m in ("RMSE", "NRMSE", "max |error|"):
             table.add_column(f"{label(d)}\n{m}", justify="right", no_wrap=True)
     for kind in table_order(kinds):
         for label, attr in (("fit", "metrics"), ("hold", "holdout_metrics")):
@@ -161,6 +169,8 @@ def fit_files(
     if not paths:
         raise CalibError("give at least one synced CSV to fit")
     saved = read_model_file(model_file) if model_file is not None else None
+    if model_file is not None:
+        _check_model_axis(model_file, axis)
     inputs = [*paths, *([model_file] if model_file is not None else [])]
     out = claim_output_dir(out, "fit", inputs, OUTPUTS)
     with output_lock(out, command="fit"):  # one fit at a time into ``out``, until written
@@ -221,6 +231,20 @@ def _fit_into(paths, axis: str, model: str, out: Path, config, saved, inputs: li
             "* not converged: see 'message' in fit.json (try more starts or --config [fit] max_nfev)"
         )
     return doc
+
+
+def _check_model_axis(model_file, axis: str) -> None:
+    """CalibError when the final_model.json was diagnosed on the other axis (its
+    effects and values belong to that motor)."""
+    origin = model_file_origin(model_file)
+    was = origin.get("axis")
+    if was is None or was == axis:
+        return
+    raise CalibError(
+        f"{model_file}: its model was diagnosed on {origin.get('dataset', was)} (axis {was}); "
+        f"this fit is --axis {axis}: give the final_model.json of a {axis} diagnosis "
+        f"('diagnose ... --axis {axis}'), or fit --axis {was}"
+    )
 
 
 def recording_summary(whole: Sequence[Dataset]) -> tuple[Excursions, MotorsTogether | None]:

@@ -42,7 +42,8 @@ def report_provenance(root: Path, inputs: list[Path], config: Any) -> dict[str, 
 
 def _build_with_progress(run: RunData, report_config: Any, prov: dict[str, Any]):
     """build_document with a transient rich progress bar on stderr (one step per section)."""
-    with Progress(console=Console(stderr=True), transient=True) as bar:
+    console = Console(stderr=True)  # off a terminal: no bar, so no blank line either
+    with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
         task = bar.add_task("report", total=section_count(run))
         started = []
 

@@ -63,7 +63,7 @@ class Stage:
     out_dir: Path
     inputs: tuple[Path, ...]
     config: Any
-    action: Callable[[], None]
+    action: Callable[[], str | None]  # None, or what happened instead of a run ("skipped: ...")
 
 
 def stamp_of(stage: Stage) -> dict[str, Any]:
@@ -118,13 +118,25 @@ def is_up_to_date(stage: Stage) -> bool:
 
 
 def run_stage(stage: Stage, force: bool) -> str:
-    """Run ``stage`` unless up to date; returns ``"ran"`` or ``"up to date"``."""
+    """Run ``stage`` unless up to date; returns ``"ran"``, ``"up to date"``, or what the
+    stage said instead (a diagnose stage that does not apply: ``"skipped: <why>"``;
+    up to date: ``"up to date (skipped: <why>)"``)."""
     if not force and is_up_to_date(stage):
-        return "up to date"
+        why = skipped_reason(stage.out_dir)
+        return "up to date" + (f" (skipped: {why})" if why else "")
     (stage.out_dir / STAMP).unlink(missing_ok=True)
-    stage.action()
+    said = stage.action()
     write_json(stage.out_dir / STAMP, stamp_of(stage))
-    return "ran"
+    return said or "ran"
+
+
+def skipped_reason(out_dir: Path) -> str | None:
+    """The reason in ``out_dir/skipped.json`` (a diagnose stage that did not apply), or None."""
+    try:
+        reason = json.loads((out_dir / "skipped.json").read_text(encoding="utf-8"))["reason"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return str(reason)
 
 
 def stage_input_files(
@@ -282,7 +294,7 @@ def _diagnose_stages(synced: Path, run_dir: Path, config: PipelineConfig) -> lis
             out = run_dir / "diagnose" / f"{axis}{direction}"
 
             def diagnose_one(axis: str = axis, direction: str = direction, out: Path = out):
-                diagnose_direction(synced, axis, direction, out, config)
+                return diagnose_direction(synced, axis, direction, out, config)
 
             stages.append(
                 Stage(
@@ -298,7 +310,7 @@ def _diagnose_stages(synced: Path, run_dir: Path, config: PipelineConfig) -> lis
 
 def diagnose_direction(
     synced: Path, axis: str, direction: str, out: Path, config: PipelineConfig
-) -> None:
+) -> str | None:
     """The diagnose stage of one axis and direction (``--start auto``).
 
     ``direction`` is diagnosed when the default fit fits it (the dataset of
@@ -308,6 +320,7 @@ def diagnose_direction(
     or fewer than the minimum loading cycles, see
     :func:`~i2ris_calib.diagnosis.workflow.check_dataset`) do not stop the run:
     ``out/skipped.json`` records why and the report shows the other diagnoses.
+    Returns None when diagnosed, else ``"skipped: <why>"`` (what ``run`` prints).
     """
     try:
         if not axis_moves(synced, axis):
@@ -329,8 +342,9 @@ def diagnose_direction(
             write_json(
                 tmp / "skipped.json", {"axis": axis, "direction": direction, "reason": str(exc)}
             )
-        return
+        return f"skipped: {exc}"
     diagnose_dataset(dset, axis, "auto", out, config, sources=[synced], show_progress=False)
+    return None
 
 
 def compensation_target(session: Path, target: str) -> Path:

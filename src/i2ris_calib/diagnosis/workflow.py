@@ -612,6 +612,14 @@ def diagnose_from_starts(
             f"{func}: starts is empty; give "
             f"{', '.join(repr((k,)) for k in DIAGNOSIS_STARTS)} or both"
         )
+    signed_only = [k for k in starts if k not in diagnosis_starts(False)]
+    if data.direction != "±" and signed_only:
+        raise CalibError(
+            f"{func}: starts {tuple(signed_only)!r} fit the signed input (one model across "
+            f"zero), but data is {data.name}, one motion direction; give starts from "
+            f"{diagnosis_starts(False)!r}, or the signed dataset of a recording whose "
+            "input crosses zero"
+        )
     check_callable(func, "progress", progress)
     for kind in starts:
         if kind not in fitted:

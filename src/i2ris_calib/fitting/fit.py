@@ -966,10 +966,12 @@ class FitResult:
         """Plain-text summary like lmfit's: fit statistics, parameters with standard
         errors and units, correlations above ``min_correl``, notes."""
         m, h = self.metrics, self.holdout_metrics
+        profiled = self.profiled
         lines = [
             f"[[Fit of {self.model.name}]]",
             f"    converged          = {self.converged} ({self.message})",
-            f"    samples in loss    = {self.n_samples}, free parameters = {len(self.free)}",
+            f"    samples in loss    = {self.n_samples}, free parameters = {self.n_fitted}"
+            + (f" (+ {', '.join(profiled)} profiled)" if profiled else ""),
             f"    function evals     = {self.nfev}, starts = {self.starts_tried}",
             *(
                 [f"    global search      = {self.certificate.text}"]
@@ -990,15 +992,17 @@ class FitResult:
         ]
         for p in self.model.parameters:
             se = self.stderr.get(p.name, float("nan"))
-            how = (
-                "(fixed)"
-                if p.name not in self.free
-                else (
-                    f"+/- {se:.3g}"
-                    if np.isfinite(se)
-                    else "+/- nan (unidentified, profiled or at a bound)"
-                )
-            )
+            reason = self.stderr_reasons.get(p.name, "")
+            if p.name not in self.free:
+                how = "(fixed)"
+            elif np.isfinite(se):
+                how = f"+/- {se:.3g}"
+            elif p.name in profiled:
+                how = "(profiled)"
+            elif reason.startswith("at its bound"):
+                how = "(at its bound)"
+            else:
+                how = "(not identified)"
             lines.append(
                 f"    {p.name:<8} = {self.params[p.name]:<12.6g} {how:<20} {p.unit:<10} {p.doc}"
             )
@@ -1014,12 +1018,27 @@ class FitResult:
             lines += [f"    {n.code}: {n.text}" for n in self.notes]
         return "\n".join(lines)
 
+    @property
+    def profiled(self) -> tuple[str, ...]:
+        """Free parameters placed by a profile search (the EGPI flag point ``v_f``): no
+        derivative, no standard error by design; not counted in :attr:`n_fitted`."""
+        return tuple(
+            k for k in self.free if str(self.stderr_reasons.get(k, "")).startswith("profiled")
+        )
+
+    @property
+    def n_fitted(self) -> int:
+        """Free parameters fitted by least squares (the report's count): ``free``
+        without the :attr:`profiled` ones."""
+        return len(self.free) - len(self.profiled)
+
     def __repr__(self) -> str:
         h = self.holdout_metrics.rmse_deg
-        held = f", held-out {h:.3g}" if np.isfinite(h) else ""
+        held = f", held-out {h:.3g} deg" if np.isfinite(h) else ""
+        prof = f" (+{len(self.profiled)} profiled)" if self.profiled else ""
         return (
             f"<FitResult {self.model.name}: RMSE {self.metrics.rmse_deg:.3g} deg{held}, "
-            f"{self.n_samples} samples, {len(self.free)} free, "
+            f"{self.n_samples} samples, {self.n_fitted} free{prof}, "
             f"{'converged' if self.converged else 'NOT converged'}>"
         )
 
@@ -2519,8 +2538,31 @@ def _without_level(
 
 
 def _on_bound(x: float, lo: float, hi: float) -> bool:
-    """True when ``x`` sits on (within 1e-6 relative of) ``lo`` or ``hi``."""
-    return abs(x - lo) <= 1e-6 * (1 + abs(lo)) or abs(x - hi) <= 1e-6 * (1 + abs(hi))
+    """True when ``x`` sits on (within 1e-6 relative of) ``lo`` or ``hi``; an infinite
+    bound is never reached."""
+
+    def near(b: float) -> bool:
+        return bool(np.isfinite(b)) and abs(x - b) <= 1e-6 * (1 + abs(b))
+
+    return near(lo) or near(hi)
+
+
+#: The optimiser's stop (``least_squares`` status codes, also :mod:`.lm`'s) in plain
+#: words: what fit.json's ``message``, the tables and :meth:`FitResult.fit_report` say.
+PLAIN_MESSAGES = {
+    -1: "the optimiser refused its input",
+    0: "the evaluation limit (max_nfev) was reached before the cost settled",
+    1: "no downhill direction left (gradient ~ 0)",
+    2: "the cost stopped decreasing",
+    3: "the parameters stopped changing",
+    4: "the cost and the parameters stopped changing",
+}
+
+
+def plain_message(res) -> str:
+    """The optimiser's stop in plain words (:data:`PLAIN_MESSAGES` by ``res.status``;
+    its own message for another status)."""
+    return PLAIN_MESSAGES.get(getattr(res, "status", None), str(getattr(res, "message", "")))
 
 
 def _outside(full, free, lower, upper) -> list[int]:
@@ -2549,7 +2591,7 @@ def _result(
         for i in range(uidx - model.levels + 1, uidx + 1):
             stderr[names[i]] = float("nan")
     converged = bool(np.isfinite(rss)) and (res is None or res.status > 0)
-    message = "profile search only" if res is None else str(res.message)
+    message = "profile search only" if res is None else plain_message(res)
     outside = [
         p.name
         for p, x in zip(model.parameters, full, strict=True)

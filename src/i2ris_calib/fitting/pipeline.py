@@ -587,7 +587,7 @@ def _fit_inputs(model, data, config, holdout):
 def fit(
     model: ParametricModel,
     data: Dataset | tuple[np.ndarray, np.ndarray],
-    config: FitConfig | None = FitConfig(),
+    config: FitConfig | None = None,
     *,
     holdout: np.ndarray | None = None,
 ) -> FitResult:

@@ -551,6 +551,13 @@ def fit_fields(obj: Mapping, where: str = "fit file") -> dict:
     if not isinstance(obj, Mapping) or obj.get("schema") != SCHEMA:
         got = obj.get("schema") if isinstance(obj, Mapping) else type(obj).__name__
         raise CalibError(f"{where}: schema is {got!r}, expected '{SCHEMA}' (FitResult.save)")
+    if "datasets" in obj and "model" not in obj:
+        raise CalibError(
+            f"{where}: this is the fit.json the 'fit' command writes (every dataset and model "
+            "of a recording), not a file FitResult.save wrote; read it with "
+            "i2ris_calib.io.fit.read_fit_json(path) (a checked dict; docs/fit.md), or "
+            "compensate with Compensator.from_fit(path)"
+        )
     try:
         model = decode_model(obj["model"])
 

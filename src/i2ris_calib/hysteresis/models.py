@@ -665,12 +665,16 @@ class EGPIModel(ParametricModel):
 
 
 def egpi_model(
-    envelopes: Sequence[tuple[str, str]],
-    values: Mapping[str, float],
+    envelopes: Sequence[tuple[str, str]] | None = None,
+    values: Mapping[str, float] | None = None,
     n: int = 30,
     deadband: float = 0.0,
 ) -> EGPIModel:
     """General N-stage EGPI from envelope kinds per stage and a complete value dict.
+
+    For the paper's I2RIS EGPI (Eq16-23) call :func:`i2ris_egpi_model`; the continuous
+    EGPI is :func:`continuous_egpi_model`, the GPI :func:`gpi_model`. This factory is
+    for a model of your own stages.
 
     Parameters
     ----------
@@ -681,6 +685,16 @@ def egpi_model(
         s >= 2, ``vf_rise{j}``/``vf_fall{j}`` for j = 1..N-1, ``lam, sigma, r1, rn``.
     """
     func = "egpi_model"
+    if envelopes is None or values is None:
+        missing = " and ".join(
+            k for k, x in (("envelopes", envelopes), ("values", values)) if x is None
+        )
+        raise CalibError(
+            f"{func}: {missing} not given; this is the general N-stage EGPI (your own "
+            "stages: envelopes and every parameter's value). For the paper's I2RIS EGPI "
+            "call i2ris_egpi_model() (continuous_egpi_model() for the continuous EGPI, "
+            "gpi_model() for the GPI)"
+        )
     if isinstance(envelopes, str) or not isinstance(envelopes, Sequence) or not envelopes:
         raise CalibError(
             f"{func}: envelopes is {describe(envelopes)}; give one (kind_l, kind_r) pair per "

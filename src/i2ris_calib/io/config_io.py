@@ -38,7 +38,8 @@ def load_toml(path: str | Path) -> dict[str, Any]:
             f"config file not found: {p} (give an existing TOML file, see docs/config.md)"
         )
     try:
-        return tomllib.loads(p.read_text(encoding="utf-8"))
+        # utf-8-sig: a byte-order mark (some Windows editors write one) is dropped
+        return tomllib.loads(p.read_text(encoding="utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise CalibError(f"invalid TOML in {p}: {exc}") from None
 

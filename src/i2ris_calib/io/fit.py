@@ -213,6 +213,19 @@ def read_model_file(path: str | Path):
         raise CalibError(f"{p}: {exc}") from None
 
 
+def model_file_origin(path: str | Path) -> dict[str, str]:
+    """What a final_model.json records of the data it was diagnosed on: ``axis``,
+    ``dataset``, ``direction`` (those present as text; read after
+    :func:`read_model_file` accepted the file)."""
+    try:
+        obj = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError):
+        return {}
+    if not isinstance(obj, dict):
+        return {}
+    return {k: obj[k] for k in ("axis", "dataset", "direction") if isinstance(obj.get(k), str)}
+
+
 def read_fit_json(path: str | Path) -> dict[str, Any]:
     """Load a fit.json written by ``fit`` (:func:`~i2ris_calib.commands.fit.fit_files`)
     and check it completely (:func:`~i2ris_calib.io.fit_schema.check_fit_doc`: keys,

@@ -15,6 +15,8 @@ from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.io.fit import read_model_file
 
 __all__ = [
+    "API_NAMES",
+    "CLI_NAMES",
     "FALLBACK_RANGE_SHARE_PER_S",
     "dataset_names",
     "dataset_record",
@@ -29,17 +31,36 @@ __all__ = [
 #: files): this share of the fitted input range per second
 FALLBACK_RANGE_SHARE_PER_S = 0.1
 
+#: How messages name the choices: the ``compensate`` command's options, or the
+#: arguments of ``Compensator.from_fit`` (a Python caller has no command-line flags).
+CLI_NAMES = {
+    "dataset": "--dataset",
+    "omit": "omit it to let compensate choose",
+    "model": "--model",
+    "model_file": "--model-file",
+    "rate": "--max-counts-per-s",
+}
+API_NAMES = {
+    "dataset": "dataset=",
+    "omit": "omit it for the signed dataset or the first",
+    "model": "model=",
+    "model_file": "model_file=",
+    "rate": "max_counts_per_s=",
+}
 
-def dataset_record(doc: dict, name: str, path: Path) -> dict:
+
+def dataset_record(doc: dict, name: str, path: Path, names: dict = CLI_NAMES) -> dict:
     """The record of dataset ``name`` in fit.json ``doc`` (read from ``path``); a
-    one-line CalibError naming the datasets it has when there is none."""
-    names = [d.get("name") for d in doc.get("datasets", [])]
+    one-line CalibError naming the datasets it has when there is none (the choice
+    named as ``names`` says: :data:`CLI_NAMES` or :data:`API_NAMES`)."""
+    have = names
+    found = [d.get("name") for d in doc.get("datasets", [])]
     for d in doc.get("datasets", []):
         if d.get("name") == name:
             return d
     raise CalibError(
-        f"{path}: no dataset '{name}' (it has {', '.join(map(str, names)) or 'none'}); "
-        "choose --dataset from those (omit it to let compensate choose) or fit that direction"
+        f"{path}: no dataset '{name}' (it has {', '.join(map(str, found)) or 'none'}); "
+        f"choose {have['dataset']} from those ({have['omit']}) or fit that direction"
     )
 
 
@@ -48,20 +69,28 @@ def dataset_names(doc: dict) -> list[str]:
     return [str(d.get("name")) for d in doc.get("datasets", [])]
 
 
-def load_model(doc: dict, record: dict, kind: str, path: Path, model_file: Path | None = None):
-    """The fitted model ``kind`` of a fit.json dataset record, rebuilt."""
+def load_model(
+    doc: dict,
+    record: dict,
+    kind: str,
+    path: Path,
+    model_file: Path | None = None,
+    names: dict = CLI_NAMES,
+):
+    """The fitted model ``kind`` of a fit.json dataset record, rebuilt (messages name
+    the choices as ``names`` says: :data:`CLI_NAMES` or :data:`API_NAMES`)."""
     models = record.get("models", {})
     if kind not in models:
         raise CalibError(
             f"{path}: dataset '{record['name']}' has no '{kind}' model (it has "
-            f"{', '.join(models) or 'none'}); choose --model from those or re-run 'fit'"
+            f"{', '.join(models) or 'none'}); choose {names['model']} from those or re-run 'fit'"
         )
     rec = models[kind]
     if kind == "diagnosed":
         if model_file is None:
             raise CalibError(
-                "--model diagnosed needs --model-file final_model.json (the diagnosed "
-                "model's structure; fit.json holds its refitted values)"
+                f"{names['model']} diagnosed needs {names['model_file']} final_model.json (the "
+                "diagnosed model's structure; fit.json holds its refitted values)"
             )
 
         base = read_model_file(model_file)
@@ -99,6 +128,7 @@ def rate_limit(
     explicit: float | None,
     configured: float,
     range_counts: float,
+    names: dict = CLI_NAMES,
 ) -> tuple[float, str, str | None]:
     """(rate limit in counts/s, where it comes from, a warning line or None).
 
@@ -108,7 +138,7 @@ def rate_limit(
     fit.json without it (older files) falls back to :data:`FALLBACK_RANGE_SHARE_PER_S`
     of the fitted input range per second, with a warning.
     """
-    for value, source in ((explicit, "--max-counts-per-s"),
+    for value, source in ((explicit, names["rate"].rstrip("=")),
                           (configured or None, "[compensate] max_counts_per_s")):  # fmt: skip
         if value is not None:
             if not float(value) > 0:
@@ -128,7 +158,7 @@ def rate_limit(
         (
             f"{record.get('name')}: fit.json has no max_input_rate_counts_per_s (written by an "
             f"older 'fit'); rate limit {rate:g} counts/s ({FALLBACK_RANGE_SHARE_PER_S:g} of the "
-            "fitted input range per second): re-run 'fit' or give --max-counts-per-s"
+            f"fitted input range per second): re-run 'fit' or give {names['rate']}"
         ),
     )
 

@@ -14,7 +14,13 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.registry import KINDS
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import read_fit_json
-from i2ris_calib.io.fit_records import dataset_record, decided_kind, load_model, rate_limit
+from i2ris_calib.io.fit_records import (
+    API_NAMES,
+    dataset_record,
+    decided_kind,
+    load_model,
+    rate_limit,
+)
 
 #: Kinds the online compensator inverts (``diagnosed``: with ``model_file``): every kind
 #: with an inverse in the registry, as the batch (a coupled kind: its kernel kind and its
@@ -88,18 +94,18 @@ class Compensator(online.Compensator):
             p = Path(p)
             doc = read_fit_json(p)
             name = _dataset_name(doc, name)
-            record = dataset_record(doc, name, p)
+            record = dataset_record(doc, name, p, API_NAMES)
             kind = _online_kind(record, model, f"{p} [{name}]", coupled_ok=len(paths) > 1)
             ax = name[:-1]
             if ax in models:
                 raise CalibError(f"Compensator.from_fit: two fits of the {ax} axis")
-            models[ax] = load_model(doc, record, kind, p, mf)
+            models[ax] = load_model(doc, record, kind, p, mf, API_NAMES)
             lo, hi = (float(x) for x in record["input_range_counts"])
             if not name.endswith("±"):
                 lo = min(lo, 0.0)
             limits[ax] = (lo, hi)
             signs[ax] = -1.0 if name.endswith("-") else 1.0
-            rates[ax] = rate_limit(record, max_counts_per_s, 0.0, hi - lo)[0]
+            rates[ax] = rate_limit(record, max_counts_per_s, 0.0, hi - lo, API_NAMES)[0]
         return cls(
             models,
             limits,

@@ -322,9 +322,9 @@ def load_fit_folder(fit_dir: str | Path) -> tuple[RunData, list[Path]]:
 
 
 def _check_is_run_folder(root: Path) -> None:
-    """CalibError when ``root`` holds no stage output but other folders: the parent of
-    run folders (say which to give) or an unrelated folder. An empty folder passes (the
-    report then says what is missing)."""
+    """CalibError when ``root`` holds no stage folder: the parent of run folders (say
+    which to give), an unrelated or an empty folder (nothing to report; the same error
+    every time, whatever a refused earlier call left)."""
     if any((root / s).is_dir() for s in STAGE_FOLDERS):
         return
     runs = sorted(
@@ -337,7 +337,7 @@ def _check_is_run_folder(root: Path) -> None:
             f"{root} holds runs, not one run: give one of them, e.g. 'report {root / runs[0]}' "
             f"({len(runs)} run(s): {', '.join(runs[:5])}{', ...' if len(runs) > 5 else ''})"
         )
-    if any(p.is_dir() for p in root.iterdir()):
-        raise CalibError(
-            f"{root}: no track/, sync/, fit/ or diagnose/ folder; give a run folder written by 'run'"
-        )
+    raise CalibError(
+        f"{root}: no track/, sync/, fit/ or diagnose/ folder, nothing to report; give a run "
+        "folder written by 'run' (or a folder written by 'fit')"
+    )

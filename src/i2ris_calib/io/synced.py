@@ -88,9 +88,39 @@ def read_synced(path: str | Path, axis: str, columns: ColumnsConfig | None = Non
     _check_epoch_unit(p, numeric["time_s"].to_numpy(dtype=float), label["time_s"], cols.time_unit_s)
     for col in encoders:
         check_encoder_jumps(t, df[col].to_numpy(), source[col], p)
+    _check_some_measured(p, df, label)
     angles = [c for c in (f"{axis}_deg", f"{other}_deg") if c in df.columns]
     _angles_in_deg(p, df, angles, cols, label)
     return df
+
+
+#: the values of a synced CSV's ``status`` column (tracking, docs/formats.md)
+STATUS_VALUES = ("measured", "not_found", "ambiguous", "rejected")
+
+
+def _check_some_measured(p: Path, df: pd.DataFrame, label: dict) -> None:
+    """CalibError when the file has a ``status`` column and no row of it reads
+    ``measured``: every angle would be ignored, leaving nothing to fit (a status
+    column mapped to another column, or a recording tracking never measured)."""
+    if "status" not in df.columns or df.empty:
+        return
+    values = df["status"].astype(str).str.strip()
+    if (values == "measured").any():
+        return
+    counts = values.value_counts()
+    seen = ", ".join(f"{v!r} x{n}" for v, n in counts.head(3).items())
+    seen += ", ..." if len(counts) > 3 else ""
+    if not set(counts.index) & set(STATUS_VALUES[1:]):
+        why = (
+            "these are not tracking statuses: map status to the column whose measured rows "
+            "read 'measured' (--columns/[columns], docs/formats.md), or leave status out"
+        )
+    else:
+        why = "tracking measured no frame: check the tracking of this recording (track, report)"
+    raise CalibError(
+        f"{p}: no row of {label['status']} reads 'measured' ({seen}); angles of rows not "
+        f"'measured' are ignored, so nothing is left to fit; {why}"
+    )
 
 
 def _check_needed(p: Path, raw: pd.DataFrame, names: list[str], standard: list[str]) -> None:

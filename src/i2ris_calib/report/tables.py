@@ -1,7 +1,7 @@
 """Report tables (as :class:`~i2ris_calib.report.document.Table`) from parsed run outputs.
 
 Metric names follow the paper (Eq25-27): RMSE (deg), NRMSE (% of the angle range),
-MAE = MAXIMUM absolute error (deg), as in the paper's Tables 1-2.
+max |error| = the MAXIMUM absolute error (deg), the paper's "MAE" in its Tables 1-2.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ FIT_MODELS = tuple((k, kind_info(k).report_name) for k in table_order(ALL_KINDS)
 METRIC_COLUMNS = (
     ("rmse_deg", "RMSE (deg)", 3),
     ("nrmse_pct", "NRMSE (%)", 2),
-    ("max_abs_err_deg", "MAE (deg)", 3),
+    ("max_abs_err_deg", "max |error| (deg)", 3),
 )
 TRACK_STATUSES = ("measured", "not_found", "ambiguous", "rejected")
 
@@ -182,7 +182,7 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
 
     Rows: model (EGPI + diagnosed effects, EGPI_C, EGPI, GPI; those present) x data
     split (fitted, held-out). Column groups: one per dataset (motion direction), each
-    with RMSE (deg), NRMSE (%), MAE (deg). A cell of model M and dataset D ends in
+    with RMSE (deg), NRMSE (%), max |error| (deg). A cell of model M and dataset D ends in
     ``*`` when M's fit of D did not converge (``converged`` false in fit.json), and
     only that cell group.
     """
@@ -214,8 +214,8 @@ def metrics_table(axis: str, datasets: list[dict[str, Any]]) -> Table:
         header=tuple(header),
         rows=tuple(rows),
         group_header=tuple(groups),
-        caption=f"{axis}: model accuracy per motion direction. MAE is the MAXIMUM absolute "
-        "error, as in the paper (Eq27); NRMSE is RMSE over the measured angle range; "
+        caption=f"{axis}: model accuracy per motion direction. max |error| is the maximum "
+        "absolute error (the paper's MAE, Eq27); NRMSE is RMSE over the measured angle range; "
         "fitted = the dataset's own samples in the loss, held-out = its held-out loading "
         "cycles (not used for fitting); EGPI_C = continuous EGPI (no output step at the "
         "flag point)." + _abs_note(datasets) + star_note,

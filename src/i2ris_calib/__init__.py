@@ -64,7 +64,7 @@ _API = {
     "SimulationConfig": "i2ris_calib.simulation.config",
     "CalibError": "i2ris_calib.errors",
 }
-_IO = {"load_synced": ("i2ris_calib.io.synced", "load_datasets"),
+_IO = {"load_synced": ("i2ris_calib.io.synced", "load_synced"),
        "load_config": ("i2ris_calib.io.config_io", "load_config")}  # fmt: skip
 
 __all__ = ["__version__", *_API, *_IO]
@@ -95,10 +95,13 @@ def _load(name: str):
             checked_directions = _import_module("i2ris_calib.data.dataset").checked_directions
 
             def load_synced(path, axis, config=None, directions=None, columns=None):  # .pyi
-                """The datasets of ``axis`` in a synced CSV: a list of ``Dataset``, one per
-                motion direction with enough motion, ``+`` before ``-`` (``[0]`` is
-                ``yaw+`` of a paper-like recording), or the one signed ``±`` dataset
-                (``config.signed``). Each holds the whole history (every sample, in time
+                """The datasets ``i2ris-calib fit`` fits, as a list of ``Dataset``: on a
+                synced CSV, the paper's split, one per motion direction with enough
+                motion, ``+`` before ``-`` (``[0]`` is ``yaw+`` of a paper-like
+                recording), or the one signed ``±`` dataset when the recording calls for
+                it (the input crosses zero, excursions do not start at rest;
+                ``config.signed`` / ``config.split`` force one), the same rule as the
+                command line. Each holds the whole history (every sample, in time
                 order), its loss mask and held-out cycles; ``fit(model, data)`` takes one.
                 ``directions``: only these (``("-",)``); ``columns``: a lab file's column
                 mapping (``ColumnsConfig``, docs/formats.md)."""

@@ -49,12 +49,10 @@ def load_synced(
     directions: Sequence[str] | None = None,
     columns: ColumnsConfig | None = None,
 ) -> list[Dataset]:
-    """The datasets of ``axis`` in a synced CSV: a list of ``Dataset``, one per
-    motion direction with enough motion, ``+`` before ``-`` (``[0]`` is ``yaw+`` of a
-    paper-like recording), or the one signed ``±`` dataset (``config.signed``). Each
-    holds the whole history (every sample, in time order), its loss mask and held-out
-    cycles; ``fit(model, data)`` takes one. ``directions``: only these (``("-",)``);
-    ``columns``: a lab file's column mapping (``ColumnsConfig``, docs/formats.md)."""
+    """The datasets ``i2ris-calib fit`` fits on a synced CSV (the paper's split, one per
+    motion direction, or the one signed ``±`` dataset when the recording calls for it:
+    the same rule as the command line); ``directions``: only these; ``columns``: a lab
+    file's column mapping (``ColumnsConfig``, docs/formats.md)."""
 
 def load_config(path: str | os.PathLike[str] | None = None) -> PipelineConfig:
     """The pipeline TOML at ``path`` (defaults when None) as a PipelineConfig."""

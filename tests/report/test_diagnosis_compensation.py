@@ -151,6 +151,9 @@ def test_nothing_named_is_said_and_the_one_figure_is_not_repeated():
     assert figs == []  # diagnosis.md shows the start model's residual, once
     (frag,) = [b for b in sec.blocks if isinstance(b, MarkdownFragment)]
     assert list(frag.images) == ["residual_00_start.png"]
+    # the verdict leads; diagnosis.md (which repeats the verdict and path tables) is
+    # the evidence, folded behind <details> (issue 33: 40 % of the report's text)
+    assert frag.summary.startswith("The evidence: the diagnosis stage's full account")
     # without diagnosis.md the one residual figure is drawn alone
     sec = _sub(diagnosis_section((_diag_data(named=False),), CFG))
     (fig,) = [b for b in sec.blocks if isinstance(b, Figure) and "before_after" in b.name]

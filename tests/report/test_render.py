@@ -133,3 +133,14 @@ def test_markdown_table_cells_cannot_start_emphasis_or_html():
     t = Table(("key", "value"), (("clock", "t = a*1e-6) * t_cam <b>"),))
     text, _ = render_markdown(Document("t", "s", (Section("a", "A", (t,)),)))
     assert "| clock | t = a\\*1e-6) \\* t_cam \\<b> |" in text
+
+
+def test_a_fragment_with_a_summary_is_folded_in_both_formats():
+    doc = Document(
+        "t", "s", (Section("a", "A", (MarkdownFragment("# x\n\nbody", {}, "open me"),)),)
+    )
+    page = render_html(doc, TEMPLATE, "body{}", "9.9")
+    assert '<details><summary>open me</summary><div class="fragment">' in page
+    md, _ = render_markdown(doc, "figures")
+    assert "<details><summary>open me</summary>" in md and "</details>" in md
+    assert md.index("<details>") < md.index("body") < md.index("</details>")

@@ -124,9 +124,11 @@ def test_fit_json_of_another_tool_with_a_provenance_is_not_ours(tmp_path):
     claim_output_dir(mine, "fit", outputs=fit_cmd.OUTPUTS)
 
 
-def test_report_refuses_a_folder_holding_the_users_own_report_md(tmp_path, capsys):
-    run = tmp_path / "run"
-    run.mkdir()  # an empty run folder: the report says what is missing
+def test_report_refuses_a_folder_holding_the_users_own_report_md(synced, tmp_path, capsys):
+    run = tmp_path / "run"  # a run folder with one fit: the report says what is missing
+    rc, _, err = run_cli(capsys, ["fit", synced, "--axis", "yaw", "--model", "gpi",
+                                  "--out", run / "fit" / "yaw"])  # fmt: skip
+    assert rc == 0, err
     mine = tmp_path / "mine"
     mine.mkdir()
     (mine / "report.md").write_text("# My report\n\nWritten by hand.\n")

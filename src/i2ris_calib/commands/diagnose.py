@@ -17,7 +17,6 @@ from matplotlib.figure import Figure
 from rich.console import Console
 from rich.progress import Progress
 
-from i2ris_calib.commands.fit import datasets_for_fit
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.blas import single_threaded_blas
@@ -32,7 +31,7 @@ from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts, 
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
-from i2ris_calib.io.synced import load_datasets
+from i2ris_calib.io.synced import datasets_for_fit, load_datasets
 
 STARTS = ("auto", *DIAGNOSIS_STARTS)
 SCHEMA = "i2ris-calib.diagnosis/1"

@@ -7,7 +7,6 @@ The files' formats (schema ``i2ris-calib.fit/1``, docs/fit.md) are built and rea
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import astuple, replace
 from pathlib import Path
 from typing import Any
 
@@ -16,14 +15,12 @@ from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
 
-from i2ris_calib.data.coupling import MotorsTogether, motors_together
-from i2ris_calib.data.dataset import Dataset, other_axis
-from i2ris_calib.data.excursions import Excursions, excursions
+from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import decide_fits
 from i2ris_calib.fitting.fit import fit_model
 from i2ris_calib.fitting.limits import dataset_limits
-from i2ris_calib.fitting.pipeline import ModelChoice, choose_model, fit_dataset, pick_after_fit
+from i2ris_calib.fitting.pipeline import fit_dataset, pick_after_fit
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import (
@@ -34,7 +31,7 @@ from i2ris_calib.io.fit import (
 )
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
-from i2ris_calib.io.synced import load_datasets
+from i2ris_calib.io.synced import datasets_for_fit, load_datasets, recording_summary  # noqa: F401 (re-exported)
 
 #: The files ``fit`` writes in its output folder.
 OUTPUTS = ("fit.json", "predictions.csv")
@@ -245,38 +242,3 @@ def _check_model_axis(model_file, axis: str) -> None:
         f"this fit is --axis {axis}: give the final_model.json of a {axis} diagnosis "
         f"('diagnose ... --axis {axis}'), or fit --axis {was}"
     )
-
-
-def recording_summary(whole: Sequence[Dataset]) -> tuple[Excursions, MotorsTogether | None]:
-    """How the recording drives the axis, over all its files: the excursions of its
-    signed input (:func:`~i2ris_calib.data.excursions.excursions`) and how the other
-    motor moves with it (:func:`~i2ris_calib.data.coupling.motors_together`; None
-    without the other motor's input). ``whole``: the signed datasets of the axis."""
-    counts = [astuple(excursions(d.enc, d.bands.zero_band, d.time_s)) for d in whole]
-    recording = Excursions(*(int(sum(c)) for c in zip(*counts, strict=True)))
-    if any(d.signals.v_other is None for d in whole):
-        return recording, None
-    other = other_axis(whole[0].axis)
-    enc = np.concatenate([d.enc for d in whole])
-    enc_other = np.concatenate([np.asarray(d.signals.v_other, float) for d in whole])
-    return recording, motors_together(enc, enc_other, other)
-
-
-def datasets_for_fit(
-    paths: Sequence[str | Path], axis: str, fit_config, model: str = "all", columns=None
-) -> tuple[list[Dataset], ModelChoice]:
-    """The datasets of a fit and the model choice (:func:`~i2ris_calib.fitting.pipeline.
-    choose_model`): unless ``[fit] signed`` forces it, the recording's excursions
-    (:func:`~i2ris_calib.data.excursions.excursions`, over all files) decide between
-    the signed dataset of the axis and the paper's per-direction split; whether the
-    other motor moves with this one decides the coupled model (:func:`recording_summary`).
-    ``columns``: the files' column mapping (``[columns]``, default the standard names)."""
-    whole = load_datasets(
-        paths, axis, replace(fit_config, signed=True, split=False), columns=columns
-    )
-    recording, together = recording_summary(whole)
-    choice = choose_model(None if fit_config.signed else recording, fit_config, model, together)
-    if choice.signed:
-        return whole, choice
-    split_config = replace(fit_config, signed=False, split=False)
-    return load_datasets(paths, axis, split_config, columns=columns), choice

@@ -33,7 +33,7 @@ from i2ris_calib import __version__
 from i2ris_calib.commands.compensate import compensate_files
 from i2ris_calib.commands.diagnose import OUTPUTS as DIAGNOSE_OUTPUTS
 from i2ris_calib.commands.diagnose import diagnose_dataset
-from i2ris_calib.commands.fit import datasets_for_fit, fit_files
+from i2ris_calib.commands.fit import fit_files
 from i2ris_calib.commands.report import write_report
 from i2ris_calib.commands.sync import sync_session
 from i2ris_calib.commands.track import track_session
@@ -48,7 +48,7 @@ from i2ris_calib.io.encoders import encoder_log_path
 from i2ris_calib.io.outputs import check_not_input, check_out_path, output_dir
 from i2ris_calib.io.provenance import file_sha256
 from i2ris_calib.io.session import check_cameras, load_session, session_file
-from i2ris_calib.io.synced import load_datasets
+from i2ris_calib.io.synced import datasets_for_fit, load_datasets
 from i2ris_calib.io.video import input_files
 from i2ris_calib.session import SessionSpec
 

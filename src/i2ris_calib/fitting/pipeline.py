@@ -37,6 +37,7 @@ from i2ris_calib.hysteresis.registry import (
     SIGNED_KINDS,
     fit_order,
     kind_info,
+    kind_of,
     model_for_kind,
     signed_kinds,
     start_recipe,
@@ -562,7 +563,8 @@ def _fit_inputs(model, data, config, holdout):
                 "cycles: fit(model, dataclasses.replace(data, holdout=mask))"
             )
         v = np.asarray(data.signals.v, dtype=float)
-        return data.signals, data.theta_deg, data.holdout, data.bands.deadband, v, config
+        db = data.bands.deadband if config.deadband_counts < 0 else float(config.deadband_counts)
+        return data.signals, data.theta_deg, data.holdout, db, v, config
     if not isinstance(data, tuple):
         checked_dataset(func, "data", data)  # raises: says what data is and what to give
     if len(data) != 2:
@@ -582,6 +584,31 @@ def _fit_inputs(model, data, config, holdout):
         else as_1d_bool(func, "holdout", holdout, v.size)
     )
     return Signals(v=v), theta, hold, deadband_for(v, config), v, config
+
+
+def _signature(model) -> tuple:
+    """What makes two models of one kind fit alike: class, thresholds, parameter names,
+    fixed flags and bounds (not values)."""
+    params = tuple(
+        (p.name, bool(p.fixed), float(p.lower), float(p.upper)) for p in model.parameters
+    )
+    return (type(model), getattr(model, "n", None), params)
+
+
+def _is_kind_model(model, info, v: np.ndarray, config: FitConfig, db: float) -> bool:
+    """True when ``model`` is its registry kind's model as the registry builds it (the
+    factory's, or the fit's own fixed flags and bounds): :func:`fit` then fits it by the
+    kind's path (:func:`fit_kind`), as the command line does."""
+    if info.factory is None or type(model) is not info.model_class:
+        return False
+    n = getattr(model, "n", None)
+    if info.n_operators is None and isinstance(n, int):
+        config = replace(config, n_operators=n)
+    mine = _signature(model)
+    return mine in (
+        _signature(model_for_kind(info.kind, n=n if isinstance(n, int) else None)),
+        _signature(unfitted_model(info.kind, v, config, db)),
+    )
 
 
 def fit(
@@ -611,8 +638,16 @@ def fit(
     Returns
     -------
     FitResult
-        A new result; ``model`` is not changed. Starts: the model's own values and the
-        data-driven ones (:meth:`guess` for GPI/EGPI models).
+        A new result; ``model`` is not changed. A registry kind's model as the registry
+        builds it (``model_for_kind(kind)``, ``gpi_model()``, ``i2ris_egpi_model()``,
+        ``continuous_egpi_model()``, ...: its own fixed flags and bounds, any values)
+        is fitted by the kind's own path, exactly as ``i2ris-calib fit --model KIND``
+        on the same dataset: the kind's data-driven starts, method and input scaling,
+        the dataset's ``v'`` dead band (``[fit] deadband_counts`` overrides it), its
+        nested kind first (EGPI from the GPI fit); its values are not a start (give
+        starts to :func:`~i2ris_calib.fitting.fit.fit_model`). Any other model (fixed
+        flags or bounds of your own, a general EGPI, effects added): the model's own
+        values and the data-driven starts of its base (:meth:`guess`).
 
     Raises
     ------
@@ -624,6 +659,21 @@ def fit(
         mask of the data's length.
     """
     signals, theta, hold, db, v, config = _fit_inputs(model, data, config, holdout)
+    info = kind_of(model)
+    if info is not None and _is_kind_model(model, info, v, config, db):
+        # the kind's own path, exactly as ``i2ris-calib fit --model KIND`` (one fitting
+        # path: its starts, method, input scaling, the other motor's start for coupling)
+        n = getattr(model, "n", None)
+        if info.n_operators is None and isinstance(n, int) and n != config.n_operators:
+            config = replace(config, n_operators=n)
+        return fit_kind(info.kind, signals, theta, config, hold, deadband=db)
+    if info is not None and info.coupled:
+        raise CalibError(
+            f"fit: a {info.kind} model with its own fixed flags or bounds has no generic "
+            "start recipe; fit the kind's model as the registry builds it "
+            f"(model_for_kind('{info.kind}')), or give starts: fit_model(model, signals, "
+            "theta, starts=[...])"
+        )
     starts = [model.values]
     theta_fit = np.where(np.isfinite(theta) & ~hold, theta, np.nan)
     base = innermost(model)  # an extended model: the data-driven starts of its base

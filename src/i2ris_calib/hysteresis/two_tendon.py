@@ -100,9 +100,12 @@ def _side_of(val: dict[str, float], side: str) -> dict[str, float]:
 
 
 def _column_ordered(n_rows: int, n_cols: int) -> np.ndarray:
-    """An uninitialised (n_rows, n_cols) float array in column (Fortran) order: each
-    column contiguous, filled by :func:`_put_columns` without strided writes."""
-    return np.empty((n_cols, n_rows)).T
+    """A zeroed (n_rows, n_cols) float array in column (Fortran) order: each column
+    contiguous, filled by :func:`_put_columns` without strided writes. Zeroed, not
+    uninitialised: a side the input never reaches (one-signed input, a coupling side
+    the other motor never drives) writes no columns, and its parameters move nothing
+    (an uninitialised buffer left garbage there and made fits differ run to run)."""
+    return np.zeros((n_cols, n_rows)).T
 
 
 def _put_columns(jac: np.ndarray, first: int, sign: float, cols: np.ndarray, at) -> None:

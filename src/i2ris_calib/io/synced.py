@@ -8,13 +8,16 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import astuple, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.data.coupling import MotorsTogether, motors_together
 from i2ris_calib.data.dataset import AXES, Dataset, direction_datasets, input_bands, other_axis
+from i2ris_calib.data.excursions import Excursions, excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.columns import STANDARD_COLUMNS, ColumnsConfig, parse_columns_option
 from i2ris_calib.io.csv_file import read_csv_file
@@ -422,3 +425,56 @@ def _too_little_motion(paths, frames, axis: str, fit_config, directions) -> str:
         f"([fit] min_block_samples{rate}): record longer or at a higher rate (or lower "
         "[fit] min_block_samples)"
     )
+
+
+def recording_summary(whole: Sequence[Dataset]) -> tuple[Excursions, MotorsTogether | None]:
+    """How the recording drives the axis, over all its files: the excursions of its
+    signed input (:func:`~i2ris_calib.data.excursions.excursions`) and how the other
+    motor moves with it (:func:`~i2ris_calib.data.coupling.motors_together`; None
+    without the other motor's input). ``whole``: the signed datasets of the axis."""
+    counts = [astuple(excursions(d.enc, d.bands.zero_band, d.time_s)) for d in whole]
+    recording = Excursions(*(int(sum(c)) for c in zip(*counts, strict=True)))
+    if any(d.signals.v_other is None for d in whole):
+        return recording, None
+    other = other_axis(whole[0].axis)
+    enc = np.concatenate([d.enc for d in whole])
+    enc_other = np.concatenate([np.asarray(d.signals.v_other, float) for d in whole])
+    return recording, motors_together(enc, enc_other, other)
+
+
+def datasets_for_fit(
+    paths: Sequence[str | Path], axis: str, fit_config, model: str = "all", columns=None
+) -> tuple[list[Dataset], Any]:
+    """The datasets of a fit and the model choice (:func:`~i2ris_calib.fitting.pipeline.
+    choose_model`): unless ``[fit] signed`` forces it, the recording's excursions
+    (:func:`~i2ris_calib.data.excursions.excursions`, over all files) decide between
+    the signed dataset of the axis and the paper's per-direction split; whether the
+    other motor moves with this one decides the coupled model (:func:`recording_summary`).
+    ``columns``: the files' column mapping (``[columns]``, default the standard names)."""
+    whole = load_datasets(
+        paths, axis, replace(fit_config, signed=True, split=False), columns=columns
+    )
+    recording, together = recording_summary(whole)
+    from i2ris_calib.fitting.pipeline import choose_model
+
+    choice = choose_model(None if fit_config.signed else recording, fit_config, model, together)
+    if choice.signed:
+        return whole, choice
+    split_config = replace(fit_config, signed=False, split=False)
+    return load_datasets(paths, axis, split_config, columns=columns), choice
+
+
+def load_synced(
+    paths: Sequence[str | Path],
+    axis: str,
+    fit_config,
+    directions: tuple[str, ...] | None = None,
+    columns: ColumnsConfig | None = None,
+) -> list[Dataset]:
+    """The datasets ``fit`` fits on these synced CSVs (the public ``load_synced``): the
+    signed dataset of the axis or the paper's per-direction split, as the recording
+    calls for (:func:`datasets_for_fit`, one rule for the CLI and the API); with
+    ``directions`` only those direction datasets (:func:`load_datasets`)."""
+    if directions is not None:
+        return load_datasets(paths, axis, fit_config, directions, columns)
+    return datasets_for_fit(paths, axis, fit_config, columns=columns)[0]

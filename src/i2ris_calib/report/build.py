@@ -694,8 +694,14 @@ def _diagnosis_subsection(dd: DiagnosisData, cfg: ReportConfig | None = None) ->
     if dd.markdown:
         referenced = {rel for rel in dd.images if f"]({rel})" in dd.markdown}
         frag_images = {rel: (fig_names[rel], dd.images[rel]) for rel in referenced}
-        blocks.append(Paragraph("The diagnosis stage's own account (diagnosis.md):"))
-        blocks.append(MarkdownFragment(dd.markdown, frag_images))
+        blocks.append(
+            MarkdownFragment(
+                dd.markdown,
+                frag_images,
+                summary="The evidence: the diagnosis stage's full account (diagnosis.md: "
+                "steps, candidates, paths)",
+            )
+        )
     for rel, png in dd.images.items():
         if rel not in referenced:
             blocks.append(Figure(fig_names[rel], png, f"{dd.axis}: {rel}"))
@@ -1107,7 +1113,14 @@ def compensation_verdicts(axes: Mapping[str, Mapping[str, Any]]) -> list[Verdict
 def _model_verdict(name: str, a: Mapping[str, Any]) -> Verdict:
     """The model inverted for axis record ``a`` (compensate.json) and why, its predicted
     error and the target samples it cannot reach."""
-    why = "forced by --model" if a.get("model_choice") == "--model" else "best of the ranking"
+    if a.get("model_choice") == "--model":
+        why = "forced by --model"
+    elif a.get("model_choice") == "ranking":  # an older compensate.json
+        why = "best of the ranking"
+    elif a.get("substitute"):
+        why = f"instead of the recommended {a.get('recommended_model')}: {a['substitute']}"
+    else:
+        why = "the model fit.json recommends"
     n_bad, n = a.get("n_unreachable"), a.get("n_samples")
     main = (
         f"{name}: {_model_name(a.get('model', '?'))} ({why}): predicted RMSE "
@@ -1239,9 +1252,11 @@ def ranking_table(axes: Mapping[str, Mapping[str, Any]]) -> Table | None:
             "continuous",
         ),
         tuple(rows[:10]),
-        "Model ranking: models whose output steps where the target passes (more than "
-        "0.5 % of the samples) after the continuous ones, then by the score (the model's "
-        "own error on this target and its held-out fit error in quadrature).",
+        "Models that could serve this target, for information (the model inverted is "
+        "fit.json's decision unless --model forces one): models whose output steps where "
+        "the target passes (more than 0.5 % of the samples) after the continuous ones, "
+        "then by the score (the model's own error on this target and its held-out fit "
+        "error in quadrature).",
         align=("l", "r", "l", "r", "r", "r", "r", "l"),
     )
 

@@ -91,6 +91,9 @@ class MarkdownFragment:
 
     text: str
     images: dict[str, tuple[str, bytes]] = field(default_factory=dict)
+    summary: str = ""
+    """When set, the fragment is folded behind this one-line summary (HTML and Markdown
+    ``<details>``): evidence a reader opens on demand."""
 
 
 DocBlock = Paragraph | Note | Verdict | Table | Figure | Code | MarkdownFragment

@@ -118,7 +118,8 @@ def _html_block(b: DocBlock) -> str:
         pre = f"<pre><code>{e(b.text)}</code></pre>"
         return f"<details><summary>{e(b.summary)}</summary>{pre}</details>" if b.summary else pre
     if isinstance(b, MarkdownFragment):
-        return f'<div class="fragment">{fragment_html(b)}</div>'
+        body = f'<div class="fragment">{fragment_html(b)}</div>'
+        return f"<details><summary>{e(b.summary)}</summary>{body}</details>" if b.summary else body
     raise TypeError(f"unknown block {type(b).__name__}")
 
 
@@ -265,7 +266,11 @@ def _md_block(b: DocBlock, fdir: str, files: dict[str, bytes]) -> list[str]:
         head = [f"**{b.summary}**", ""] if b.summary else []
         return head + [fence, b.text, fence]
     if isinstance(b, MarkdownFragment):
-        return [fragment_markdown(b, fdir, files)]
+        body = fragment_markdown(b, fdir, files)
+        if b.summary:
+            return [f"<details><summary>{html.escape(b.summary)}</summary>", "", body, "",
+                    "</details>"]  # fmt: skip
+        return [body]
     raise TypeError(f"unknown block {type(b).__name__}")
 
 

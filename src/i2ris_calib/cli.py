@@ -18,6 +18,7 @@ import typer
 from typer.core import TyperArgument, TyperCommand, TyperOption
 
 from i2ris_calib import __version__
+from i2ris_calib.hysteresis import kinds as _kinds
 from i2ris_calib.interrupts import sigint_guard
 
 # Words a user may put after a flag as if it took a value (`run S --force true`).
@@ -25,19 +26,18 @@ _BOOL_WORDS = frozenset({"true", "false", "yes", "no", "on", "off", "1", "0"})
 # Value placeholders for options declared without metavar= (click's own names).
 _TYPE_METAVARS = {"int": "INTEGER", "float": "FLOAT", "str": "TEXT", "Path": "PATH"}
 
-# The model kinds the options accept, as the registry (i2ris_calib.hysteresis.registry)
-# lists them, in its order. Written out here: the registry imports the models (numpy,
-# numba) and --help stays fast; tests/test_cli_help.py keeps them equal to the registry.
+# The model kinds the options accept, from the names table of the registry
+# (i2ris_calib.hysteresis.kinds: no model imported, so --help stays fast).
 #: Kinds of a motion-direction dataset (registry ``MODEL_KINDS``).
-_DIRECTION_KINDS = ("gpi", "egpi", "egpi_c")
+_DIRECTION_KINDS = _kinds.MODEL_KINDS
 #: Kinds that need the whole signed input of an axis (registry rows with ``signed``).
-_SIGNED_ONLY_KINDS = ("agpi", "agpi_coupled", "maxwell_slip", "bouc_wen")
+_SIGNED_ONLY_KINDS = _kinds.SIGNED_ONLY_KINDS
 #: ``fit --model`` (registry ``BUILT_KINDS``; or ``all``).
-_FIT_MODELS = (*_DIRECTION_KINDS, *_SIGNED_ONLY_KINDS)
+_FIT_MODELS = _kinds.BUILT_KINDS
 #: ``compensate --model`` (registry ``INVERSE_KINDS``; or ``diagnosed``).
-_INVERSE_MODELS = ("gpi", "egpi", "egpi_c", "agpi", "agpi_coupled")
+_INVERSE_MODELS = _kinds.INVERSE_KINDS
 #: ``diagnose --start`` (registry ``DIAGNOSIS_STARTS``; or ``auto``).
-_DIAGNOSIS_STARTS = ("gpi", "egpi", "agpi", "maxwell_slip", "bouc_wen")
+_DIAGNOSIS_STARTS = _kinds.DIAGNOSIS_STARTS
 
 
 def _one_of(names: tuple[str, ...]) -> str:
@@ -302,7 +302,7 @@ def compensate(
         None,
         "--model",
         metavar="MODEL",
-        help=f"{_one_of((*_INVERSE_MODELS, 'diagnosed'))} (default: fit.json's recommended model).",
+        help=f"{_one_of((*_INVERSE_MODELS, _kinds.DIAGNOSED))} (default: fit.json's recommended model).",
     ),
     max_counts_per_s: float | None = typer.Option(
         None, "--max-counts-per-s", metavar="RATE", help="Motor rate limit (counts/s)."

@@ -22,6 +22,7 @@ from i2ris_calib.compensation.safety import (
 )
 from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
@@ -44,7 +45,7 @@ from i2ris_calib.io.target_csv import read_history, read_target
 
 SCHEMA = "i2ris-calib.compensate/1"
 #: ``--model`` choices: the kinds with an inverse (registry) and ``"diagnosed"``
-KINDS = (*INVERSE_KINDS, "diagnosed")
+KINDS = (*INVERSE_KINDS, DIAGNOSED)
 #: ``--dataset`` choices (``yaw+-`` is accepted for ``yaw±``)
 DATASETS = ("yaw+", "yaw-", "yaw±", "pitch+", "pitch-", "pitch±")
 
@@ -732,8 +733,8 @@ def _kinds_to_invert(a: dict, axis: str, axes: list, model: str | None, mf) -> l
     kinds = [k for k in record.get("models", {}) if k in INVERSE_KINDS]
     if other is None:  # no other motor's commands: coupled models left out
         kinds = [k for k in kinds if k not in COUPLED_KINDS]
-    if "diagnosed" in record.get("models", {}) and mf is not None:
-        kinds.append("diagnosed")
+    if DIAGNOSED in record.get("models", {}) and mf is not None:
+        kinds.append(DIAGNOSED)
     if not kinds:
         raise CalibError(
             f"{path} [{name}]: none of its models ({', '.join(record.get('models', {}))}) "
@@ -815,7 +816,7 @@ def _refusal(a: dict, kind: str) -> str | None:
     """Why compensate cannot invert ``kind`` for axis ``a`` (None: it can)."""
     if kind in a["candidates"] or (kind in COUPLED_KINDS and kind == a.get("coupled")):
         return None
-    if kind == "diagnosed":
+    if kind == DIAGNOSED:
         return "the diagnosed model needs its final_model.json (--model-file)"
     if kind not in INVERSE_KINDS:
         return f"{kind} has no inverse (compensate inverts {', '.join(INVERSE_KINDS)})"

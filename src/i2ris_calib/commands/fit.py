@@ -21,6 +21,7 @@ from i2ris_calib.fitting.decision import decide_fits
 from i2ris_calib.fitting.fit import fit_model
 from i2ris_calib.fitting.limits import dataset_limits
 from i2ris_calib.fitting.pipeline import fit_dataset, pick_after_fit
+from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import (
@@ -67,7 +68,7 @@ def fit_every_kind(
             if progress is not None:
                 progress(f"{d.name}: {kind}")
             try:
-                if kind == "diagnosed":
+                if kind == DIAGNOSED:
                     results[kind] = fit_saved(saved, d, fit_config)
                 else:
                     results[kind] = fit_dataset(kind, d, fit_config, results)
@@ -178,7 +179,7 @@ def _fit_into(paths, axis: str, model: str, out: Path, config, saved, inputs: li
     """The body of :func:`fit_files` once ``out`` is claimed and locked."""
     fit_config = config.fit
     datasets, choice = datasets_for_fit(paths, axis, fit_config, model, config.columns)
-    kinds = (*choice.kinds, *(["diagnosed"] if saved is not None else []))
+    kinds = (*choice.kinds, *([DIAGNOSED] if saved is not None else []))
     console = Console(stderr=True)
     with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
         task = bar.add_task("fitting", total=len(datasets) * len(kinds))

@@ -6,10 +6,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from i2ris_calib._validate import validated_config
+from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 
 #: The kinds compensation inverts (the registry's ``inverse``) and ``"diagnosed"``
-_KINDS = ("", *INVERSE_KINDS, "diagnosed")
+_KINDS = ("", *INVERSE_KINDS, DIAGNOSED)
 #: how the commands start (`--conditioning`, docs/compensate.md "Start state")
 CONDITIONING = ("auto", "sweep", "none")
 _DATASETS = ("yaw+", "yaw-", "yaw±", "pitch+", "pitch-", "pitch±")

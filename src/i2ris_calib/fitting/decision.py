@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from i2ris_calib.hysteresis.kinds import CONTINUOUS_EGPI
 from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info
 
 SCHEMA = "i2ris-calib.decision/1"
@@ -52,7 +53,7 @@ held-out RMSE."""
 CONTINUOUS_MARGIN = 0.10
 """A continuous model (EGPI_C) is preferred over one whose output steps at its flag
 point (EGPI) when its held-out RMSE is at most this much higher (relative)."""
-CONTINUOUS_KIND = "egpi_c"
+CONTINUOUS_KIND = CONTINUOUS_EGPI
 """The continuous EGPI."""
 JUMP_NOISE_SD = 3.0
 """A model's output "jumps" when its largest sample-to-sample change exceeds the data's

@@ -16,7 +16,7 @@ the defaults (``n`` operators, the ``v'`` dead band) are the same everywhere.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from operator import attrgetter
 
 from i2ris_calib._validate import describe
@@ -33,6 +33,7 @@ from i2ris_calib.hysteresis.coupled import (
     coupled_starts,
     coupled_two_tendon_model,
 )
+from i2ris_calib.hysteresis.kinds import BY_NAME, DIAGNOSED, KindName
 from i2ris_calib.hysteresis.models import (
     ContinuousEGPIModel,
     GPIModel,
@@ -148,47 +149,34 @@ class ModelKind:
     output_steps: bool = False
 
 
+def _row(kind: str, factory, model_class, **behaviour) -> ModelKind:
+    """The registry row of ``kind``: its name, labels and flags from the names table
+    (:mod:`~i2ris_calib.hysteresis.kinds`), joined to its factory, class and recipes."""
+    name = BY_NAME[kind]
+    flags = {f.name: getattr(name, f.name) for f in fields(KindName) if f.name != "model"}
+    if model_class is not None and f"{model_class.__module__}:{model_class.__name__}" != (
+        f"i2ris_calib.hysteresis.{name.model}"
+    ):
+        raise TypeError(f"kinds.py says {kind} is {name.model}, not {model_class.__name__}")
+    return ModelKind(factory=factory, model_class=model_class, **flags, **behaviour)
+
+
 #: Every kind, in fitting order (a kind's nested kind comes before it). Tables list
 #: them in the reverse order (:func:`table_order`).
 KINDS: tuple[ModelKind, ...] = (
-    ModelKind(
-        "gpi", "GPI", "GPI", gpi_model, GPIModel,
-        start=start_values, fixed=attrgetter("fixed_gpi"), n_starts="n_starts_gpi",
-        inverse="gpi", paper=True, diagnosis_start=True, on_signed=True,
-    ),
-    ModelKind(
-        "egpi", "EGPI", "EGPI", i2ris_egpi_model, I2RISEGPIModel,
-        start=start_values, fixed=attrgetter("fixed_egpi"), nested="gpi",
-        inverse="egpi", paper=True, diagnosis_start=True, uses_deadband=True, output_steps=True,
-    ),
-    ModelKind(
-        "egpi_c", "EGPI_C", "EGPI_C", continuous_egpi_model, ContinuousEGPIModel,
-        start=start_values, fixed=attrgetter("fixed_egpi"), nested="gpi",
-        inverse="egpi_c", uses_deadband=True,
-    ),
-    ModelKind(
-        "agpi", "two-tendon GPI", "two-tendon GPI", two_tendon_gpi_model, TwoTendonGPIModel,
-        start=two_tendon_starts, fixed=two_tendon_fixed, n_starts="n_starts_gpi", signed=True,
-        on_signed=True, diagnosis_start=True, inverse="agpi",
-    ),
-    ModelKind(
-        "agpi_coupled", "two-tendon GPI + coupling",
-        "two-tendon GPI + hysteretic coupling to the other motor", coupled_two_tendon_model,
-        CoupledTwoTendonModel, start=coupled_starts, fixed=coupled_fixed,
-        n_starts="n_starts_gpi", nested="agpi", signed=True, coupled=True,
-        inverse="agpi_coupled",
-    ),
-    ModelKind(
-        "maxwell_slip", "PI / Maxwell slip", "Prandtl-Ishlinskii / Maxwell slip",
-        slip_model, SlipModel, start=slip_starts, fixed=slip_fixed, signed=True, on_signed=True,
-        diagnosis_start=True, with_coupling=False, method="trf", n_operators=SLIP_THRESHOLDS,
-    ),
-    ModelKind(
-        "bouc_wen", "Bouc-Wen", "Bouc-Wen (one smooth loop)",
-        bouc_wen_model, BoucWenModel, start=bouc_wen_starts, fixed=bouc_wen_fixed,
-        signed=True, on_signed=True, diagnosis_start=True, with_coupling=False,
-    ),
-    ModelKind("diagnosed", "DIAGNOSED", "EGPI + diagnosed effects", None, None),
+    _row("gpi", gpi_model, GPIModel, start=start_values, fixed=attrgetter("fixed_gpi")),
+    _row("egpi", i2ris_egpi_model, I2RISEGPIModel, start=start_values,
+         fixed=attrgetter("fixed_egpi")),
+    _row("egpi_c", continuous_egpi_model, ContinuousEGPIModel, start=start_values,
+         fixed=attrgetter("fixed_egpi")),
+    _row("agpi", two_tendon_gpi_model, TwoTendonGPIModel, start=two_tendon_starts,
+         fixed=two_tendon_fixed),
+    _row("agpi_coupled", coupled_two_tendon_model, CoupledTwoTendonModel,
+         start=coupled_starts, fixed=coupled_fixed),
+    _row("maxwell_slip", slip_model, SlipModel, start=slip_starts, fixed=slip_fixed,
+         n_operators=SLIP_THRESHOLDS),
+    _row("bouc_wen", bouc_wen_model, BoucWenModel, start=bouc_wen_starts, fixed=bouc_wen_fixed),
+    _row(DIAGNOSED, None, None),
 )  # fmt: skip
 
 _BY_NAME = {k.kind: k for k in KINDS}

@@ -12,6 +12,7 @@ import numpy as np
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import Decision
 from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.io.fit import read_model_file
 
 __all__ = [
@@ -86,7 +87,7 @@ def load_model(
             f"{', '.join(models) or 'none'}); choose {names['model']} from those or re-run 'fit'"
         )
     rec = models[kind]
-    if kind == "diagnosed":
+    if kind == DIAGNOSED:
         if model_file is None:
             raise CalibError(
                 f"{names['model']} diagnosed needs {names['model_file']} final_model.json (the "

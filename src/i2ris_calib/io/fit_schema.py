@@ -21,11 +21,12 @@ from typing import Any, NoReturn
 from i2ris_calib.data.dataset import AXES
 from i2ris_calib.diagnosis.serialize import SCHEMA as MODEL_SCHEMA
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, model_for_kind
 
 FIT_SCHEMA = "i2ris-calib.fit/1"
 #: Model records a fit.json may hold besides the built kinds (a refitted saved model).
-SAVED_KIND = "diagnosed"
+SAVED_KIND = DIAGNOSED
 
 FIX_FIT = "re-run 'fit' or restore the file"
 FIX_MODEL = "give the final_model.json written by 'diagnose' or restore the file"

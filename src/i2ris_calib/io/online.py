@@ -11,6 +11,7 @@ from pathlib import Path
 
 from i2ris_calib.compensation import online
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.registry import KINDS
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import read_fit_json
@@ -159,7 +160,7 @@ def _online_kind(record: dict, model: str | None, where: str, coupled_ok: bool) 
     """The model kind to invert: ``model`` checked, or the dataset record's fitted online
     kind with the lowest held-out RMSE (a coupled kind only when ``coupled_ok``)."""
     if model is not None:
-        if model not in ONLINE_KINDS and model != "diagnosed":
+        if model not in ONLINE_KINDS and model != DIAGNOSED:
             raise CalibError(
                 f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "
                 f"got '{model}'"

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.fitting.decision import CONTINUOUS_MARGIN, Decision
+from i2ris_calib.hysteresis.kinds import CONTINUOUS_EGPI
 from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info
 from i2ris_calib.report.tables import (
     FIT_MODELS,
@@ -31,7 +32,7 @@ from i2ris_calib.report.tables import (
     unidentified,
 )
 
-CONTINUOUS_KIND = "egpi_c"
+CONTINUOUS_KIND = CONTINUOUS_EGPI
 """The continuous EGPI: recommended over a kind whose output steps at its flag point
 (registry ``output_steps``: EGPI) within :data:`CONTINUOUS_MARGIN`."""
 

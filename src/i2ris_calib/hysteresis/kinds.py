@@ -1,0 +1,79 @@
+"""The model kinds by name: what a stage may know of a kind without importing its model.
+
+One row per kind: its name, labels, where its class lives, and the flags every stage
+reads (which input it needs, whether it has an inverse, whether ``diagnose`` starts
+from it, ...). Nothing here imports numpy or a model, so the command line's ``--help``
+reads the kinds from this table directly. :mod:`i2ris_calib.hysteresis.registry` joins
+each row to its class, factory, start recipe and fixed parameters (``ModelKind``); the
+other stages read the registry. Kind names are written out here and in the registry
+only (tests/test_architecture.py keeps them out of the other layers).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class KindName:
+    """One model kind's name, labels, class location and flags (the meaning of each
+    flag: :class:`i2ris_calib.hysteresis.registry.ModelKind`)."""
+
+    kind: str
+    label: str
+    report_name: str
+    model: str = ""  # "module:Class" under i2ris_calib.hysteresis ("": not built)
+    nested: str | None = None
+    inverse: str | None = None
+    signed: bool = False
+    paper: bool = False
+    diagnosis_start: bool = False
+    on_signed: bool = False
+    uses_deadband: bool = False
+    coupled: bool = False
+    with_coupling: bool = True
+    method: str | None = None
+    output_steps: bool = False
+    n_starts: str = "n_starts"
+
+
+#: Every kind, in fitting order (a kind's nested kind comes before it).
+NAMES: tuple[KindName, ...] = (
+    KindName("gpi", "GPI", "GPI", "models:GPIModel", n_starts="n_starts_gpi", inverse="gpi",
+             paper=True, diagnosis_start=True, on_signed=True),
+    KindName("egpi", "EGPI", "EGPI", "models:I2RISEGPIModel", nested="gpi", inverse="egpi",
+             paper=True, diagnosis_start=True, uses_deadband=True, output_steps=True),
+    KindName("egpi_c", "EGPI_C", "EGPI_C", "models:ContinuousEGPIModel", nested="gpi",
+             inverse="egpi_c", uses_deadband=True),
+    KindName("agpi", "two-tendon GPI", "two-tendon GPI", "two_tendon:TwoTendonGPIModel",
+             n_starts="n_starts_gpi", signed=True, on_signed=True, diagnosis_start=True,
+             inverse="agpi"),
+    KindName("agpi_coupled", "two-tendon GPI + coupling",
+             "two-tendon GPI + hysteretic coupling to the other motor",
+             "coupled:CoupledTwoTendonModel", n_starts="n_starts_gpi", nested="agpi",
+             signed=True, coupled=True, inverse="agpi_coupled"),
+    KindName("maxwell_slip", "PI / Maxwell slip", "Prandtl-Ishlinskii / Maxwell slip",
+             "slip:SlipModel", signed=True, on_signed=True, diagnosis_start=True,
+             with_coupling=False, method="trf"),
+    KindName("bouc_wen", "Bouc-Wen", "Bouc-Wen (one smooth loop)", "bouc_wen:BoucWenModel",
+             signed=True, on_signed=True, diagnosis_start=True, with_coupling=False),
+    KindName("diagnosed", "DIAGNOSED", "EGPI + diagnosed effects"),
+)  # fmt: skip
+
+BY_NAME = {k.kind: k for k in NAMES}
+
+#: Kinds a factory builds (every kind but ``"diagnosed"``), in fitting order.
+BUILT_KINDS = tuple(k.kind for k in NAMES if k.model)
+#: Kinds of a motion-direction dataset (the paper's split).
+MODEL_KINDS = tuple(k.kind for k in NAMES if k.model and not k.signed)
+#: Kinds that need the whole signed input of an axis.
+SIGNED_ONLY_KINDS = tuple(k.kind for k in NAMES if k.model and k.signed)
+#: Kinds the compensation stage inverts.
+INVERSE_KINDS = tuple(k.kind for k in NAMES if k.inverse)
+#: Starting models of ``diagnose``.
+DIAGNOSIS_STARTS = tuple(k.kind for k in NAMES if k.diagnosis_start)
+#: A model saved by ``diagnose`` and refitted by ``fit --model-file``.
+DIAGNOSED = "diagnosed"
+#: The continuous EGPI: preferred over a kind whose output steps at its flag point
+#: (``output_steps``) within a margin (fitting/decision.py).
+CONTINUOUS_EGPI = "egpi_c"

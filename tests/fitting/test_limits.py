@@ -112,8 +112,9 @@ def test_a_rest_off_the_loop_is_named_with_its_numbers():
     vv, tt = np.r_[v, rest_v], np.r_[t, rest_t]
     assert rest_anomalies(vv, on, tt, 0.01) == []
     (w,) = rest_anomalies(vv, off, tt, 0.01)
-    assert (
-        w.startswith("a rest of 2.99 s at input 0 (t = ") and "sits at -1.68 deg, 1.6 deg from" in w
-    )
-    half = float(w.split("half-width ")[1].split(" deg")[0])
-    assert 0.2 <= half <= 0.3  # the loop's half-width at 0 is 0.3 deg (branch means)
+    assert w.startswith("a rest of 2.99 s at input 0 (t = ") and "sits at -1.68 deg, 1." in w
+    lo = float(w.split("the loop's angles there (")[1].split(" to ")[0])
+    assert -0.55 <= lo <= -0.25  # the falling branch near 0: -0.3 deg, slope and noise
+    # the other motor moving during the "rest": coupling may move the angle, no warning
+    other = np.r_[np.zeros(v.size), np.linspace(0, 2000, 300)]
+    assert rest_anomalies(vv, off, tt, 0.01, other) == []

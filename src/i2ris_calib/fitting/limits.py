@@ -52,8 +52,8 @@ REST_NEAR = 0.02
 """Moving samples within this share of the input span of a rest's input describe the
 loop there."""
 REST_OFF_FLOOR = 5.0
-"""A rest is off the loop when its mean angle lies more than the loop's half-width plus
-this many times the recording's floor from the loop's centre at its input."""
+"""A rest is off the loop when its mean angle lies outside the loop's angles at its
+input by more than this many times the recording's floor."""
 
 
 @dataclass(frozen=True)
@@ -404,7 +404,7 @@ def recording_limits(data, result, model: str | None, crossval: CrossValidation 
         else math.nan
     )
     lim = RecordingLimits(model, m, noise, rep, n_rep, line, phase_rmse, k, worst, crossval, ww)
-    odd = rest_anomalies(v, theta, t, lim.floor_deg)
+    odd = rest_anomalies(v, theta, t, lim.floor_deg, v_other)
     return RecordingLimits(**{**lim.__dict__, "anomalies": tuple(odd), "verdict": verdict(lim)})
 
 
@@ -414,42 +414,54 @@ def _runs(still: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
-def rest_anomalies(v: np.ndarray, theta: np.ndarray, t: np.ndarray, floor: float) -> list[str]:
-    """Warnings for rests whose angle is far from the loop's at the same input.
+def rest_anomalies(
+    v: np.ndarray, theta: np.ndarray, t: np.ndarray, floor: float,
+    v_other: np.ndarray | None = None,
+) -> list[str]:  # fmt: skip
+    """Warnings for rests whose angle lies outside the loop's angles at the same input.
 
     A rest is a run of at least :data:`REST_MIN_S` s (and 5 samples) with the input
-    still; the loop at its input is described by the moving samples within
-    :data:`REST_NEAR` of the span: its centre (the mean of the rising and the falling
-    branch's mean angle) and half-width. A rest whose mean measured angle lies more
-    than the half-width plus :data:`REST_OFF_FLOOR` x ``floor`` (the recording's noise
-    or repeatability, deg) from the centre is named with its numbers."""
+    still inside its range (not at either end, where the operators clamp and no loop
+    passes), and the other motor still too when there is one (its motion moves the
+    angle through coupling: that is not a rest). The loop at the rest's input is the range of
+    the measured angles of the moving samples within :data:`REST_NEAR` of the span, on
+    both branches (rising and falling). A rest whose mean measured angle lies outside
+    that range by more than :data:`REST_OFF_FLOOR` x ``floor`` (the recording's noise or
+    repeatability, deg) is named with its numbers."""
     v, theta, t = (np.asarray(x, dtype=float) for x in (v, theta, t))
     if v.size < 10 or not math.isfinite(floor):
         return []
     span = float(np.ptp(v)) or 1.0
     dv = np.r_[0.0, np.diff(v)]
     still = np.abs(dv) <= 1e-9 * span
+    if v_other is not None:
+        vo = np.asarray(v_other, dtype=float)
+        span_o = float(np.ptp(vo[np.isfinite(vo)])) if np.isfinite(vo).any() else 0.0
+        still &= np.abs(np.r_[0.0, np.diff(vo)]) <= 1e-9 * max(span_o, 1.0)
     out = []
     for a, b in _runs(still):
         a = max(a - 1, 0)  # the sample the input stopped at
         if b - a < 5 or t[b - 1] - t[a] < REST_MIN_S:
             continue
         level = float(np.median(v[a:b]))
+        if not (v.min() + REST_NEAR * span < level < v.max() - REST_NEAR * span):
+            continue  # at an end of the input range the operators clamp: no loop to compare
         at_rest = theta[a:b][np.isfinite(theta[a:b])]
         near = ~still & np.isfinite(theta) & (np.abs(v - level) <= REST_NEAR * span)
+        near[a:b] = False  # the rest's own samples (the one it stopped at included)
         rising, falling = near & (dv > 0), near & (dv < 0)
         if at_rest.size < 3 or not rising.any() or not falling.any():
             continue
-        up, down = float(theta[rising].mean()), float(theta[falling].mean())
-        centre, half = 0.5 * (up + down), 0.5 * abs(up - down)
-        off = abs(float(at_rest.mean()) - centre)
-        if off > half + REST_OFF_FLOOR * floor:
+        lo, hi = float(theta[near].min()), float(theta[near].max())
+        mean = float(at_rest.mean())
+        off = max(lo - mean, mean - hi, 0.0)
+        if off > REST_OFF_FLOOR * floor:
             out.append(
                 f"a rest of {t[b - 1] - t[a]:.3g} s at input {level:.4g} (t = {t[a]:.4g}-"
-                f"{t[b - 1]:.4g} s) sits at {at_rest.mean():.3g} deg, {off:.2g} deg from the "
-                f"loop's centre there ({centre:.3g} deg, half-width {half:.2g} deg): not on "
-                "the loop (drift, a slipped marker or another experiment?); if it is not part "
-                "of the experiment, leave it out (a status column) and refit"
+                f"{t[b - 1]:.4g} s) sits at {mean:.3g} deg, {off:.2g} deg outside the loop's "
+                f"angles there ({lo:.3g} to {hi:.3g} deg): not on the loop (drift, a "
+                "slipped marker or another experiment?); if it is not part of the "
+                "experiment, leave it out (a status column) and refit"
             )
     return out
 

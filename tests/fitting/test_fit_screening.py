@@ -142,34 +142,35 @@ def test_level_output_is_evaluate_to_the_last_bit():
     m = _coupled()
     s = F._frozen_inputs(_signals(phase=1.0))
     fl = F._FromLevel(m, s.v)
-    full = np.append(m.values, [0.0, 0.0])
+    full = np.append(m.values, [0.0, 0.0, 0.0])
     output = fl.level_output(s, full)
     for u in (float(s.v.min()), -700.0, 0.0, 1234.5, float(s.v.max())):
         trial = full.copy()
         trial[-1] = u
         np.testing.assert_array_equal(output(u), fl.evaluate(s, trial))
-    # the earlier turning point, and a replayed opening cycle (the other motor moving)
+    # the earlier turning points, and a replayed opening cycle (the other motor moving)
     for cycle in (0, 40):
         fc = F._FromLevel(m, s.v, cycle)
-        turn = fc.level_output(s, full, len(full) - 2)
-        for u in (float(s.v.min()), 0.0, 1234.5):
-            trial = full.copy()
-            trial[-2] = u
-            np.testing.assert_array_equal(turn(u), fc.evaluate(s, trial))
-    # the other motor's own pre-history (four levels): the own levels' shortcut is
+        for idx in (len(full) - 2, len(full) - 3):
+            turn = fc.level_output(s, full, idx)
+            for u in (float(s.v.min()), 0.0, 1234.5):
+                trial = full.copy()
+                trial[idx] = u
+                np.testing.assert_array_equal(turn(u), fc.evaluate(s, trial))
+    # the other motor's own pre-history (five levels): the own levels' shortcut is
     # still the whole model bit for bit; the other motor's levels have none
     f4 = F._FromLevel(m, s.v, 30, s.v_other)
-    assert f4.levels == 4
-    full4 = np.append(m.values, [900.0, -800.0, 0.0, 0.0])
-    for idx in (len(full4) - 1, len(full4) - 2):
+    assert f4.levels == 5 and f4.n_other == 2
+    full4 = np.append(m.values, [900.0, -800.0, 300.0, 0.0, 0.0])
+    for idx in (len(full4) - 1, len(full4) - 2, len(full4) - 3):
         out4 = f4.level_output(s, full4, idx)
         for u in (float(s.v.min()), 0.0, 1234.5):
             trial = full4.copy()
             trial[idx] = u
             np.testing.assert_array_equal(out4(u), f4.evaluate(s, trial))
-    assert f4.level_output(s, full4, len(full4) - 3) is None
+    assert f4.level_output(s, full4, len(full4) - 4) is None
     agpi = F._FromLevel(two_tendon_gpi_model(), s.v)
-    assert agpi.level_output(s, np.append(two_tendon_gpi_model().values, [0.0, 0.0])) is None
+    assert agpi.level_output(s, np.append(two_tendon_gpi_model().values, [0.0] * 3)) is None
     assert fl.level_output(Signals(v=s.v), full) is None
 
 
@@ -181,7 +182,7 @@ def test_level_profile_costs_are_the_plain_costs():
     fl = F._FromLevel(m, s.v)
     search = _search(fl, s, theta)
     c = search.counter
-    full = np.append(m.values, [100.0, 100.0])
+    full = np.append(m.values, [100.0, 100.0, 100.0])
     held = c.held_cost(full, len(full) - 1)
     for u in np.linspace(search.lower[-1], search.upper[-1], 7):
         trial = full.copy()

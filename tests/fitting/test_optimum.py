@@ -73,3 +73,24 @@ def test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol):
         f"{r['truth_cost']:.6g} (ratio {r['ratio']:.5g}){extra}; reproduce: "
         f"python benchmarks/bench_optimum.py --case {kind}:{seed}"
     )
+
+
+#: Mid-loop starts after loops of varying amplitude (issue 31): the operators' state at
+#: the first sample is a staircase of three turning points (a loop, a smaller one inside
+#: it), beyond the two-level pre-history, or one the level profiles alone stopped short
+#: of. Each failed before the third level and the end-of-search level sweeps (fit /
+#: truth cost 1.027, 1.63, 1.11, 1.098, 1.196; misses of the 40-case run).
+STAIRCASE_CASES = [
+    ("agpi", 16, "circles_mid"),  # 5 Hz, n=564
+    ("maxwell_slip", 4, "circles_mid"),  # 500 Hz, n=6045
+    ("agpi_coupled", 19, "circles_mid"),  # 5 Hz, n=379
+    ("agpi_coupled", 23, "circles_mid"),  # 5 Hz, n=1280
+    ("agpi_coupled", 33, "circles_mid"),  # 5 Hz, n=819: the other motor's shift
+]
+
+
+@pytest.mark.parametrize(
+    "kind, seed, protocol", STAIRCASE_CASES, ids=[f"{k}:{s}" for k, s, _ in STAIRCASE_CASES]
+)
+def test_staircase_start_state_reaches_the_truths_cost(kind, seed, protocol):
+    test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)

@@ -208,15 +208,20 @@ def search_data(
 
 
 def _after_prehistory(d: SearchData, st: InitialState) -> SearchData:
-    """``d`` with the fit's pre-history ``st`` (the ramps from ``v_turn`` via ``v_from``,
-    the other motor's first when estimated, the replayed first cycle) prepended
-    (nothing counted there)."""
+    """``d`` with the fit's pre-history ``st`` (the ramps from ``v_turn2`` via ``v_turn``
+    and ``v_from``, the other motor's first when estimated, the replayed first cycle)
+    prepended (nothing counted there)."""
     other = None
     if st.other_v_from is not None:
         o_turn = st.other_v_from if st.other_v_turn is None else st.other_v_turn
         other = (o_turn, st.other_v_from)
     sig, n_pre = prehistory_signals(
-        d.signals, st.v_from, cycle=st.cycle_samples, v_turn=st.v_turn, other_levels=other
+        d.signals,
+        st.v_from,
+        cycle=st.cycle_samples,
+        v_turn=st.v_turn,
+        other_levels=other,
+        v_turn2=getattr(st, "v_turn2", None),
     )
 
     def pad(a: np.ndarray, value) -> np.ndarray:

@@ -44,6 +44,7 @@ from i2ris_calib.fitting import results
 from i2ris_calib.fitting.lm import least_squares_lm
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
 from i2ris_calib.fitting.results import ParamTable
+from i2ris_calib.hysteresis.kernel import ordered_sum
 from i2ris_calib.hysteresis.model import Model, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
 
@@ -1221,7 +1222,7 @@ class _Counter:
             z = 2.0 * (np.sqrt(1.0 + z) - 1.0)
         elif self.loss == "huber":
             z = np.where(z <= 1.0, z, 2.0 * np.sqrt(z) - 1.0)
-        return float(np.sum(z) * self.f_scale**2)
+        return float(ordered_sum(np.ascontiguousarray(z, dtype=float)) * self.f_scale**2)
 
     def residuals(self, full: np.ndarray) -> np.ndarray:
         self.n += 1

@@ -458,3 +458,16 @@ def run_index(v):  # pragma: no cover - compiled
             vals[r] = v[k]
         idx[k] = r
     return vals[: r + 1].copy(), idx
+
+
+@njit(cache=True)
+def ordered_sum(a):  # pragma: no cover - compiled
+    """Sum of ``a`` (float (n,)) in index order, one addition after another: the same
+    bits wherever the array sits in memory (numpy's ``sum`` takes SIMD steps whose
+    split depends on the array's alignment, so two copies of one array can sum to
+    values a few ulps apart, and a fit's search, which compares costs, then depended on
+    the process's history)."""
+    s = 0.0
+    for k in range(a.size):
+        s += a[k]
+    return s

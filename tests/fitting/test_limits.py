@@ -89,7 +89,7 @@ def test_verdict_words_match_the_numbers():
     at = verdict(RecordingLimits(model_rmse_deg=0.025, **base))
     assert "at the limit of this recording" in at and "1.2x its floor" in at
     off = verdict(RecordingLimits(model_rmse_deg=0.2, **base))
-    assert "leaves about 0.2 deg beyond" in off and "10.0x its floor" in off
+    assert "leaves about 0.2 deg beyond" in off and "10x its floor" in off
     one = RecordingLimits(model_rmse_deg=0.19, worst_sample={"time_s": 20.0, "error_deg": -1.93},
                           without_worst_deg=0.0077, **base)  # fmt: skip
     assert "one sample carries much of it (t = 20 s, -1.9 deg" in verdict(one)

@@ -38,7 +38,10 @@ def _file_and_axis(kind: str) -> tuple[str, str]:
     return ("through_zero.csv" if kind_info(kind).signed else "paper.csv"), "yaw"
 
 
-@pytest.mark.parametrize("kind", BUILT_KINDS)
+@pytest.mark.parametrize(
+    "kind",
+    [pytest.param(k, marks=pytest.mark.slow) if kind_info(k).coupled else k for k in BUILT_KINDS],
+)  # the coupled kind (~25 s): in the slow run
 def test_api_and_cli_fit_the_same_parameters(files, kind, tmp_path):
     name, axis = _file_and_axis(kind)
     out = tmp_path / "fit"

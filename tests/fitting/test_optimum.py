@@ -80,17 +80,23 @@ def test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol):
 #: it), beyond the two-level pre-history, or one the level profiles alone stopped short
 #: of. Each failed before the third level and the end-of-search level sweeps (fit /
 #: truth cost 1.027, 1.63, 1.11, 1.098, 1.196; misses of the 40-case run).
+_SLOW = pytest.mark.slow  # the coupled cases: ~8 s each; run with -m slow
 STAIRCASE_CASES = [
     ("agpi", 16, "circles_mid"),  # 5 Hz, n=564
     ("maxwell_slip", 4, "circles_mid"),  # 500 Hz, n=6045
     ("agpi_coupled", 19, "circles_mid"),  # 5 Hz, n=379
-    ("agpi_coupled", 23, "circles_mid"),  # 5 Hz, n=1280
-    ("agpi_coupled", 33, "circles_mid"),  # 5 Hz, n=819: the other motor's shift
+    pytest.param("agpi_coupled", 23, "circles_mid", marks=_SLOW),  # 5 Hz, n=1280
+    pytest.param("agpi_coupled", 33, "circles_mid", marks=_SLOW),  # 5 Hz, n=819: other motor
 ]
 
 
 @pytest.mark.parametrize(
-    "kind, seed, protocol", STAIRCASE_CASES, ids=[f"{k}:{s}" for k, s, _ in STAIRCASE_CASES]
+    "kind, seed, protocol",
+    STAIRCASE_CASES,
+    ids=[
+        f"{c[0]}:{c[1]}" if isinstance(c, tuple) else f"{c.values[0]}:{c.values[1]}"
+        for c in STAIRCASE_CASES
+    ],  # fmt: skip
 )
 def test_staircase_start_state_reaches_the_truths_cost(kind, seed, protocol):
     test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)

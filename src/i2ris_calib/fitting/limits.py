@@ -111,7 +111,7 @@ class RecordingLimits:
         Cycle-to-cycle spread at the same input (deg), :func:`repeatability`; NaN when
         no two cycles cover the same input range.
     n_cycles_compared : int
-        Cycles the repeatability compares.
+        Cycles the repeatability compares (-1: not compared, the other motor moves).
     line_rmse_deg : float
         Held-out RMSE of a straight line on the inputs (deg).
     phase_rmse_deg : float
@@ -340,17 +340,23 @@ def verdict(lim: RecordingLimits) -> str:
     if math.isfinite(lim.repeatability_deg):
         parts.append(f"cycle-to-cycle repeatability {lim.repeatability_deg:.2g} deg")
     else:
-        parts.append("repeatability not measurable (no two cycles over the same input range)")
+        parts.append(
+            "repeatability not measurable ("
+            + ("the other motor moves: cycles at one input differ by coupling"
+               if lim.n_cycles_compared < 0
+               else "no two cycles over the same input range")
+            + ")"
+        )  # fmt: skip
     base = f"held-out {m:.2g} deg against {', '.join(parts)}"
     if not math.isfinite(floor) or floor <= 0:
         text = f"{lim.model}: {base}"
     elif m <= AT_LIMIT_RATIO * floor:
-        text = f"{lim.model} is at the limit of this recording ({base}; {m / floor:.1f}x its floor)"
+        text = f"{lim.model} is at the limit of this recording ({base}; {m / floor:.2g}x its floor)"
     else:
         left = math.sqrt(max(m**2 - floor**2, 0.0))
         text = (
             f"{lim.model} leaves about {left:.2g} deg beyond this recording's limits ({base}; "
-            f"{m / floor:.1f}x its floor): a missing effect, or a better model, can still gain"
+            f"{m / floor:.2g}x its floor): a missing effect, or a better model, can still gain"
         )
     w = lim.worst_sample
     if w and math.isfinite(lim.without_worst_deg) and lim.without_worst_deg < 0.7 * m:
@@ -384,6 +390,10 @@ def recording_limits(data, result, model: str | None, crossval: CrossValidation 
     fit = ~np.asarray(data.holdout, bool) & np.isfinite(theta)
     noise = noise_sd(result.residuals) if result is not None else math.nan
     rep, n_rep = repeatability(v, theta, cyc)
+    vo = data.signals.v_other
+    other_moves = vo is not None and bool(np.ptp(np.asarray(vo, dtype=float)[np.isfinite(vo)]) > 0)
+    if other_moves:  # cycles at one input differ by the other motor's motion, not by chance
+        rep, n_rep = math.nan, -1
     v_other = data.signals.v_other
     line = line_baseline(v, theta, fit, hold, v_other)
     t = np.asarray(data.time_s, dtype=float)
@@ -512,25 +522,27 @@ def dataset_limits(data, results: dict, decision, config) -> RecordingLimits:
     """:func:`recording_limits` of one dataset judged with its recommended model
     (``decision``: :class:`~i2ris_calib.fitting.decision.Decision`; its fallback when
     none is recommended), cross-validated on a short recording (:func:`cross_validated`:
-    each fold refitted by :func:`~i2ris_calib.fitting.pipeline.fit_kind` from the full
-    fit, a local search). ``results``: kind -> FitResult; ``config``: the FitConfig."""
+    each fold refitted from the full fit's values by a local search: one start, no
+    restarts, the kind's method). ``results``: kind -> FitResult;
+    ``config``: the FitConfig."""
     from dataclasses import replace
 
     from i2ris_calib.data.cycles import cycle_index
-    from i2ris_calib.fitting.pipeline import fit_kind
+    from i2ris_calib.fitting.pipeline import _fit_configured
     from i2ris_calib.hysteresis.registry import BUILT_KINDS
 
     kind = decision.model if decision.model is not None else decision.fallback
     result = results.get(kind) if kind is not None else None
     cyc = cycle_index(np.asarray(data.v, dtype=float))
     cv = None
-    if result is not None and kind in BUILT_KINDS:
-        local = replace(config, n_starts=1, n_starts_gpi=1, max_restarts=0)
-        db = data.bands.deadband if config.deadband_counts < 0 else float(config.deadband_counts)
+    if result is not None:
+        local = replace(config, max_restarts=0)
+        x0 = np.array([p.value for p in result.model.parameters], dtype=float)
 
         def refit(hold: np.ndarray):
-            return fit_kind(kind, data.signals, data.theta_deg, local, hold, deadband=db,
-                            related=(result,))  # fmt: skip
+            # a local search from the full fit (its basin), the kind's method
+            return _fit_configured(result.model, data.signals, data.theta_deg, hold, [x0],
+                                   local, kind if kind in BUILT_KINDS else None)  # fmt: skip
 
         cv = cross_validated(kind, data, refit, cyc)
     return recording_limits(data, result, kind if result is not None else None, cv, cyc)

@@ -19,6 +19,33 @@ sys.path.insert(0, str(Path(__file__).parents[2] / "benchmarks"))
 
 import bench_optimum  # noqa: E402
 
+#: Kinds whose case runs in a fresh process, as ``i2ris-calib fit`` does: the coupled
+#: model's search is sensitive to the last bits of its costs, which in one long-lived
+#: process depend on what ran before it (issue 31, "results depend on process
+#: history": agpi_coupled:2 ended at 1348x its truth's cost once inside the whole suite,
+#: and at 1.0x alone). A fresh process tests what a user runs.
+FRESH_PROCESS_KINDS = ("agpi_coupled",)
+
+
+def run_case(kind: str, seed: int) -> dict:
+    """:func:`bench_optimum.run_case`, in a fresh process for :data:`FRESH_PROCESS_KINDS`."""
+    if kind not in FRESH_PROCESS_KINDS:
+        return bench_optimum.run_case(kind, seed)
+    import json
+    import subprocess
+
+    code = (
+        "import json, sys; sys.path.insert(0, sys.argv[1]); import bench_optimum; "
+        "r = bench_optimum.run_case(sys.argv[2], int(sys.argv[3])); "
+        "print(json.dumps({k: (v if isinstance(v, (str, int, float, bool, type(None))) "
+        "else str(v)) for k, v in r.items()}))"
+    )
+    bench = str(Path(__file__).parents[2] / "benchmarks")
+    out = subprocess.run([sys.executable, "-c", code, bench, kind, str(seed)],
+                         capture_output=True, text=True, check=True)  # fmt: skip
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 #: (kind, seed, protocol the seed draws)
 CASES = [
     ("gpi", 8, "paper"),
@@ -54,7 +81,7 @@ def test_subset_covers_every_kind_and_protocol():
 
 @pytest.mark.parametrize("kind, seed, protocol", CASES, ids=[f"{k}:{s}" for k, s, _ in CASES])
 def test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol):
-    r = bench_optimum.run_case(kind, seed)
+    r = run_case(kind, seed)
     assert r["protocol"] == protocol, "the benchmark's draws changed: pick the seeds again"
     assert not r["error"], f"{kind}:{seed}: the fit raised {r['error']}"
     assert r["chisqr_mismatch"] < 1e-9, "FitResult.chisqr is not the cost of its predict()"

@@ -64,7 +64,7 @@ SLIP_THRESHOLDS = 15
 
 
 @dataclass(frozen=True)
-class ModelKind:
+class ModelKind(KindName):
     """One model kind and what every stage needs to know about it.
 
     Attributes
@@ -75,6 +75,9 @@ class ModelKind:
         Row label in the terminal's results table.
     report_name : str
         Row label in the report's tables.
+    model : str
+        Where its class lives, ``"module:Class"`` under ``i2ris_calib.hysteresis``
+        (the names table, :mod:`~i2ris_calib.hysteresis.kinds`; "" when not built).
     factory : callable or None
         ``factory(n=..., deadband_counts=...)`` -> an unfitted model with default
         values (``deadband_counts`` only when ``uses_deadband``); None for
@@ -127,33 +130,18 @@ class ModelKind:
         compensate says where a stepping output misses the target.
     """
 
-    kind: str
-    label: str
-    report_name: str
-    factory: Callable[..., ParametricModel] | None
-    model_class: type | None
+    factory: Callable[..., ParametricModel] | None = None
+    model_class: type | None = None
     start: Callable | None = None
     fixed: Callable[[object], tuple[str, ...]] = lambda config: ()
-    n_starts: str = "n_starts"
-    nested: str | None = None
-    inverse: str | None = None
-    signed: bool = False
-    paper: bool = False
-    diagnosis_start: bool = False
-    on_signed: bool = False
-    uses_deadband: bool = False
-    coupled: bool = False
-    with_coupling: bool = True
-    method: str | None = None
     n_operators: int | None = None
-    output_steps: bool = False
 
 
 def _row(kind: str, factory, model_class, **behaviour) -> ModelKind:
     """The registry row of ``kind``: its name, labels and flags from the names table
     (:mod:`~i2ris_calib.hysteresis.kinds`), joined to its factory, class and recipes."""
     name = BY_NAME[kind]
-    flags = {f.name: getattr(name, f.name) for f in fields(KindName) if f.name != "model"}
+    flags = {f.name: getattr(name, f.name) for f in fields(KindName)}
     if model_class is not None and f"{model_class.__module__}:{model_class.__name__}" != (
         f"i2ris_calib.hysteresis.{name.model}"
     ):

@@ -1635,7 +1635,8 @@ def _fit_model(
             out = other
     if not level:
         return out.result
-    return _without_level(out.result, model, v, out.full, out.cycle, s.v_other, own_levels(v))
+    return _without_level(out.result, model, v, out.full, out.cycle, s.v_other,
+                          own_levels(v, basin_hops != 0))  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -1651,14 +1652,17 @@ class _Searched:
     cycle: int
 
 
-def own_levels(v: np.ndarray) -> int:
+def own_levels(v: np.ndarray, global_search: bool = True) -> int:
     """Own levels of the fitted pre-history (:class:`InitialState`): three (``v_turn2``,
     ``v_turn``, ``v_from``) up to :data:`LARGE_ROWS` samples, two (no ``v_turn2``)
     beyond: a long recording's start state weighs little against its many loops, and
     the third level's profiles and Jacobian column cost time (measured on
     bench_speed's 50,000-sample coupled recording: the coupled two-tendon GPI 3.8 -> 4.8 s
-    CPU, its diagnose 10.8 -> 19.3 s)."""
-    return 3 if np.asarray(v).size <= LARGE_ROWS else 2
+    CPU, its diagnose 10.8 -> 19.3 s). Two for a local search (``global_search``
+    False: ``basin_hops = 0``, e.g. sync's clock-offset profile): the third level makes
+    the cost a rougher function of the other settings (measured on the rendered lab
+    session: sync's offset profile lost its curvature, and its model refinement)."""
+    return 3 if global_search and np.asarray(v).size <= LARGE_ROWS else 2
 
 
 #: A recording of more samples than this tries one start state (with or without its
@@ -1679,7 +1683,9 @@ def _searched(
     v = np.asarray(s.v, dtype=float)
     loss, method = opts["loss"], opts["method"]
     max_nfev, basin_hops = opts["max_nfev"], opts["basin_hops"]
-    fitted_model: Model = _FromLevel(model, v, cycle, s.v_other, own_levels(v)) if level else model
+    fitted_model: Model = (
+        _FromLevel(model, v, cycle, s.v_other, own_levels(v, basin_hops != 0)) if level else model
+    )
     search = _Search.of(
         fitted_model, s, theta, used, loss, opts["f_scale_deg"], method, opts["ftol"],
         opts["screen_nfev"],

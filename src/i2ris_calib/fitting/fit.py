@@ -1959,16 +1959,7 @@ def _other_branch_level(search: _Search, full: np.ndarray) -> np.ndarray:
     :data:`INITIAL_STATE_GRID` levels on the other side of the first input (the other
     branch: above it a falling branch, at or below it the loading one), the other
     parameters held; ``full`` itself when that side is empty."""
-    uidx, v0 = search.uidx, float(search.v[0])
-    lo, hi = search.lower[uidx], search.upper[uidx]
-    a, b = (lo, v0) if full[uidx] > v0 else (v0 + 1e-9 * max(abs(v0), 1.0), hi)
-    if not a < b:
-        return full
-    grid = np.linspace(a, b, INITIAL_STATE_GRID)
-    cost = search.counter.held_cost(full, uidx)
-    out = full.copy()
-    out[uidx] = grid[int(np.argmin([cost(u) for u in grid]))]
-    return out
+    return _branch_level(search, full, search.uidx, float(search.v[0]))
 
 
 def _plain_fit_end(model, s, theta, opts, starts, search: _Search) -> np.ndarray:

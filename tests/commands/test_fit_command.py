@@ -358,3 +358,15 @@ def test_table_title_names_the_models_fitted(tmp_path, capsys, monkeypatch):
     title = " ".join(out.out.split("yaw motor:")[0].split())
     assert title.endswith("two-tendon GPI,") and "EGPI" not in title, title
     assert "max |error|" in out.out and "MAE" not in out.out
+
+
+def test_messages_print_brackets_verbatim(tmp_path, capsys):
+    """The terminal's lines are plain text: "[fit] max_nfev" in a hint is printed as
+    written (rich markup once ate "[fit]", leaving "--config  max_nfev")."""
+    synced_frame(directions=("yaw+",), n=300).to_csv(tmp_path / "s.csv", index=False)
+    cfg = _cfg(tmp_path, "max_nfev = 10\nmax_restarts = 0")
+    code = main(["fit", str(tmp_path / "s.csv"), "--axis", "yaw", "--model", "gpi",
+                 "--out", str(tmp_path / "o"), "--config", str(cfg)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "try more starts or --config [fit] max_nfev" in err

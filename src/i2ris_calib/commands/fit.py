@@ -180,7 +180,8 @@ def _fit_into(paths, axis: str, model: str, out: Path, config, saved, inputs: li
     fit_config = config.fit
     datasets, choice = datasets_for_fit(paths, axis, fit_config, model, config.columns)
     kinds = (*choice.kinds, *([DIAGNOSED] if saved is not None else []))
-    console = Console(stderr=True)
+    # plain text: a message's "[fit] n_starts" or a file label "[a.csv]" is not markup
+    console = Console(stderr=True, markup=False, highlight=False, soft_wrap=True)
     with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
         task = bar.add_task("fitting", total=len(datasets) * len(kinds))
 

@@ -117,8 +117,10 @@ def main(argv: list[str] | None = None) -> int:
               f"{held:.4f} deg = {ratio:.2f}x the floor{flag}")  # fmt: skip
     err, method = clock_error_s(session, run_dir)
     ok &= err <= CLOCK_TARGET_S
-    print(f"  clock worst error {err * 1e3:.3f} ms (method {method})"
-          f"{'  ok' if err <= CLOCK_TARGET_S else '  MISSED'} (target 0.5 ms)")
+    print(
+        f"  clock worst error {err * 1e3:.3f} ms (method {method})"
+        f"{'  ok' if err <= CLOCK_TARGET_S else '  MISSED'} (target 0.5 ms)"
+    )
     return 0 if ok else 1
 
 

@@ -9,11 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
-from i2ris_calib.fitting import fit as fit_module
 from i2ris_calib.fitting.lm import ScaledSystem, _norm, least_squares_lm, lm_parameter
-from i2ris_calib.fitting.pipeline import fit_kind
-from i2ris_calib.hysteresis.models import gpi_model
-from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
 
 
 def _tanh_problem(seed, m=3000, n=6):
@@ -144,26 +140,6 @@ def test_lm_parameter_meets_the_trust_radius(seed, n, delta_scale):
         rtol=1e-6,
         atol=1e-8 * np.abs(j.T @ f).max(),
     )
-
-
-def test_fit_ends_the_same_with_either_lm(monkeypatch):
-    """A GPI fit (data-driven starts, screening) on GPI data with paper-like
-    parameters, the normal-equations LM forced on (threshold 0) and off (inf): the same
-    fitted cost and parameters."""
-    rng = np.random.default_rng(5)
-    truth = paper_like_params("pitch+")
-    _, v = loading_trajectory(rng, n_cycles=4, n_samples=1500)
-    theta = gpi_model().evaluate_dict(v, {k: truth[k] for k in GPI_NAMES})
-    theta = theta + rng.normal(0.0, 0.05, v.size)
-    ends = {}
-    for name, threshold in (("minpack", np.inf), ("normal", 0.0)):
-        monkeypatch.setattr(fit_module, "NORMAL_EQUATIONS_MIN_FLOPS", threshold)
-        ends[name] = fit_kind("gpi", v, theta)
-    a, b = ends["minpack"], ends["normal"]
-    assert a.converged and b.converged
-    assert b.chisqr == pytest.approx(a.chisqr, rel=1e-6)
-    for pa, pb in zip(a.model.parameters, b.model.parameters, strict=True):
-        assert pb.value == pytest.approx(pa.value, rel=1e-3, abs=1e-4), pa.name
 
 
 def test_qr_system_is_the_normal_system_when_well_conditioned():

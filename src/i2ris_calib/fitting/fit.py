@@ -1,8 +1,9 @@
 """Levenberg-Marquardt fitting of hysteresis models (Eq24), robust to poor starts.
 
 :func:`fit_model` minimises ``L = sum_k (y[k] - theta[k])^2`` over the free
-parameters with scipy's ``least_squares`` (``method="lm"``: MINPACK
-Levenberg-Marquardt, unbounded, as the paper; ``"trf"``: bounded trust region),
+parameters by Levenberg-Marquardt (``method="lm"``: Moré's algorithm as MINPACK's
+``lmder``, :func:`~i2ris_calib.fitting.lm.least_squares_lm`, unbounded, as the paper;
+``"trf"``: scipy's bounded trust region),
 from several data-driven starts (:mod:`.initial`), keeping the best. A free flag
 point ``v_f`` is fitted by a profile search (the output is piecewise constant in
 v_f, so finite-difference derivatives are useless): a grid over v_f with the other
@@ -1308,20 +1309,27 @@ def _validate(signals: Signals, theta: np.ndarray, n_free: int, used: np.ndarray
         )
 
 
-#: LM problems of at least this many m n^2 (fitted rows x free parameters squared) solve
-#: each step from the normal equations (:func:`~i2ris_calib.fitting.lm.least_squares_lm`,
-#: the same algorithm as MINPACK's ``lmder``) instead of MINPACK's QR of the Jacobian
-#: (2 m n^2 flops, unblocked). Measured on a 50,000-sample coupled recording (37,500 x 25):
-#: MINPACK's own work ~10 ms per iteration, the normal equations ~1.5 ms. Below it (every
-#: recording of up to ~25,000 samples with the 10-parameter EGPI, ~4,000 with the coupled
-#: one) the QR costs under ~1 ms an iteration and MINPACK is kept, bit for bit.
-NORMAL_EQUATIONS_MIN_FLOPS = 2e6
+#: Relative step of the forward differences of a model without an exact Jacobian
+#: (scipy's ``2-point`` rule: sqrt(eps) x max(1, |x|)).
+FD_REL_STEP = float(np.sqrt(np.finfo(float).eps))
 
 
-def _normal_equations_pay(counter, free) -> bool:
-    """Whether an LM run over ``free`` on ``counter``'s fitted rows is tall enough for
-    :data:`NORMAL_EQUATIONS_MIN_FLOPS`."""
-    return counter.used_idx.size * len(free) ** 2 >= NORMAL_EQUATIONS_MIN_FLOPS
+def _forward_jacobian(fun):
+    """``jac(x)``: forward differences of ``fun`` at ``x``, shape (m, n) (scipy's
+    ``2-point`` steps, :data:`FD_REL_STEP`; ``n + 1`` evaluations)."""
+
+    def jac(x):
+        x = np.asarray(x, dtype=float)
+        f0 = fun(x)
+        out = np.empty((f0.size, x.size))
+        for j in range(x.size):
+            h = FD_REL_STEP * max(1.0, abs(x[j])) * (1.0 if x[j] >= 0 else -1.0)
+            xj = x.copy()
+            xj[j] += h
+            out[:, j] = (fun(xj) - f0) / (xj[j] - x[j])
+        return out
+
+    return jac
 
 
 def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
@@ -1355,12 +1363,12 @@ def _lsq(counter, x0_full, free, lower, upper, method, max_nfev, ftol):
             loss=counter.loss,
             f_scale=counter.f_scale,
         )
-    elif method == "lm" and callable(jac) and _normal_equations_pay(counter, free):
-        res = least_squares_lm(fun, jac, x0, max_nfev=max_nfev, ftol=ftol)
     elif method == "lm":
-        res = least_squares(
-            fun, x0, jac=jac, method="lm", x_scale="jac", max_nfev=max_nfev, ftol=ftol
-        )
+        # every LM run is the project's own (fitting/lm.py), never scipy's MINPACK:
+        # scipy's lmder took different steps from the same residuals and Jacobian in
+        # different processes (tests/fitting/test_determinism.py)
+        jac = jac if callable(jac) else _forward_jacobian(fun)
+        res = least_squares_lm(fun, jac, x0, max_nfev=max_nfev, ftol=ftol)
     else:
         raise CalibError(f"fit: unknown method '{method}'; use 'lm' or 'trf'")
     full = x0_full.copy()

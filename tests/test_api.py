@@ -202,12 +202,10 @@ def test_dir_lists_the_public_names():
         [sys.executable, "-c", "import i2ris_calib; print(' '.join(dir(i2ris_calib)))"],
         capture_output=True, text=True, check=True,
     ).stdout.split()  # fmt: skip
-    assert set(i2ris_calib.__all__) <= set(out)
-    assert set(i2ris_calib.__all__) <= set(dir(i2ris_calib))
-    # nothing public beside the API (the face's own imports are private aliases)
-    assert {n for n in out if not n.startswith("_")} == {
-        n for n in i2ris_calib.__all__ if not n.startswith("_")
-    }
+    # exactly the stub's names: no private helper of the face (its _API, _load, ...)
+    _, _, stub_all, _ = _stub_names()
+    assert out == sorted(stub_all) == dir(i2ris_calib)
+    assert "_API" not in out and "__version__" in out
 
 
 def test_public_signatures_are_the_real_ones():

@@ -321,7 +321,10 @@ class _Exploding(NamedParameters):
     """A model whose evaluation fails: a display must not evaluate it."""
 
     name: str = "boom"
-    parameters: tuple[Parameter, ...] = (Parameter("a", 1.0), Parameter("b", 2.0, fixed=True))
+    parameters: tuple[Parameter, ...] = (
+        Parameter("a", value=1.0),
+        Parameter("b", value=2.0, fixed=True),
+    )
 
     def evaluate(self, signals, values):
         raise AssertionError("a display evaluated the model")

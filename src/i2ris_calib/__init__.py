@@ -10,9 +10,10 @@ writes files; ``commands`` runs a stage per command (files in, stage, files out)
 
 The Python API (docs/api.md) is importable from here; names load on first use, so
 ``import i2ris_calib`` stays cheap (the CLI's ``--help`` does not load numba, scipy,
-OpenCV or matplotlib). ``dir(i2ris_calib)`` lists them, and ``__init__.pyi`` declares
-them with their real types for IDEs and type checkers (scikit-image's lazy-loader
-pattern; ``tests/test_api.py`` keeps the stub, ``_API`` and ``__all__`` in step)::
+OpenCV or matplotlib). ``__init__.pyi`` is the one list of them: it declares them with
+their real types for IDEs and type checkers, and this module reads its ``__all__`` and
+the module each name is imported from (scikit-image's lazy-loader pattern, its
+``attach_stub``); ``dir(i2ris_calib)`` lists exactly ``__all__``::
 
     from i2ris_calib import i2ris_egpi_model, fit, load_synced
     data = load_synced("synced.csv", "yaw")[0]      # the yaw+ dataset, whole history
@@ -29,51 +30,45 @@ try:
 except _PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0.0.0+unknown"
 
-#: public name -> module that defines it
-_API = {
-    "gpi_model": "i2ris_calib.hysteresis.models",
-    "i2ris_egpi_model": "i2ris_calib.hysteresis.models",
-    "continuous_egpi_model": "i2ris_calib.hysteresis.models",
-    "egpi_model": "i2ris_calib.hysteresis.models",
-    "model_for_kind": "i2ris_calib.hysteresis.registry",
-    "MODEL_KINDS": "i2ris_calib.hysteresis.registry",
-    "Parameter": "i2ris_calib.hysteresis.model",
-    "Signals": "i2ris_calib.hysteresis.model",
-    "Dataset": "i2ris_calib.data.dataset",
-    "make_dataset": "i2ris_calib.data.dataset",
-    "direction_datasets": "i2ris_calib.data.dataset",
-    "fit": "i2ris_calib.fitting.pipeline",
-    "fit_model": "i2ris_calib.fitting.fit",
-    "FitResult": "i2ris_calib.fitting.fit",
-    "FitNote": "i2ris_calib.fitting.fit",
-    "FitConfig": "i2ris_calib.fitting.config",
-    "diagnose": "i2ris_calib.diagnosis.workflow",
-    "diagnose_from_starts": "i2ris_calib.diagnosis.workflow",
-    "add_effect": "i2ris_calib.diagnosis.effects",
-    "CATALOGUE": "i2ris_calib.diagnosis.effects",
-    "compensate": "i2ris_calib.compensation",
-    "Compensator": "i2ris_calib.io.online",
-    "PipelineConfig": "i2ris_calib.config",
-    "RunConfig": "i2ris_calib.config",
-    "ColumnsConfig": "i2ris_calib.config",
-    "TrackingConfig": "i2ris_calib.tracking.config",
-    "SyncConfig": "i2ris_calib.sync.config",
-    "DiagnosisConfig": "i2ris_calib.diagnosis.config",
-    "CompensateConfig": "i2ris_calib.compensation.config",
-    "ReportConfig": "i2ris_calib.report.config",
-    "SimulationConfig": "i2ris_calib.simulation.config",
-    "CalibError": "i2ris_calib.errors",
-}
+
+def _stub_names() -> tuple[dict[str, str], list[str]]:
+    """The public names as ``__init__.pyi`` declares them.
+
+    Returns
+    -------
+    api : dict
+        Public name -> the module it is imported from (the stub's ``from module import
+        name as name`` lines).
+    names : list of str
+        The stub's ``__all__``: those names, ``__version__`` and the functions the stub
+        defines (:data:`_IO`, made here).
+    """
+    import ast
+    from pathlib import Path
+
+    tree = ast.parse(Path(__file__).with_suffix(".pyi").read_text(encoding="utf-8"))
+    api: dict[str, str] = {}
+    names: list[str] = []
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("i2ris_calib"):
+            api.update({a.name: node.module for a in node.names})
+        elif isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "__all__":
+            names = list(ast.literal_eval(node.value))
+    return api, names
+
+
+#: public name -> module that defines it, and the public names (both from the stub)
+_API, __all__ = _stub_names()
+#: public functions made here (wrappers with argument checks): name -> (module, function)
 _IO = {"load_synced": ("i2ris_calib.io.synced", "load_synced"),
        "load_config": ("i2ris_calib.io.config_io", "load_config")}  # fmt: skip
-
-__all__ = ["__version__", *_API, *_IO]
 
 _FRAME_HINT = "a DataFrame in memory: make_dataset(axis, direction, df['time_s'], ...)"
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+    """The public names (``__all__``): not the face's private helpers."""
+    return list(__all__)
 
 
 def __getattr__(name: str):

@@ -1,7 +1,9 @@
-# Types of the public API for IDEs, notebooks and type checkers. At run time the names
-# load lazily (``__getattr__`` in __init__.py); this stub declares them as if imported
-# (scikit-image's lazy-loader pattern). tests/test_api.py checks that it names exactly
-# ``__all__``, each from the module ``_API`` in __init__.py loads it from.
+# The one list of the public API, with its types for IDEs, notebooks and type checkers.
+# At run time the names load lazily (``__getattr__`` in __init__.py), from the module
+# this stub imports each from; __init__.py reads these imports and ``__all__`` from here
+# (scikit-image's lazy-loader pattern). A new public name is its import (or, for a
+# function made in __init__.py, its def) and its ``__all__`` entry; tests/test_api.py
+# checks that the two agree and that ``dir(i2ris_calib)`` is ``__all__``.
 
 import os
 from collections.abc import Sequence

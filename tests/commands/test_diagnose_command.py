@@ -463,3 +463,46 @@ def test_run_section_is_validated(tmp_path):
     typo.write_text("[run]\ndiagnoze = true\n")
     with pytest.raises(CalibError, match="did you mean 'diagnose'"):
         load_config(typo)
+
+
+@pytest.mark.parametrize("direction", ["auto", "+", "-", "±"])
+def test_the_synced_csv_is_read_and_validated_once(tmp_path, monkeypatch, direction):
+    """``diagnose`` reads its synced CSV once (it read it twice: fit's model choice
+    then the split) and builds the datasets from that one validated frame: the same
+    dataset as two reads gave."""
+    import i2ris_calib.io.synced as synced
+
+    t = np.arange(0, 50, 0.1)
+    enc = np.round(np.interp(t, [0, 10, 20, 30, 40, 50], [0, 3000, 0, -2000, 0, 0]))
+    csv = tmp_path / "s.csv"
+    pd.DataFrame({"time_s": t, "enc_yaw": enc, "yaw_deg": 0.01 * enc, "status": "measured"}).to_csv(
+        csv, index=False
+    )
+    config = FitConfig(split=direction == "auto")
+    reads, read = [], synced.read_synced
+    monkeypatch.setattr(synced, "read_synced", lambda *a, **k: reads.append(a) or read(*a, **k))
+    got = diagnosis_dataset(csv, "yaw", direction, config)
+    assert len(reads) == 1
+    if direction == "auto":  # the split forced: the larger direction, as fit's datasets
+        want = synced.datasets_for_fit([csv], "yaw", config)[0]
+        want = max(want, key=lambda d: d.rows["in_direction"])
+    else:
+        signed = direction == "±"
+        cfg = FitConfig(signed=True, split=False) if signed else config
+        (want,) = synced.load_datasets([csv], "yaw", cfg, (direction,))
+    assert got.name == want.name and got.rows == want.rows
+    np.testing.assert_array_equal(got.in_direction, want.in_direction)
+    np.testing.assert_array_equal(got.holdout, want.holdout)
+
+
+def test_the_diagnose_command_reads_its_csv_once(tmp_path, monkeypatch):
+
+    csv = tmp_path / "synced.csv"
+    _synced_csv(csv, n_cycles=6)
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text('[diagnose]\nmax_steps = 1\ncandidates = ["time_delay"]\n')
+    reads, read = [], pd.read_csv
+    monkeypatch.setattr(pd, "read_csv", lambda *a, **k: reads.append(a) or read(*a, **k))
+    rc = main(["diagnose", str(csv), "--axis", "yaw", "--start", "gpi", "--out",
+               str(tmp_path / "out"), "--config", str(cfg)])  # fmt: skip
+    assert rc == 0 and [Path(a[0]) for a in reads] == [csv]

@@ -18,8 +18,8 @@ class LinearModel:
 
     name: str = "linear"
     parameters: tuple[Parameter, ...] = (
-        Parameter("gain", 0.01, 0.0, 1.0, unit="deg/count"),
-        Parameter("offset", 0.0, -100.0, 100.0, unit="deg"),
+        Parameter("gain", value=0.01, lower=0.0, upper=1.0, unit="deg/count"),
+        Parameter("offset", value=0.0, lower=-100.0, upper=100.0, unit="deg"),
     )
 
     def evaluate(self, signals: Signals, values: np.ndarray) -> np.ndarray:

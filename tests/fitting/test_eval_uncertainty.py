@@ -22,8 +22,8 @@ class LineModel(NamedParameters):
 
     name: str = "line"
     parameters: tuple[Parameter, ...] = (
-        Parameter("a", 0.01, unit="deg/count"),
-        Parameter("b", 0.0, unit="deg"),
+        Parameter("a", value=0.01, unit="deg/count"),
+        Parameter("b", value=0.0, unit="deg"),
     )
 
     def evaluate(self, signals, values):

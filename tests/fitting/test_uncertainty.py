@@ -92,7 +92,7 @@ def test_exact_covariance_on_a_linear_model():
     v = v / 100.0  # envelopes = input (deg), thresholds up to 40
     r = (0.0, 5.0, 12.0, 25.0, 40.0)
     names = ["c0"] + [f"c{i}" for i in range(1, len(r) + 1)]
-    model = PIWeights("pi", tuple(Parameter(n, 0.1) for n in names), r=r)
+    model = PIWeights("pi", tuple(Parameter(n, value=0.1) for n in names), r=r)
     truth = np.array([1.0, 0.3, 0.2, 0.15, 0.1, 0.05])
     X = model.basis(v)
     y = X @ truth + rng.normal(0.0, NOISE, v.size)

@@ -43,6 +43,18 @@ def test_registry_is_the_one_table_of_kinds():
     assert kind_of(object()) is None
 
 
+def test_the_names_tables_roles_are_the_paper_and_the_simulations_kinds():
+    """The role names of hysteresis/kinds.py the other layers read instead of literals."""
+    from i2ris_calib.hysteresis import kinds
+    from i2ris_calib.hysteresis.models import GPIModel, I2RISEGPIModel
+
+    assert kinds.PAPER_KINDS == ("egpi", "gpi")  # its Tables 1-2's row order
+    assert kind_info(kinds.PAPER_MODEL).model_class is I2RISEGPIModel
+    assert kind_info(kinds.PAPER_BASELINE).model_class is GPIModel
+    assert kinds.SESSION_TRUTH == "egpi"  # simulation/truth.py: i2ris_egpi_model
+    assert kind_info(kinds.LAB_TRUTH).model_class is TwoTendonGPIModel
+
+
 def test_output_is_offset_plus_one_gpi_per_side():
     """theta = theta0 + GPI_p[max(v, 0)] - GPI_n[max(-v, 0)], over the whole history."""
     truth, _, v, _ = _through_zero()

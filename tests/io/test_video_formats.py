@@ -28,7 +28,17 @@ from i2ris_calib.config import PipelineConfig
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io import frames
 from i2ris_calib.io.session import load_session
-from i2ris_calib.io.video import iter_frames, open_reader, open_writer, video_info
+from i2ris_calib.io.video import (
+    ImageFolder,
+    VideoFile,
+    frame_source,
+    header_frame_count,
+    input_files,
+    iter_frames,
+    open_reader,
+    open_writer,
+    video_info,
+)
 from i2ris_calib.simulation.presets import preset_config
 from i2ris_calib.tracking.config import TrackingConfig
 
@@ -317,3 +327,23 @@ def test_16bit_scaling_uses_the_significant_bits(tmp_path, bits, expect_top):
     assert imgs[0].max() == expect_top and imgs[0].min() == 0
     np.testing.assert_allclose(imgs[0], np.round(ramp * 255.0 / top), atol=0.5)
     np.testing.assert_allclose(imgs[1], np.round((ramp // 2) * 255.0 / top), atol=0.5)
+
+
+def test_the_frame_source_is_chosen_once_from_the_path(tmp_path, monkeypatch):
+    """A folder is an ImageFolder (its sequence found once for count, files, bits and
+    frames), a file a VideoFile; both answer the same questions."""
+    clip = _mjpg_clip(tmp_path / "m.avi")
+    d = _write(tmp_path / "f", [f"f_{k}.png" for k in range(3)])
+    assert isinstance(frame_source(clip), VideoFile)
+    assert isinstance(frame_source(d), ImageFolder)
+    assert isinstance(frame_source(tmp_path / "missing.mkv"), VideoFile)
+    assert header_frame_count(clip) == 5 and input_files(clip) == [clip]
+    assert header_frame_count(d) == 3
+    assert input_files(d) == [d / f"f_{k}.png" for k in range(3)]
+    assert video_info(d) == {"codec": "image sequence (.png)", "pixel_format": "", "frames": 3}
+    calls = []
+    find = frames.find_sequence
+    monkeypatch.setattr(frames, "find_sequence", lambda f: calls.append(f) or find(f))
+    source = frame_source(d)
+    assert source.header_count() == 3 and source.known_bits() == 8
+    assert len(list(source.raw_frames(threads=0))) == 3 and calls == [d]

@@ -31,7 +31,7 @@ from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts, 
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
-from i2ris_calib.io.synced import datasets_for_fit, load_datasets
+from i2ris_calib.io.synced import frame_datasets, frames_for_fit, read_frames
 
 STARTS = ("auto", *DIAGNOSIS_STARTS)
 SCHEMA = "i2ris-calib.diagnosis/1"
@@ -49,7 +49,7 @@ def diagnosis_dataset(
 
     Read by the one reader (:func:`i2ris_calib.io.synced.load_datasets`), so ``fit``
     builds exactly the same dataset (samples, loss mask, held-out cycles) from the
-    same file and ``[fit]`` settings. ``direction``: ``"+"`` or ``"-"`` (``"±"`` when
+    same file and ``[fit]`` settings; the file is read and validated once. ``direction``: ``"+"`` or ``"-"`` (``"±"`` when
     ``[fit] signed = true``), or ``"auto"``: the dataset(s) of the default fit's model
     choice (:func:`~i2ris_calib.commands.fit.datasets_for_fit`: the signed dataset when the
     input crosses zero or its excursions do not start at rest, else the split), the
@@ -62,15 +62,16 @@ def diagnosis_dataset(
             f"--direction {direction}: [fit] signed = true makes one signed dataset per axis; "
             "use --direction auto (or set signed = false)"
         )
+    frames = read_frames([path], axis, columns)
     if direction == "auto":  # the dataset(s) the default fit fits: signed or split
-        found, _ = datasets_for_fit([path], axis, fit_config, columns=columns)
+        found, _ = frames_for_fit(frames, axis, fit_config)
     elif direction == "±":  # the signed dataset, asked for: the input must cross zero
         signed = replace(fit_config, signed=True, split=False)
-        found = load_datasets([path], axis, signed, ("±",), columns=columns)
+        found = frame_datasets(frames, axis, signed, ("±",))
         if not fit_config.signed:
             _check_crosses_zero(found[0], path)
     else:
-        found = load_datasets([path], axis, fit_config, (direction,), columns=columns)
+        found = frame_datasets(frames, axis, fit_config, (direction,))
     return max(found, key=lambda d: d.rows["in_direction"])
 
 

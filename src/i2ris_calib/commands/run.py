@@ -48,7 +48,7 @@ from i2ris_calib.io.encoders import encoder_log_path
 from i2ris_calib.io.outputs import check_not_input, check_out_path, output_dir
 from i2ris_calib.io.provenance import file_sha256
 from i2ris_calib.io.session import check_cameras, load_session, session_file
-from i2ris_calib.io.synced import datasets_for_fit, load_datasets
+from i2ris_calib.io.synced import frame_datasets, frames_for_fit, read_frames
 from i2ris_calib.io.video import input_files
 from i2ris_calib.session import SessionSpec
 
@@ -325,7 +325,8 @@ def diagnose_direction(
     try:
         if not axis_moves(synced, axis):
             raise CalibError(f"{axis} does not move in {synced}")
-        found, choice = datasets_for_fit([synced], axis, config.fit)
+        frames = read_frames([synced], axis)  # read and validated once
+        found, choice = frames_for_fit(frames, axis, config.fit)
         if (direction == "±") != choice.signed:
             fitted = f"{axis}±" if choice.signed else f"{axis}+ and {axis}-"
             raise CalibError(
@@ -335,7 +336,7 @@ def diagnose_direction(
             )
         dset = next((d for d in found if d.direction == direction), None)
         if dset is None:  # says why this direction has no dataset
-            (dset,) = load_datasets([synced], axis, config.fit, (direction,))[:1]
+            (dset,) = frame_datasets(frames, axis, config.fit, (direction,))[:1]
         check_dataset(dset, config.diagnose)
     except CalibError as exc:
         with output_dir(out, "diagnose", [synced], DIAGNOSE_OUTPUTS) as tmp:

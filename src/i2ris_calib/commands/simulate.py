@@ -19,6 +19,7 @@ import pandas as pd
 from rich.progress import Progress
 
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.kinds import LAB_TRUTH, SESSION_TRUTH
 from i2ris_calib.io.atomic import write_csv, write_json, write_text
 from i2ris_calib.io.camera_yaml import write_camera_yaml
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
@@ -278,7 +279,7 @@ def _write_truth(folder: Path, cfg, cams, truth: Truth, t0_ctrl: float, tables: 
         "datasets": [
             {"name": b.name, "axis": b.axis, "sign": b.sign, "t0_ctrl_s": t0_ctrl + b.t0_s,
              "t1_ctrl_s": t0_ctrl + b.t1_s, "settle_start_ctrl_s": t0_ctrl + b.settle_start_s,
-             "model": "egpi", "params": truth.params.get(b.name, {})}
+             "model": SESSION_TRUTH, "params": truth.params.get(b.name, {})}
             for b in blocks
         ],
         "effects": cfg.effects,
@@ -303,7 +304,7 @@ def _lab_summary(cfg, truth: Truth, t0_ctrl: float) -> dict:
     s0, s1 = truth.params["straight_motion_s"]
     start, duration = lab_reference_window(cfg)
     return {
-        "model": "agpi", "yaw": truth.params["yaw"], "pitch": truth.params["pitch"],
+        "model": LAB_TRUTH, "yaw": truth.params["yaw"], "pitch": truth.params["pitch"],
         "pitch_per_yaw_deg": truth.params["c"], "coupling": truth.params["coupling"],
         "angle_at_zero_input_deg": {"yaw": truth.params["yaw"]["theta0"],
                                     "pitch": truth.params["pitch"]["theta0"]},

@@ -164,19 +164,19 @@ def bouc_wen_model(n: int = 30, **values: float) -> BoucWenModel:
     ``values``; ``n`` (operators) is accepted for the registry's interface and unused."""
     check_settings("bouc_wen_model", n)
     params = (
-        Parameter("theta0", 0.0, -500.0, 500.0, False, "deg",
-                  "output at zero input with the hysteretic part h = 0"),
-        Parameter("d", 7.0e-3, -1.0, 1.0, False, "deg/count",
-                  "slope far from a reversal (h saturated)"),
-        Parameter("hs", 1.0, -500.0, 500.0, False, "deg",
-                  "saturated hysteretic part: half the loop's height"),
-        Parameter("k", 1e-3, 1e-9, 10.0, False, "1/count",
-                  "saturation rate: h is on its asymptote after a travel of ~3/k"),
-        Parameter("phi", 0.0, -0.9, 1.0, False, "1",
-                  "loop shape (beta-gamma)/(beta+gamma): slope of h at a reversal is "
+        Parameter("theta0", value=0.0, lower=-500.0, upper=500.0, unit="deg",
+                  doc="output at zero input with the hysteretic part h = 0"),
+        Parameter("d", value=7.0e-3, lower=-1.0, upper=1.0, unit="deg/count",
+                  doc="slope far from a reversal (h saturated)"),
+        Parameter("hs", value=1.0, lower=-500.0, upper=500.0, unit="deg",
+                  doc="saturated hysteretic part: half the loop's height"),
+        Parameter("k", value=1e-3, lower=1e-9, upper=10.0, unit="1/count",
+                  doc="saturation rate: h is on its asymptote after a travel of ~3/k"),
+        Parameter("phi", value=0.0, lower=-0.9, upper=1.0, unit="1",
+                  doc="loop shape (beta-gamma)/(beta+gamma): slope of h at a reversal is "
                   "(1 + phi) x its slope at h = 0"),
-        Parameter("n_bw", 1.0, 0.3, 8.0, False, "1",
-                  "Bouc-Wen exponent n: sharpness of the yield (large: a sharp corner)"),
+        Parameter("n_bw", value=1.0, lower=0.3, upper=8.0, unit="1",
+                  doc="Bouc-Wen exponent n: sharpness of the yield (large: a sharp corner)"),
     )  # fmt: skip
     return checked_values("bouc_wen_model", BoucWenModel("bouc_wen", params, n=n), values)
 

@@ -154,16 +154,16 @@ def coupled_two_tendon_model(n: int = 30, **values: float) -> CoupledTwoTendonMo
             name = f"{p.name}_{cs}"
             params.append(
                 Parameter(
-                    name, SILENT.get(p.name, p.value), p.lower, p.upper,
-                    p.fixed or name in COUPLING_GAUGE, p.unit,
-                    f"coupling, {side_doc[cs]}: {p.doc}"
+                    name, value=SILENT.get(p.name, p.value), lower=p.lower, upper=p.upper,
+                    fixed=p.fixed or name in COUPLING_GAUGE, unit=p.unit,
+                    doc=f"coupling, {side_doc[cs]}: {p.doc}"
                     + ("; held at 0 (gauge: the offset is theta0)" if p.name == "a2" else ""),
                 )
             )  # fmt: skip
         params.append(
             Parameter(
-                f"sign_{cs}", 1.0, -1.0, 1.0, True, "1",
-                f"direction in which the {side_doc[cs]} moves this axis (+1 or -1, held)",
+                f"sign_{cs}", value=1.0, lower=-1.0, upper=1.0, fixed=True, unit="1",
+                doc=f"direction in which the {side_doc[cs]} moves this axis (+1 or -1, held)",
             )
         )  # fmt: skip
     model = CoupledTwoTendonModel("agpi_coupled", tuple(params), n=n)

@@ -77,3 +77,15 @@ DIAGNOSED = "diagnosed"
 #: The continuous EGPI: preferred over a kind whose output steps at its flag point
 #: (``output_steps``) within a margin (fitting/decision.py).
 CONTINUOUS_EGPI = "egpi_c"
+#: The paper's two models (its Tables 1-2), in the paper's row order (EGPI, GPI).
+PAPER_KINDS = tuple(k.kind for k in reversed(NAMES) if k.paper)
+#: The model the paper proposes, its I2RIS EGPI: the paper's kind with a nested kind.
+PAPER_MODEL = next(k.kind for k in NAMES if k.paper and k.nested)
+#: The paper's baseline, the GPI nested in its EGPI (the report's GPI / EGPI ratio).
+PAPER_BASELINE = BY_NAME[PAPER_MODEL].nested
+#: The truth of a simulated paper-protocol session, per motion direction: the paper's
+#: EGPI (truth.json ``datasets[].model``).
+SESSION_TRUTH = PAPER_MODEL
+#: The truth of the simulated lab, per axis: the two-tendon GPI, the first signed-only
+#: kind (simulation/lab.py, two_motor.py; truth.json ``lab.model``).
+LAB_TRUTH = SIGNED_ONLY_KINDS[0]

@@ -403,12 +403,15 @@ _OFFSET = dict(lower=-500.0, upper=500.0, unit="deg")
 def _density_params(lam, sigma, r1, rn) -> tuple[Parameter, ...]:
     return (
         Parameter(
-            "lam", lam, 1e-6, 1e3, True, "1",
-            "density scale lambda (Eq15); fixed: redundant with the envelope scale",
+            "lam", value=lam, lower=1e-6, upper=1e3, fixed=True, unit="1",
+            doc="density scale lambda (Eq15); fixed: redundant with the envelope scale",
         ),
-        Parameter("sigma", sigma, 0.0, 20.0, False, "1/deg", "density decay sigma (Eq15)"),
-        Parameter("r1", r1, 0.0, 100.0, False, "deg", "smallest non-zero threshold r_1 (Eq14)"),
-        Parameter("rn", rn, 0.0, 100.0, False, "deg", "largest threshold r_n (Eq14)"),
+        Parameter("sigma", value=sigma, lower=0.0, upper=20.0, unit="1/deg",
+                  doc="density decay sigma (Eq15)"),
+        Parameter("r1", value=r1, lower=0.0, upper=100.0, unit="deg",
+                  doc="smallest non-zero threshold r_1 (Eq14)"),
+        Parameter("rn", value=rn, lower=0.0, upper=100.0, unit="deg",
+                  doc="largest threshold r_n (Eq14)"),
     )  # fmt: skip
 
 
@@ -439,10 +442,10 @@ def gpi_model(n: int = 30, **values: float) -> GPIModel:
     """A GPI model with default (paper-like yaw+) values, overridden by ``values``."""
     check_settings("gpi_model", n)
     params = (
-        Parameter("a1", 7.0e-3, doc="loading envelope slope", **_SLOPE),
-        Parameter("a2", 0.5, doc="loading envelope offset", **_OFFSET),
-        Parameter("a3", 7.0e-3, doc="unloading envelope slope", **_SLOPE),
-        Parameter("a4", -0.5, doc="unloading envelope offset", **_OFFSET),
+        Parameter("a1", value=7.0e-3, doc="loading envelope slope", **_SLOPE),
+        Parameter("a2", value=0.5, doc="loading envelope offset", **_OFFSET),
+        Parameter("a3", value=7.0e-3, doc="unloading envelope slope", **_SLOPE),
+        Parameter("a4", value=-0.5, doc="unloading envelope offset", **_OFFSET),
         *_density_params(0.06, 0.2, 0.3, 3.0),
     )
     return checked_values("gpi_model", GPIModel("gpi", params, n=n), values)
@@ -521,19 +524,20 @@ def i2ris_egpi_model(n: int = 30, deadband_counts: float = 2.0, **values: float)
     """An I2RIS EGPI with default (paper-like yaw+) values, overridden by ``values``."""
     check_settings("i2ris_egpi_model", n, deadband_counts)
     params = (
-        Parameter("a1", 7.0e-3, doc="loading envelope slope gamma_l", **_SLOPE),
-        Parameter("a2", 0.5, doc="loading envelope offset gamma_l", **_OFFSET),
-        Parameter("a3", 7.0e-3, doc="stage-1 unloading envelope slope gamma_r1", **_SLOPE),
-        Parameter("a4", -0.5, doc="stage-1 unloading envelope offset gamma_r1", **_OFFSET),
-        Parameter("a5", 7.0e-3, doc="stage-2 unloading envelope slope gamma_r2", **_SLOPE),
-        Parameter("a6", -0.5, doc="stage-2 unloading envelope offset gamma_r2", **_OFFSET),
+        Parameter("a1", value=7.0e-3, doc="loading envelope slope gamma_l", **_SLOPE),
+        Parameter("a2", value=0.5, doc="loading envelope offset gamma_l", **_OFFSET),
+        Parameter("a3", value=7.0e-3, doc="stage-1 unloading envelope slope gamma_r1", **_SLOPE),
+        Parameter("a4", value=-0.5, doc="stage-1 unloading envelope offset gamma_r1", **_OFFSET),
+        Parameter("a5", value=7.0e-3, doc="stage-2 unloading envelope slope gamma_r2", **_SLOPE),
+        Parameter("a6", value=-0.5, doc="stage-2 unloading envelope offset gamma_r2", **_OFFSET),
         *_density_params(0.06, 0.2, 0.3, 3.0),
         Parameter(
-            "kappa", 3.0, 0.0, 100.0, False, "1", "stage-2 backlash magnitude regulator (Eq17)"
+            "kappa", value=3.0, lower=0.0, upper=100.0, unit="1",
+            doc="stage-2 backlash magnitude regulator (Eq17)",
         ),
         Parameter(
-            "v_f", 2000.0, -1e7, 1e7, False, "count",
-            "flag point: unloading switches to y2 at v <= v_f (fitted by profile search)",
+            "v_f", value=2000.0, lower=-1e7, upper=1e7, unit="count",
+            doc="flag point: unloading switches to y2 at v <= v_f (fitted by profile search)",
         ),
     )  # fmt: skip
     model = I2RISEGPIModel("egpi", params, n=n, deadband_counts=deadband_counts)
@@ -732,5 +736,5 @@ def egpi_model(
         )
     for x in names:
         as_real(func, f"values[{x!r}]", values[x])
-    params = tuple(Parameter(x, float(values[x])) for x in names)
+    params = tuple(Parameter(x, value=float(values[x])) for x in names)
     return EGPIModel("egpi_general", params, envelopes=env, n=n, deadband=deadband)

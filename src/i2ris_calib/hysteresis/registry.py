@@ -180,9 +180,6 @@ MODEL_KINDS = tuple(k.kind for k in KINDS if k.factory is not None and not k.sig
 #: Kinds a fit.json / compensation may name: the built kinds and ``"diagnosed"``.
 ALL_KINDS = tuple(k.kind for k in KINDS)
 
-#: The paper's two models (its Tables 1-2), in the paper's row order (EGPI, GPI).
-PAPER_KINDS = tuple(k.kind for k in reversed(KINDS) if k.paper)
-
 #: Kinds the compensation stage inverts (a ``"diagnosed"`` model: when its base is one).
 INVERSE_KINDS = tuple(k.kind for k in KINDS if k.inverse)
 

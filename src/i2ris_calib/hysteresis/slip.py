@@ -176,8 +176,8 @@ def slip_model(n: int = 30, **values: float) -> SlipModel:
     non-zero thresholds (``n + 1`` operators), default values overridden by ``values``."""
     check_settings("slip_model", n)
     params = [
-        Parameter("theta0", 0.0, -500.0, 500.0, False, "deg",
-                  "output at zero input with every element relaxed"),
+        Parameter("theta0", value=0.0, lower=-500.0, upper=500.0, unit="deg",
+                  doc="output at zero input with every element relaxed"),
     ]  # fmt: skip
     for j, name in enumerate(_weights(n)):
         what = (
@@ -186,11 +186,12 @@ def slip_model(n: int = 30, **values: float) -> SlipModel:
             else (f"stiffness of the element slipping at r_{j} = {j}/{n} r_max (>= 0)")
         )
         # an element's stiffness is >= 0 (the linear part w0 may have either sign)
-        params.append(Parameter(name, 7.0e-3 if j == 0 else 0.0, -1.0 if j == 0 else 0.0,
-                                1.0, False, "deg/count", what))  # fmt: skip
+        params.append(Parameter(name, value=7.0e-3 if j == 0 else 0.0,
+                                lower=-1.0 if j == 0 else 0.0, upper=1.0, unit="deg/count",
+                                doc=what))  # fmt: skip
     params.append(
-        Parameter("r_max", 1000.0, 0.0, 1e7, True, "count",
-                  "largest slip threshold (the grid; 0.45 of the input range)")
+        Parameter("r_max", value=1000.0, lower=0.0, upper=1e7, fixed=True, unit="count",
+                  doc="largest slip threshold (the grid; 0.45 of the input range)")
     )  # fmt: skip
     return checked_values("slip_model", SlipModel("maxwell_slip", tuple(params), n=n), values)
 

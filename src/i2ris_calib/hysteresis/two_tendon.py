@@ -174,8 +174,8 @@ def two_tendon_gpi_model(n: int = 30, **values: float) -> TwoTendonGPIModel:
     check_settings("two_tendon_gpi_model", n)
     params = [
         Parameter(
-            "theta0", 0.0, -500.0, 500.0, False, "deg",
-            "angle at zero input with both tendons relaxed",
+            "theta0", value=0.0, lower=-500.0, upper=500.0, unit="deg",
+            doc="angle at zero input with both tendons relaxed",
         ),
     ]  # fmt: skip
     tendon = {"p": "positive-input tendon", "n": "negative-input tendon (|counts| -> |deg|)"}
@@ -183,8 +183,9 @@ def two_tendon_gpi_model(n: int = 30, **values: float) -> TwoTendonGPIModel:
         for p in gpi_model(n=n, a2=0.0, a4=-1.0).parameters:
             params.append(
                 Parameter(
-                    f"{p.name}_{side}", p.value, p.lower, p.upper,
-                    p.fixed or f"{p.name}_{side}" in GAUGE, p.unit, f"{tendon[side]}: {p.doc}"
+                    f"{p.name}_{side}", value=p.value, lower=p.lower, upper=p.upper,
+                    fixed=p.fixed or f"{p.name}_{side}" in GAUGE, unit=p.unit,
+                    doc=f"{tendon[side]}: {p.doc}"
                     + ("; held at 0 (gauge: the offset is theta0)" if p.name == "a2" else ""),
                 )
             )  # fmt: skip

@@ -363,6 +363,14 @@ def _filled(t: np.ndarray, x: np.ndarray | None) -> np.ndarray | None:
     return np.interp(t, t[ok], x[ok]) if ok.sum() >= 2 else None
 
 
+def read_frames(
+    paths: Sequence[str | Path], axis: str, columns: ColumnsConfig | None = None
+) -> list[tuple[str, pd.DataFrame]]:
+    """Each synced CSV of ``paths`` read and validated once (:func:`read_synced`), with
+    its path as text: what :func:`frame_datasets` and :func:`frames_for_fit` take."""
+    return [(str(path), read_synced(path, axis, columns)) for path in paths]
+
+
 def load_datasets(
     paths: Sequence[str | Path],
     axis: str,
@@ -374,13 +382,24 @@ def load_datasets(
     named (``"yaw+ (file stem)"`` when two files give the same name). ``columns``:
     the column mapping and units of the files (``[columns]``; default: the standard
     synced CSV)."""
+    return frame_datasets(read_frames(paths, axis, columns), axis, fit_config, directions)
+
+
+def frame_datasets(
+    frames: Sequence[tuple[str, pd.DataFrame]],
+    axis: str,
+    fit_config,
+    directions: tuple[str, ...] | None = None,
+) -> list[Dataset]:
+    """:func:`load_datasets` of files already read (:func:`read_frames`): the datasets
+    of each ``(path, frame)``, uniquely named."""
     found: list[Dataset] = []
-    frames = []
-    for path in paths:
-        frames.append(read_synced(path, axis, columns))
-        found += datasets_from_frame(frames[-1], axis, fit_config, str(path), directions)
+    for source, df in frames:
+        found += datasets_from_frame(df, axis, fit_config, source, directions)
     if not found:
-        raise CalibError(_too_little_motion(paths, frames, axis, fit_config, directions))
+        paths = [source for source, _ in frames]
+        dfs = [df for _, df in frames]
+        raise CalibError(_too_little_motion(paths, dfs, axis, fit_config, directions))
     seen: dict[str, int] = {}
     unique = []
     for d in found:
@@ -450,10 +469,17 @@ def datasets_for_fit(
     (:func:`~i2ris_calib.data.excursions.excursions`, over all files) decide between
     the signed dataset of the axis and the paper's per-direction split; whether the
     other motor moves with this one decides the coupled model (:func:`recording_summary`).
-    ``columns``: the files' column mapping (``[columns]``, default the standard names)."""
-    whole = load_datasets(
-        paths, axis, replace(fit_config, signed=True, split=False), columns=columns
-    )
+    ``columns``: the files' column mapping (``[columns]``, default the standard names).
+    Each file is read once (:func:`read_frames`)."""
+    return frames_for_fit(read_frames(paths, axis, columns), axis, fit_config, model)
+
+
+def frames_for_fit(
+    frames: Sequence[tuple[str, pd.DataFrame]], axis: str, fit_config, model: str = "all"
+) -> tuple[list[Dataset], Any]:
+    """:func:`datasets_for_fit` of files already read (:func:`read_frames`): the signed
+    datasets or the split, from the same frames, and the model choice."""
+    whole = frame_datasets(frames, axis, replace(fit_config, signed=True, split=False))
     recording, together = recording_summary(whole)
     from i2ris_calib.fitting.pipeline import choose_model
 
@@ -461,7 +487,7 @@ def datasets_for_fit(
     if choice.signed:
         return whole, choice
     split_config = replace(fit_config, signed=False, split=False)
-    return load_datasets(paths, axis, split_config, columns=columns), choice
+    return frame_datasets(frames, axis, split_config), choice
 
 
 def load_synced(

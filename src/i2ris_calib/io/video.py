@@ -15,6 +15,10 @@ hand back the raw luma plane (grey levels 16-235 instead of 0-255).
 
 ``CAP_PROP_FRAME_COUNT`` comes from the container header and may be wrong, so
 readers count decoded frames instead.
+
+The two kinds of input are two :class:`FrameSource` implementations, chosen once by
+:func:`frame_source` (a folder is an :class:`ImageFolder`, anything else a
+:class:`VideoFile`); the functions below ask the source and never test the path again.
 """
 
 from __future__ import annotations
@@ -23,7 +27,10 @@ import os
 import queue
 import threading
 from collections.abc import Iterator
+from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
+from typing import Protocol
 
 import cv2
 import numpy as np
@@ -146,14 +153,11 @@ def stream_is_grey(cap) -> bool:
 
 def video_info(path: Path) -> dict:
     """Codec, pixel format, size and header frame count of a video file or sequence."""
-    p = Path(path)
-    if p.is_dir():
-        seq = frames.find_sequence(p)
-        return {
-            "codec": f"image sequence ({seq.suffix})",
-            "pixel_format": "",
-            "frames": len(seq.files),
-        }
+    return frame_source(path).info()
+
+
+def _file_info(p: Path) -> dict:
+    """:func:`video_info` of a video file."""
     cap = open_reader(p)
     try:
         return {
@@ -206,12 +210,99 @@ def _decode_file(path: Path, threads: int) -> Iterator[np.ndarray]:
         cap.release()
 
 
-def _raw_frames(path: Path, threads: int) -> Iterator[np.ndarray]:
+class FrameSource(Protocol):
+    """Where a camera's frames come from: one implementation per kind of input
+    (CONTRIBUTING.md, "adding a frame source"), chosen once by :func:`frame_source`."""
+
+    path: Path
+
+    def info(self) -> dict:
+        """Codec, pixel format, frame count (and size, grey) as :func:`video_info`."""
+        ...
+
+    def header_count(self) -> int:
+        """Frames the input claims before decoding (-1 if unknown)."""
+        ...
+
+    def files(self) -> list[Path]:
+        """The files the input consists of (the run's stamps hash them)."""
+        ...
+
+    def known_bits(self) -> int | None:
+        """Significant bits of its 16-bit frames known before decoding, or None (then
+        estimated from the first frame)."""
+        ...
+
+    def raw_frames(self, threads: int) -> Iterator[np.ndarray]:
+        """Decoded frames in order (grey, BGR or 16 bit), before :func:`as_gray`."""
+        ...
+
+
+@dataclass(frozen=True)
+class VideoFile:
+    """A video file decoded by OpenCV's FFmpeg (:func:`open_reader`)."""
+
+    path: Path
+
+    def info(self) -> dict:
+        return _file_info(self.path)
+
+    def header_count(self) -> int:
+        cap = open_reader(self.path)
+        try:
+            n = cap.get(cv2.CAP_PROP_FRAME_COUNT)
+        finally:
+            cap.release()
+        return int(n) if n and n > 0 else -1
+
+    def files(self) -> list[Path]:
+        return [self.path]
+
+    def known_bits(self) -> int | None:
+        return None
+
+    def raw_frames(self, threads: int) -> Iterator[np.ndarray]:
+        _check_file(self.path)
+        return _decode_file(self.path, threads)
+
+
+@dataclass(frozen=True)
+class ImageFolder:
+    """A folder of ``<prefix><number>.<png|tif|tiff>`` frames (:mod:`i2ris_calib.io.frames`)."""
+
+    path: Path
+
+    @cached_property
+    def sequence(self) -> frames.ImageSequence:
+        """The folder's image sequence (found once)."""
+        return frames.find_sequence(self.path)
+
+    def info(self) -> dict:
+        seq = self.sequence
+        return {
+            "codec": f"image sequence ({seq.suffix})",
+            "pixel_format": "",
+            "frames": len(seq.files),
+        }
+
+    def header_count(self) -> int:
+        return len(self.sequence.files)
+
+    def files(self) -> list[Path]:
+        return list(self.sequence.files)
+
+    def known_bits(self) -> int | None:
+        return frames.sequence_bits(self.sequence)
+
+    def raw_frames(self, threads: int) -> Iterator[np.ndarray]:
+        return frames.iter_sequence(self.sequence)
+
+
+def frame_source(path: Path) -> FrameSource:
+    """The :class:`FrameSource` of a camera's ``video``: an :class:`ImageFolder` for a
+    folder, else a :class:`VideoFile` (a missing file fails when it is read)."""
     p = Path(path)
-    _check_file(p)
-    if p.is_dir():
-        return frames.iter_sequence(frames.find_sequence(p))
-    return _decode_file(p, threads)
+    return ImageFolder(p) if p.is_dir() else VideoFile(p)
 
 
 _DONE = object()
@@ -289,10 +380,10 @@ def iter_frames(
     ndarray (h, w) uint8
     CalibError if no frame decodes.
     """
-    p = Path(path)
-    if bits is None and p.is_dir():
-        bits = frames.sequence_bits(frames.find_sequence(p))
-    raw = _raw_frames(p, threads)
+    source = frame_source(path)
+    if bits is None:
+        bits = source.known_bits()
+    raw = source.raw_frames(threads)
     src = _ahead(raw, ahead) if ahead > 0 else raw
     n = 0
     try:
@@ -311,18 +402,9 @@ def iter_frames(
 
 def header_frame_count(path: Path) -> int:
     """Frame count claimed by the container header, or the number of sequence images (-1 if unknown)."""
-    p = Path(path)
-    if p.is_dir():
-        return len(frames.find_sequence(p).files)
-    cap = open_reader(p)
-    try:
-        n = cap.get(cv2.CAP_PROP_FRAME_COUNT)
-    finally:
-        cap.release()
-    return int(n) if n and n > 0 else -1
+    return frame_source(path).header_count()
 
 
 def input_files(path: Path) -> list[Path]:
     """The files a video input consists of: the file itself, or a sequence's images."""
-    p = Path(path)
-    return list(frames.find_sequence(p).files) if p.is_dir() else [p]
+    return frame_source(path).files()

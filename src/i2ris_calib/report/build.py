@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.hysteresis.kinds import PAPER_MODEL
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, model_for_kind
 from i2ris_calib.report import figures, tables, verdicts
 from i2ris_calib.report.clock import angle_rate_p95, clock_view
@@ -316,7 +317,7 @@ def _headline(fits: tuple[FitData, ...]) -> Table | None:
         for k, lab in tables.FIT_MODELS
         if any(k in d.get("models", {}) for _, d in records)
     ]
-    with_ratio = any("egpi" in d.get("models", {}) for _, d in records)
+    with_ratio = any(PAPER_MODEL in d.get("models", {}) for _, d in records)
     rows = []
     starred = False
     for axis, d in records:
@@ -512,7 +513,7 @@ def parameter_info() -> dict[str, tuple[str, str]]:
     kind (the registry: GPI, EGPI, EGPI_C, two-tendon GPI, with coupling); the
     I2RIS-EGPI's meaning first where kinds share a name."""
     info: dict[str, tuple[str, str]] = {}
-    kinds = ("egpi", *(k for k in BUILT_KINDS if k != "egpi"))
+    kinds = (PAPER_MODEL, *(k for k in BUILT_KINDS if k != PAPER_MODEL))
     for kind in kinds:
         for p in model_for_kind(kind).parameters:
             info.setdefault(p.name, (p.unit, p.doc))

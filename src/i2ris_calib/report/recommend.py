@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from i2ris_calib.fitting.decision import CONTINUOUS_MARGIN, Decision
-from i2ris_calib.hysteresis.kinds import CONTINUOUS_EGPI
+from i2ris_calib.hysteresis.kinds import CONTINUOUS_EGPI, PAPER_BASELINE
 from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info
 from i2ris_calib.report.tables import (
     FIT_MODELS,
@@ -130,8 +130,8 @@ def recommend(
         why.append(
             "it also reads the other motor's input: predict and compensate both axes together"
         )
-    if "gpi" in cands and best != "gpi":
-        ratio = cands["gpi"] / cands[best] if cands[best] > 0 else float("nan")
+    if PAPER_BASELINE in cands and best != PAPER_BASELINE:
+        ratio = cands[PAPER_BASELINE] / cands[best] if cands[best] > 0 else float("nan")
         if math.isfinite(ratio) and ratio > 1:
             why.append(f"GPI is {fmt_sig(ratio, 2, pad=True)}x worse")
     return Recommendation(name, best, cands[best], "; ".join(why) + ".", support)

@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from i2ris_calib.hysteresis.registry import ALL_KINDS, PAPER_KINDS, kind_info, table_order
+from i2ris_calib.hysteresis.kinds import PAPER_BASELINE, PAPER_KINDS, PAPER_MODEL
+from i2ris_calib.hysteresis.registry import ALL_KINDS, kind_info, table_order
 from i2ris_calib.report.document import Table
 
 DASH = "—"
@@ -332,15 +333,16 @@ def samples_table(
     )
 
 
-# The paper's Tables 1-2 (Yue et al., real I2RIS data): (RMSE deg, NRMSE %, MAE deg).
+# The paper's Tables 1-2 (Yue et al., real I2RIS data): (RMSE deg, NRMSE %, MAE deg)
+# of its EGPI (PAPER_MODEL) and its GPI (PAPER_BASELINE).
 PAPER_RESULTS = {
     "yaw": {
-        "yaw+": {"egpi": (0.36, 0.98, 1.07), "gpi": (2.23, 6.07, 4.88)},
-        "yaw-": {"egpi": (0.35, 1.12, 1.15), "gpi": (2.38, 7.50, 5.37)},
+        "yaw+": {PAPER_MODEL: (0.36, 0.98, 1.07), PAPER_BASELINE: (2.23, 6.07, 4.88)},
+        "yaw-": {PAPER_MODEL: (0.35, 1.12, 1.15), PAPER_BASELINE: (2.38, 7.50, 5.37)},
     },
     "pitch": {
-        "pitch+": {"egpi": (0.58, 1.65, 1.62), "gpi": (2.51, 7.16, 6.73)},
-        "pitch-": {"egpi": (0.49, 1.12, 1.62), "gpi": (2.64, 8.38, 5.53)},
+        "pitch+": {PAPER_MODEL: (0.58, 1.65, 1.62), PAPER_BASELINE: (2.51, 7.16, 6.73)},
+        "pitch-": {PAPER_MODEL: (0.49, 1.12, 1.62), PAPER_BASELINE: (2.64, 8.38, 5.53)},
     },
 }
 
@@ -390,8 +392,8 @@ def gpi_egpi_ratio(dataset: Mapping[str, Any], split_key: str = "holdout_metrics
     """GPI RMSE / EGPI RMSE for one dataset on ``split_key`` (None when not available)."""
     models = dataset.get("models", {})
     try:
-        g = float(models["gpi"][split_key]["rmse_deg"])
-        e = float(models["egpi"][split_key]["rmse_deg"])
+        g = float(models[PAPER_BASELINE][split_key]["rmse_deg"])
+        e = float(models[PAPER_MODEL][split_key]["rmse_deg"])
     except (KeyError, TypeError, ValueError):
         return None
     return g / e if e > 0 and math.isfinite(g) and math.isfinite(e) else None

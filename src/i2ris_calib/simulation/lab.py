@@ -29,6 +29,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from i2ris_calib.hysteresis.kinds import LAB_TRUTH
 from i2ris_calib.hysteresis.presets import random_two_tendon_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.simulation.config import SimulationConfig
@@ -125,7 +126,7 @@ def _straighten(t, ey, ep, params, amp, c):
     n_hold = int(round(float(c["lab_reference_hold_s"]) * RATE_HZ))
     n_blend = int(round(BLEND_S * RATE_HZ))
     b = a + n_ramp
-    agpi = model_for_kind("agpi")
+    agpi = model_for_kind(LAB_TRUTH)
     yaw_model = agpi.with_values(params["yaw"])
     pitch_model = agpi.with_values(params["pitch"])
     # yaw straight; pitch = own + c (yaw - theta0_yaw) = 0 at yaw = 0: own = c theta0_yaw

@@ -43,6 +43,7 @@ import numpy as np
 
 from i2ris_calib.data.dataset import direction_input, direction_of_samples, input_bands
 from i2ris_calib.diagnosis.effects import build_model, model_values
+from i2ris_calib.hysteresis.kinds import LAB_TRUTH
 from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import paper_like_params
@@ -304,7 +305,7 @@ def _lab_truth(cfg: SimulationConfig, t_s: np.ndarray | None) -> Truth:
     """The lab protocol's truth: its whole driving grid (burn-in included), or ``t_s``."""
     d = lab_drive(cfg)
     params = {"yaw": d.params["yaw"], "pitch": d.params["pitch"], "c": d.params["c"],
-              "coupling": d.params["coupling"], "model": "agpi",
+              "coupling": d.params["coupling"], "model": LAB_TRUTH,
               "straight_motion_s": list(d.straight_s)}  # fmt: skip
     full = Truth(d.t_s, d.enc_yaw.astype(np.int64), d.enc_pitch.astype(np.int64), d.yaw_deg,
                  d.pitch_deg, np.full(d.t_s.shape, -1), params, "lab")  # fmt: skip

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from i2ris_calib.hysteresis.kinds import LAB_TRUTH
 from i2ris_calib.hysteresis.presets import V_MAX_COUNTS, random_two_tendon_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 
@@ -88,7 +89,7 @@ def _gain(values: dict[str, float], v_max: float) -> float:
     """Mean gain of a two-tendon axis (deg/count): half its swing from -v_max to +v_max
     on a slow loading ramp, divided by v_max."""
     v = np.concatenate([np.linspace(0, v_max, 200), np.linspace(0, -v_max, 200)])
-    y = model_for_kind("agpi").with_values(values)(v)
+    y = model_for_kind(LAB_TRUTH).with_values(values)(v)
     return float(abs(y[199] - y[-1]) / (2.0 * v_max))
 
 
@@ -114,7 +115,7 @@ def two_motor_angles(
 
     ``truth``: ``{"yaw": agpi values, "pitch": agpi values, "c": float}``.
     """
-    agpi = model_for_kind("agpi")
+    agpi = model_for_kind(LAB_TRUTH)
     yaw = np.asarray(agpi.with_values(truth["yaw"])(np.asarray(enc_yaw, float)), dtype=float)
     own = np.asarray(agpi.with_values(truth["pitch"])(np.asarray(enc_pitch, float)), dtype=float)
     return yaw, own + truth["c"] * (yaw - truth["yaw"]["theta0"])

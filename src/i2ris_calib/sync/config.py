@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from i2ris_calib._validate import validated_config
+from i2ris_calib.hysteresis.kinds import PAPER_KINDS, PAPER_MODEL
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,7 @@ class SyncConfig:
     estimate_drift: bool = True  # False: drift fixed at 0 ppm for model/xcorr
 
     # --- joint offset + hysteresis model profile
-    model: Literal["egpi", "gpi"] = "egpi"
+    model: str = PAPER_MODEL  # one of the paper's two models (PAPER_KINDS)
     profile_halfwidth_s: float = (
         0.12  # coarse profile +- around the xcorr offset (extended if needed)
     )
@@ -97,6 +98,8 @@ class SyncConfig:
             raise ValueError(f"offset_search_s must be >= 0, got {self.offset_search_s}")
         if self.profile_step_s > self.profile_halfwidth_s:
             raise ValueError("profile_step_s must not exceed profile_halfwidth_s")
+        if self.model not in PAPER_KINDS:
+            raise ValueError(f"model '{self.model}' is not one of {', '.join(PAPER_KINDS)}")
         if self.drift_windows < 1:
             raise ValueError(f"drift_windows must be >= 1, got {self.drift_windows}")
         if self.min_overlap_frames < 1:

@@ -26,11 +26,11 @@ import time
 import numpy as np
 
 from i2ris_calib.compensation import compensate
-from i2ris_calib.compensation.online import Compensator
 from i2ris_calib.diagnosis.effects import add_effect
 from i2ris_calib.fitting.pipeline import model_from_params
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
 from i2ris_calib.hysteresis.registry import model_for_kind
+from i2ris_calib.io.online import Compensator
 
 AGPI = dict(
     theta0=0.4, a1_p=0.008, a3_p=0.0072, a4_p=-1.2, lam_p=0.06, sigma_p=0.25, r1_p=0.3,

@@ -704,7 +704,7 @@ def test_stepping_model_flagged_in_summary_and_warnings(tmp_path, capsys):
 
 
 def test_ranking_steps_double_the_score_not_last_whatever_the_error():
-    from i2ris_calib.commands.compensate import rank_models
+    from i2ris_calib.compensation.choice import rank_models
 
     class Res:  # a CompensationResult's summary and flags: n samples, `steps` output steps
         def __init__(self, rmse, steps, n=600):
@@ -715,11 +715,9 @@ def test_ranking_steps_double_the_score_not_last_whatever_the_error():
             flags = {k: int(v.sum()) for k, v in self.flags.items()}
             return {"rmse_deg": self.rmse, "n_samples": self.n, "flags": flags}
 
-    record = {"models": {"gpi": {"holdout_metrics": {"rmse_deg": 5.75}},
-                         "agpi_coupled": {"holdout_metrics": {"rmse_deg": 0.41}},
-                         "egpi": {"holdout_metrics": {"rmse_deg": 5.0}}}}  # fmt: skip
+    holdout = {"gpi": 5.75, "agpi_coupled": 0.41, "egpi": 5.0}
     rows = rank_models(
-        {"gpi": Res(0.003, 0), "agpi_coupled": Res(0.004, 15), "egpi": Res(0.003, 30)}, record
+        {"gpi": Res(0.003, 0), "agpi_coupled": Res(0.004, 15), "egpi": Res(0.003, 30)}, holdout
     )
     assert [r["model"] for r in rows] == ["agpi_coupled", "gpi", "egpi"]
     assert rows[0]["rank_score_deg"] == pytest.approx(2 * rows[0]["score_deg"])

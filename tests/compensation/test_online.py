@@ -201,16 +201,20 @@ def test_agpi_coupled_needs_the_other_axis_one_line(tmp_path):
 
 def test_online_kinds_are_the_registrys_inverse_kinds():
     """io.online's kinds come from the registry: every kind the batch inverts, each on
-    its own kernel kind or (a coupled kind) its nested kind's plus the coupling."""
+    the kernel kind of its registry row's inverse family (a coupled kind: plus the
+    coupling); the JSON names the kernel kinds as before."""
     from i2ris_calib.compensation.online import KIND_NAMES
+    from i2ris_calib.compensation.plan import COUPLED_KINDS
+    from i2ris_calib.hysteresis.kinds import INVERSE_FAMILIES
     from i2ris_calib.hysteresis.registry import INVERSE_KINDS, kind_info
     from i2ris_calib.io import online as io_online
 
     assert io_online.ONLINE_KINDS == INVERSE_KINDS == (*KIND_NAMES.values(), "agpi_coupled")
-    assert io_online._COUPLED == ("agpi_coupled",)
+    assert KIND_NAMES == {0: "gpi", 1: "egpi", 2: "egpi_c", 3: "agpi"}
+    assert tuple(KIND_NAMES.values()) == INVERSE_FAMILIES
+    assert COUPLED_KINDS == ("agpi_coupled",)
     for k in io_online.ONLINE_KINDS:
-        info = kind_info(k)
-        assert (info.nested if info.coupled else info.inverse) in KIND_NAMES.values()
+        assert kind_info(k).inverse in KIND_NAMES.values()
 
 
 # ---------------------------------------------------------------- issue 33: values checked

@@ -8,7 +8,8 @@ import pytest
 
 from i2ris_calib.compensation import compensate
 from i2ris_calib.compensation.inverse import forward
-from i2ris_calib.compensation.safety import entry_ramp, find_spikes, max_input_rate
+from i2ris_calib.compensation.rate import max_input_rate
+from i2ris_calib.compensation.safety import entry_ramp, find_spikes
 from i2ris_calib.fitting.pipeline import model_from_params
 
 # an EGPI fitted by 'fit' to a synthetic yaw- recording (the case): its inverse

@@ -244,8 +244,8 @@ def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float
     (``agpi``, and the own tendons of ``agpi_coupled``): ``c`` (9,) = the sides' a1..a4
     (``_p`` then ``_n``) and ``theta0``, ``r``, ``p`` (2 m,) = side p's then side n's
     (:data:`~.kernel.KIND_AGPI`)."""
-    family = getattr(kind_of(model), "inverse", None)  # the registry's inverse
-    if family in ("agpi", "agpi_coupled"):
+    code = K.FAMILY_CODES.get(getattr(kind_of(model), "inverse", None))  # the registry's
+    if code == K.KIND_AGPI:
         v = model.value_dict()
         cs, rs, ps = [], [], []
         for side in ("p", "n"):
@@ -255,15 +255,14 @@ def kernel_params(model) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, float
             cs += [v[f"{k}_{side}"] for k in ("a1", "a2", "a3", "a4")]
         c = np.array([*cs, v["theta0"]], dtype=float)
         return K.KIND_AGPI, c, np.concatenate(rs), np.concatenate(ps), 1.0, np.inf, 0.0
-    if family is not None:
+    if code is not None:
         v = model.value_dict()
         r = thresholds(v["r1"], v["rn"], int(model.n))
         p = density(r, v["lam"], v["sigma"])
-    if family in ("egpi", "egpi_c"):
-        code = K.KIND_EGPI_C if family == "egpi_c" else K.KIND_EGPI
+    if code in (K.KIND_EGPI, K.KIND_EGPI_C):
         c = np.array([v[k] for k in ("a1", "a2", "a3", "a4", "a5", "a6")])
         return code, c, r, p, v["kappa"], v["v_f"], float(model.deadband_counts)
-    if family == "gpi":
+    if code == K.KIND_GPI:
         c = np.array([v["a1"], v["a2"], v["a3"], v["a4"], v["a3"], v["a4"]])
         return K.KIND_GPI, c, r, p, 1.0, np.inf, 0.0
     *names, last = (k.kind for k in KINDS if k.inverse)
@@ -308,8 +307,10 @@ def default_tol(code: int, c: np.ndarray, p: np.ndarray, quantum: float) -> floa
 
 
 def is_coupled(model) -> bool:
-    """True for a model that reads the other motor's input (``agpi_coupled``)."""
-    return getattr(kind_of(base_of(model)), "inverse", None) == "agpi_coupled"
+    """True for an invertible model that reads the other motor's input (its registry
+    row ``coupled``: the coupling is inverted with its own tendons)."""
+    info = kind_of(base_of(model))
+    return bool(info is not None and info.inverse and info.coupled)
 
 
 def coupling_deg(

@@ -51,6 +51,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from i2ris_calib.hysteresis.kinds import INVERSE_FAMILIES
+
 KIND_GPI = 0
 KIND_EGPI = 1
 KIND_EGPI_C = 2
@@ -59,6 +61,10 @@ KIND_EGPI_C = 2
 #: (shape (2 m,)), one family whose state row holds ``w_p`` then ``w_n``; the input is
 #: the signed command (side p sees ``max(u, 0)``, side n ``max(-u, 0)``)
 KIND_AGPI = 3
+#: Inverse family (a registry row's ``inverse``) -> its kind code: the families of
+#: :data:`~i2ris_calib.hysteresis.kinds.INVERSE_FAMILIES` are in code order
+FAMILY_CODES = dict(zip(INVERSE_FAMILIES, (KIND_GPI, KIND_EGPI, KIND_EGPI_C, KIND_AGPI),
+                        strict=True))  # fmt: skip
 
 STATUS_OK = 0
 STATUS_ABOVE = 1

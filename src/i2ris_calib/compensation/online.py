@@ -1,11 +1,12 @@
-"""Online compensation: a :class:`Compensator` a control loop calls once per cycle.
+"""Online compensation: an :class:`OnlineInverse` a control loop calls once per cycle
+(the public :class:`i2ris_calib.Compensator` is one, with its files).
 
 The batch path (:func:`~i2ris_calib.compensation.inverse.compensate`) inverts a whole
-target; a controller knows one target sample at a time. :class:`Compensator` carries
+target; a controller knows one target sample at a time. :class:`OnlineInverse` carries
 the inverse's state from one call to the next and takes exactly the batch's step
 (:func:`~i2ris_calib.compensation.kernel.step_one` runs the compiled
 :func:`~i2ris_calib.compensation.kernel._step` the batch loop runs, and
-:meth:`Compensator.advance` the kernel's :func:`~i2ris_calib.compensation.kernel.advance`
+:meth:`OnlineInverse.advance` the kernel's :func:`~i2ris_calib.compensation.kernel.advance`
 the batch runs through a history), so the same target sampled the same way gives the
 same commands as ``compensate(..., v_initial=start, entry=False, repair_spikes=False)``
 (docs/compensate.md, "Online use"), for every kind the batch inverts:
@@ -19,9 +20,9 @@ same commands as ``compensate(..., v_initial=start, entry=False, repair_spikes=F
 * a model with a time delay ``tau``: the target a step is given is the angle wanted
   ``tau`` after it (the batch inverts ``interp(t + tau)`` of its target).
 
-Everything a controller needs is in :meth:`Compensator.to_dict` (plain numbers: model
+Everything a controller needs is in :meth:`OnlineInverse.to_dict` (plain numbers: model
 kind and kernel parameters, limits, rate, state; schema :data:`SCHEMA`), which
-:meth:`Compensator.from_dict` restores without the model objects. Files are read and
+:meth:`OnlineInverse.from_dict` restores without the model objects. Files are read and
 written by :mod:`i2ris_calib.io.online`.
 """
 
@@ -47,13 +48,13 @@ from i2ris_calib.compensation.inverse import (
 )
 from i2ris_calib.errors import CalibError
 
-#: Schema of :meth:`Compensator.to_dict` (the JSON a controller loads); version 2 adds
+#: Schema of :meth:`OnlineInverse.to_dict` (the JSON a controller loads); version 2 adds
 #: ``delay_s`` and ``coupling`` per axis (version 1 files, without them, still load)
 SCHEMA = "i2ris-calib.compensator/2"
-#: Schemas :meth:`Compensator.from_dict` reads
+#: Schemas :meth:`OnlineInverse.from_dict` reads
 SCHEMAS_READ = ("i2ris-calib.compensator/1", SCHEMA)
-#: Kernel kind code <-> name in the JSON
-KIND_NAMES = {K.KIND_GPI: "gpi", K.KIND_EGPI: "egpi", K.KIND_EGPI_C: "egpi_c", K.KIND_AGPI: "agpi"}
+#: Kernel kind code <-> name in the JSON (the inverse families of the registry)
+KIND_NAMES = {code: family for family, code in K.FAMILY_CODES.items()}
 _KIND_CODES = {v: k for k, v in KIND_NAMES.items()}
 AXES = ("yaw", "pitch")
 _OTHER = {"yaw": "pitch", "pitch": "yaw"}
@@ -73,7 +74,7 @@ UNSETTLED = "coupling_unsettled"
 
 
 class AxisCommand(NamedTuple):
-    """One axis's result of :meth:`Compensator.step`.
+    """One axis's result of :meth:`OnlineInverse.step`.
 
     Attributes
     ----------
@@ -293,7 +294,7 @@ def _axis_from_model(name, model, v_limits, sign, max_rate, start, quantum, tol_
                  coupling=coupling, other_start=float(other_start))  # fmt: skip
 
 
-class Compensator:
+class OnlineInverse:
     """Online feedforward compensation: one target sample in, one command per axis out.
 
     Parameters
@@ -368,7 +369,7 @@ class Compensator:
             self._start_state = self.state
 
     @classmethod
-    def _from_axes(cls, axes: dict[str, _Axis]) -> Compensator:
+    def _from_axes(cls, axes: dict[str, _Axis]) -> OnlineInverse:
         obj = cls.__new__(cls)
         obj._axes = axes
         obj._start_state = None
@@ -534,7 +535,7 @@ class Compensator:
                 "joint_rounds": JOINT_ROUNDS, "axes": axes}  # fmt: skip
 
     @classmethod
-    def from_dict(cls, doc: dict) -> Compensator:
+    def from_dict(cls, doc: dict) -> OnlineInverse:
         """The compensator :meth:`to_dict` described (no model objects needed; schema
         version 1 or 2); CalibError naming the key for a document that is not one."""
         if not isinstance(doc, dict) or doc.get("schema") not in SCHEMAS_READ:
@@ -620,7 +621,7 @@ def _check_axis_values(name, c, r, p, cfg, v0, coupling, other_start, params) ->
     """CalibError when an axis's numbers cannot be a fitted model's (a JSON edited or
     damaged): kernel arrays and parameters finite, limits ordered, rate > 0, quantum
     >= 0, tolerance > 0, the start input ``v0`` (model convention) inside the limits
-    (:meth:`Compensator.from_dict` checks what the constructor's model checks)."""
+    (:meth:`OnlineInverse.from_dict` checks what the constructor's model checks)."""
     arrays = {"c": c, "r": r, "p": p}
     if coupling is not None:
         arrays.update({"coupling.c": coupling[0], "coupling.r": coupling[1],
@@ -675,7 +676,7 @@ def _floats(a) -> list[float]:
 
 
 def _axis_dict(name: str, ax) -> dict:
-    """:meth:`Compensator.to_dict`'s record of axis ``name`` (its ``_Axis`` ``ax``)."""
+    """:meth:`OnlineInverse.to_dict`'s record of axis ``name`` (its ``_Axis`` ``ax``)."""
     kappa, vf, db, lo, hi, rate, quantum, tol = (float(x) for x in ax.cfg)
     st = ax.get()
     state = {

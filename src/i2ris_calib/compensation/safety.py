@@ -1,5 +1,5 @@
-"""Safety of a command sequence: the fastest input move a recording shows (the default
-rate limit of compensation), up-and-back spikes, the entry ramp from the start state.
+"""Safety of a command sequence: up-and-back spikes, the entry ramp from the start state,
+the conditioning sweep (the rate limit: :mod:`.rate`).
 
 Pure array code (no files, no printing); docs/compensate.md ("Safe by default").
 """
@@ -9,10 +9,6 @@ from __future__ import annotations
 import numpy as np
 
 from i2ris_calib.errors import CalibError
-
-#: Percentile of |dv/dt| over the moving samples taken as a recording's fastest input
-#: move (robust to a few glitches, :func:`max_input_rate`)
-RATE_PERCENTILE = 99.0
 
 #: An output excursion that returns is a spike when it leaves the target by more than
 #: ``max(SPIKE_MIN_DEG, SPIKE_TOL_FACTOR * tol_deg)`` (deg) on top of the target's own
@@ -35,30 +31,6 @@ def ramp_commands(dist: float, max_rate: float, dt_s: float) -> float:
         return 0.0
     per = float(max_rate) * float(dt_s)
     return float(np.ceil(abs(float(dist)) / per)) if per > 0 else float("inf")
-
-
-def max_input_rate(v: np.ndarray, t_s: np.ndarray) -> float | None:
-    """The fastest input move of a recording (input unit per s): the
-    :data:`RATE_PERCENTILE` percentile of ``|dv/dt|`` over the samples where the input
-    moves; None when it never moves (or has fewer than 2 samples).
-
-    Parameters
-    ----------
-    v : ndarray, shape (n,)
-        Input (encoder counts).
-    t_s : ndarray, shape (n,)
-        Sample times (s), increasing.
-    """
-    v = np.asarray(v, dtype=float)
-    t = np.asarray(t_s, dtype=float)
-    if v.size < 2 or t.size != v.size:
-        return None
-    dv = np.abs(np.diff(v))
-    dt = np.diff(t)
-    ok = (dv > 0) & (dt > 0) & np.isfinite(dv) & np.isfinite(dt)
-    if not ok.any():
-        return None
-    return float(np.percentile(dv[ok] / dt[ok], RATE_PERCENTILE))
 
 
 def find_spikes(

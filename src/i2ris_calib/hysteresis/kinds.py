@@ -37,6 +37,12 @@ class KindName:
     n_starts: str = "n_starts"
 
 
+#: The model families the compensation kernel inverts, in the order of its kind codes
+#: (``compensation/kernel.py``, ``KIND_*``); a row's ``inverse`` names one (a coupled
+#: kind: its own tendons', the coupling inverted with them). The online compensator's
+#: JSON names them (``kernel_kind``).
+INVERSE_FAMILIES = ("gpi", "egpi", "egpi_c", "agpi")
+
 #: Every kind, in fitting order (a kind's nested kind comes before it).
 NAMES: tuple[KindName, ...] = (
     KindName("gpi", "GPI", "GPI", "models:GPIModel", n_starts="n_starts_gpi", inverse="gpi",
@@ -51,7 +57,7 @@ NAMES: tuple[KindName, ...] = (
     KindName("agpi_coupled", "two-tendon GPI + coupling",
              "two-tendon GPI + hysteretic coupling to the other motor",
              "coupled:CoupledTwoTendonModel", n_starts="n_starts_gpi", nested="agpi",
-             signed=True, coupled=True, inverse="agpi_coupled"),
+             signed=True, coupled=True, inverse="agpi"),
     KindName("maxwell_slip", "PI / Maxwell slip", "Prandtl-Ishlinskii / Maxwell slip",
              "slip:SlipModel", signed=True, on_signed=True, diagnosis_start=True,
              with_coupling=False, method="trf"),

@@ -94,9 +94,10 @@ class ModelKind(KindName):
     nested : str or None
         Kind whose fit, mapped into this kind, is one more start (GPI in EGPI).
     inverse : str or None
-        Model family the compensation kernel inverts (``"gpi"``, ``"egpi"``,
-        ``"egpi_c"``, ``"agpi"``; ``"agpi_coupled"``: its own tendons as ``agpi``, given
-        the other motor's commands); None: no inverse.
+        Model family the compensation kernel inverts (one of
+        :data:`~i2ris_calib.hysteresis.kinds.INVERSE_FAMILIES`: ``"gpi"``, ``"egpi"``,
+        ``"egpi_c"``, ``"agpi"``; a ``coupled`` kind: its own tendons', given the other
+        motor's commands); None: no inverse.
     signed : bool
         Needs the whole signed input of an axis (dataset ``"±"``).
     paper : bool

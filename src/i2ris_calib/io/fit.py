@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from i2ris_calib.compensation.safety import max_input_rate
+from i2ris_calib.compensation.rate import max_input_rate
 from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.effects import base_of
 from i2ris_calib.diagnosis.serialize import model_from_dict

@@ -1,7 +1,8 @@
 """Reading what compensation needs from a fit.json (docs/formats.md, fit.json): a
-dataset's record, its models rebuilt, and the motor
-rate limit the recording supports. Used by ``compensate`` and the online
-:class:`~i2ris_calib.io.online.Compensator`."""
+dataset's record and what the compensation plan reads of it
+(:class:`~i2ris_calib.compensation.plan.FittedDataset`: its range, the recording's
+fastest input move, its models' held-out errors, its decision), its models rebuilt.
+Used by ``compensate`` and the online :class:`~i2ris_calib.io.online.Compensator`."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from i2ris_calib.compensation.plan import FittedDataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import Decision
 from i2ris_calib.fitting.pipeline import model_from_params
@@ -18,19 +20,14 @@ from i2ris_calib.io.fit import read_model_file
 __all__ = [
     "API_NAMES",
     "CLI_NAMES",
-    "FALLBACK_RANGE_SHARE_PER_S",
     "dataset_names",
     "dataset_record",
-    "decided_kind",
+    "fitted_dataset",
     "record_decision",
     "holdout_rmse",
     "load_model",
-    "rate_limit",
+    "virgin_identified",
 ]
-
-#: Rate limit when fit.json does not store the recording's fastest input move (older
-#: files): this share of the fitted input range per second
-FALLBACK_RANGE_SHARE_PER_S = 0.1
 
 #: How messages name the choices: the ``compensate`` command's options, or the
 #: arguments of ``Compensator.from_fit`` (a Python caller has no command-line flags).
@@ -124,46 +121,6 @@ def load_model(
         ) from None
 
 
-def rate_limit(
-    record: dict,
-    explicit: float | None,
-    configured: float,
-    range_counts: float,
-    names: dict = CLI_NAMES,
-) -> tuple[float, str, str | None]:
-    """(rate limit in counts/s, where it comes from, a warning line or None).
-
-    ``explicit`` (``--max-counts-per-s``) wins, then ``configured`` (``[compensate]
-    max_counts_per_s``, 0 = not set); ``inf`` means no limit. Otherwise the fastest
-    input move of the fit's recording (fit.json ``max_input_rate_counts_per_s``); a
-    fit.json without it (older files) falls back to :data:`FALLBACK_RANGE_SHARE_PER_S`
-    of the fitted input range per second, with a warning.
-    """
-    for value, source in ((explicit, names["rate"].rstrip("=")),
-                          (configured or None, "[compensate] max_counts_per_s")):  # fmt: skip
-        if value is not None:
-            if not float(value) > 0:
-                raise CalibError(f"{source} = {value:g}: give a rate > 0 counts/s (inf: no limit)")
-            return float(value), source, None
-    stored = record.get("max_input_rate_counts_per_s")
-    if stored is not None and float(stored) > 0:
-        return (
-            float(stored),
-            "fit.json max_input_rate_counts_per_s (the recording's fastest move)",
-            None,
-        )
-    rate = FALLBACK_RANGE_SHARE_PER_S * range_counts
-    return (
-        rate,
-        "fallback",
-        (
-            f"{record.get('name')}: fit.json has no max_input_rate_counts_per_s (written by an "
-            f"older 'fit'); rate limit {rate:g} counts/s ({FALLBACK_RANGE_SHARE_PER_S:g} of the "
-            f"fitted input range per second): re-run 'fit' or give {names['rate']}"
-        ),
-    )
-
-
 def holdout_rmse(rec: dict) -> float | None:
     """A fit.json model record's held-out RMSE (deg), else its fitted RMSE, else None."""
     for key in ("holdout_metrics", "metrics"):
@@ -194,13 +151,31 @@ def record_decision(record: dict) -> Decision:
     return Decision(name, best, why, ranking, tuple(held.items()))
 
 
-def decided_kind(record: dict, refusal, where: str) -> tuple[str, str]:
-    """(kind, note) of the dataset record's recommended model for an entry point that
-    cannot use every kind (``refusal(kind)``: why not, None when it can;
-    :meth:`Decision.model_for`); ``note`` says which model it uses instead and why
-    (empty: the recommended one). A one-line CalibError (``where``: the file and
-    dataset) when it can use none."""
-    kind, note = record_decision(record).model_for(refusal)
-    if kind is None:
-        raise CalibError(f"{where}: {note}")
-    return kind, note
+def virgin_identified(record: dict) -> bool | None:
+    """Whether the fit knows the model's state at rest: True when its recording started
+    at rest (no model of the dataset has an estimated ``initial_state``), False when it
+    started mid-loop (an ``initial_state`` was estimated), None when fit.json does not
+    say (older files)."""
+    models = record.get("models", {}).values()
+    if not any("initial_state" in m for m in models):
+        return None
+    return not any(m.get("initial_state") for m in models)
+
+
+def fitted_dataset(record: dict, path: Path) -> FittedDataset:
+    """What the compensation plan reads of a fit.json dataset ``record`` (read from
+    ``path``): its name, input range, the recording's fastest input move, its fitted
+    kinds and their held-out RMSE, whether its recording started at rest, its decision
+    (:func:`record_decision`)."""
+    models = record.get("models", {})
+    stored = record.get("max_input_rate_counts_per_s")
+    return FittedDataset(
+        name=str(record.get("name")),
+        where=str(path),
+        input_range=tuple(float(x) for x in record["input_range_counts"]),
+        recorded_rate=None if stored is None else float(stored),
+        kinds=tuple(models),
+        holdout={k: holdout_rmse(rec) for k, rec in models.items()},
+        virgin=virgin_identified(record),
+        decision=record_decision(record),
+    )

@@ -9,31 +9,21 @@ import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
-from i2ris_calib.compensation import online
+from i2ris_calib.compensation.online import OnlineInverse
+from i2ris_calib.compensation.plan import ONLINE_KINDS, axis_plan, online_kind
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.kinds import DIAGNOSED
-from i2ris_calib.hysteresis.registry import KINDS
 from i2ris_calib.io.atomic import write_json
 from i2ris_calib.io.fit import read_fit_json
-from i2ris_calib.io.fit_records import (
-    API_NAMES,
-    dataset_record,
-    decided_kind,
-    load_model,
-    rate_limit,
-)
+from i2ris_calib.io.fit_records import API_NAMES, dataset_record, fitted_dataset, load_model
 
-#: Kinds the online compensator inverts (``diagnosed``: with ``model_file``): every kind
-#: with an inverse in the registry, as the batch (a coupled kind: its kernel kind and its
-#: coupling to the other motor)
-ONLINE_KINDS = tuple(k.kind for k in KINDS if k.inverse)
-#: Kinds that read the other motor (chosen by default only with both axes' fits)
-_COUPLED = tuple(k.kind for k in KINDS if k.inverse and k.coupled)
+__all__ = ["ONLINE_KINDS", "Compensator"]
 
 
-class Compensator(online.Compensator):
-    """The online compensator (:class:`i2ris_calib.compensation.online.Compensator`)
-    with its files: :meth:`from_fit`, :meth:`to_json`, :meth:`from_json`.
+class Compensator(OnlineInverse):
+    """The online compensator: the file-free inverse
+    (:class:`i2ris_calib.compensation.online.OnlineInverse`: built from models, its
+    ``step``, ``advance``, ``state``, ``to_dict``) with its files: :meth:`from_fit`,
+    :meth:`to_json`, :meth:`from_json`.
 
     Example (a control loop at 100 Hz)::
 
@@ -96,17 +86,18 @@ class Compensator(online.Compensator):
             doc = read_fit_json(p)
             name = _dataset_name(doc, name)
             record = dataset_record(doc, name, p, API_NAMES)
-            kind = _online_kind(record, model, f"{p} [{name}]", coupled_ok=len(paths) > 1)
+            fit = fitted_dataset(record, p)
+            kind, note = online_kind(fit, model, coupled_ok=len(paths) > 1)
+            if note:
+                warnings.warn(f"Compensator.from_fit: {note}", stacklevel=2)
             ax = name[:-1]
             if ax in models:
                 raise CalibError(f"Compensator.from_fit: two fits of the {ax} axis")
             models[ax] = load_model(doc, record, kind, p, mf, API_NAMES)
-            lo, hi = (float(x) for x in record["input_range_counts"])
-            if not name.endswith("±"):
-                lo = min(lo, 0.0)
-            limits[ax] = (lo, hi)
-            signs[ax] = -1.0 if name.endswith("-") else 1.0
-            rates[ax] = rate_limit(record, max_counts_per_s, 0.0, hi - lo, API_NAMES)[0]
+            plan = axis_plan(fit, max_counts_per_s, 0.0, API_NAMES["rate"])
+            limits[ax] = (plan.lo, plan.hi)
+            signs[ax] = plan.sign
+            rates[ax] = plan.rate.counts_per_s
         return cls(
             models,
             limits,
@@ -130,7 +121,7 @@ class Compensator(online.Compensator):
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise CalibError(f"{p}: not a readable compensator JSON ({exc})") from None
         try:
-            base = online.Compensator.from_dict(doc)
+            base = OnlineInverse.from_dict(doc)
         except CalibError as exc:
             raise CalibError(f"{p}: {exc}") from None
         return cls._from_axes(base._axes)
@@ -154,29 +145,3 @@ def _dataset_name(doc: dict, name: str | None) -> str:
         have = [str(d.get("name")) for d in doc.get("datasets", [])]
         name = f"{axis}±" if f"{axis}±" in have else (have[0] if have else f"{axis}+")
     return name.replace("+-", "±")
-
-
-def _online_kind(record: dict, model: str | None, where: str, coupled_ok: bool) -> str:
-    """The model kind to invert: ``model`` checked, or the dataset record's fitted online
-    kind with the lowest held-out RMSE (a coupled kind only when ``coupled_ok``)."""
-    if model is not None:
-        if model not in ONLINE_KINDS and model != DIAGNOSED:
-            raise CalibError(
-                f"Compensator.from_fit: model must be one of {', '.join(ONLINE_KINDS)}, "
-                f"got '{model}'"
-            )
-        return model
-
-    def refusal(kind: str) -> str | None:
-        if kind not in ONLINE_KINDS:
-            return (
-                f"{kind} has no inverse (the online compensator inverts {', '.join(ONLINE_KINDS)})"
-            )
-        if kind in _COUPLED and not coupled_ok:
-            return f"{kind} reads the other motor: give both axes' fit.json"
-        return None
-
-    kind, note = decided_kind(record, refusal, where)
-    if note:
-        warnings.warn(f"Compensator.from_fit: {note}", stacklevel=3)
-    return kind

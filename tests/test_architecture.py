@@ -192,12 +192,9 @@ def test_no_circle_between_files():
 
 
 #: Files outside hysteresis/ that may still write kind names out, until the branch that
-#: moves them lands: compensation/ is the compensation branch's (issue 34: its kernel
-#: codes from the names table), diagnosis/serialize.py the branch moving it into the
-#: model layer. Remove each entry when its branch merges.
+#: moves them lands: diagnosis/serialize.py, the branch moving it into the model layer.
+#: Remove each entry when its branch merges.
 KIND_LITERAL_EXEMPT = {
-    "compensation/inverse.py",
-    "compensation/online.py",
     "diagnosis/serialize.py",
 }
 #: At most this many other files outside hysteresis/ may write a kind name out (issue 34).

@@ -37,8 +37,8 @@ _API = {
     "egpi_model": "i2ris_calib.hysteresis.models",
     "model_for_kind": "i2ris_calib.hysteresis.registry",
     "MODEL_KINDS": "i2ris_calib.hysteresis.registry",
-    "Parameter": "i2ris_calib.hysteresis.model",
-    "Signals": "i2ris_calib.hysteresis.model",
+    "Parameter": "i2ris_calib.model",
+    "Signals": "i2ris_calib.model",
     "Dataset": "i2ris_calib.data.dataset",
     "make_dataset": "i2ris_calib.data.dataset",
     "direction_datasets": "i2ris_calib.data.dataset",
@@ -49,8 +49,8 @@ _API = {
     "FitConfig": "i2ris_calib.fitting.config",
     "diagnose": "i2ris_calib.diagnosis.workflow",
     "diagnose_from_starts": "i2ris_calib.diagnosis.workflow",
-    "add_effect": "i2ris_calib.diagnosis.effects",
-    "CATALOGUE": "i2ris_calib.diagnosis.effects",
+    "add_effect": "i2ris_calib.hysteresis.effects",
+    "CATALOGUE": "i2ris_calib.hysteresis.effects",
     "compensate": "i2ris_calib.compensation",
     "Compensator": "i2ris_calib.io.online",
     "PipelineConfig": "i2ris_calib.config",
@@ -112,9 +112,8 @@ def _load(name: str):
                 if directions is not None:
                     directions = checked_directions(func, directions)
                 if columns is not None:
-                    from i2ris_calib.config import ColumnsConfig
-
-                    v.check_instance(func, "columns", columns, ColumnsConfig)
+                    columns_config = _import_module("i2ris_calib.config").ColumnsConfig
+                    v.check_instance(func, "columns", columns, columns_config)
                 return obj([path], axis, config, directions, columns=columns)
 
             return load_synced

@@ -20,10 +20,9 @@ from i2ris_calib.compensation.safety import (
     conditioning_sweep,
     ramp_commands,
 )
-from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.effects import model_values
 from i2ris_calib.hysteresis.kinds import DIAGNOSED
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.hysteresis.registry import KINDS as KIND_ROWS
 from i2ris_calib.interrupts import deferred
@@ -42,6 +41,7 @@ from i2ris_calib.io.fit_records import (
 from i2ris_calib.io.outputs import claim_output_file, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.target_csv import read_history, read_target
+from i2ris_calib.model import Signals
 
 SCHEMA = "i2ris-calib.compensate/1"
 #: ``--model`` choices: the kinds with an inverse (registry) and ``"diagnosed"``

@@ -64,10 +64,10 @@ import numpy as np  # noqa: E402
 from i2ris_calib.compensation import compensate  # noqa: E402
 from i2ris_calib.compensation.inverse import forward  # noqa: E402
 from i2ris_calib.data.dataset import input_bands, make_dataset  # noqa: E402
-from i2ris_calib.diagnosis.effects import build_model, effects_of  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model  # noqa: E402
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
 from i2ris_calib.fitting.pipeline import fit_dataset_all, model_from_params  # noqa: E402
+from i2ris_calib.hysteresis.effects import build_model, effects_of  # noqa: E402
 from i2ris_calib.hysteresis.presets import loading_trajectory, paper_like_params  # noqa: E402
 
 NOISE_DEG = 0.1

@@ -26,8 +26,8 @@ import time
 import numpy as np
 
 from i2ris_calib.compensation import compensate
-from i2ris_calib.diagnosis.effects import add_effect
 from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.effects import add_effect
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.io.online import Compensator

@@ -54,8 +54,8 @@ from independent_cases import (  # noqa: E402
 )
 
 from i2ris_calib.diagnosis.config import DiagnosisConfig  # noqa: E402
-from i2ris_calib.diagnosis.effects import CATALOGUE  # noqa: E402
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts  # noqa: E402
+from i2ris_calib.hysteresis.effects import CATALOGUE  # noqa: E402
 
 
 def run_independent(args) -> dict:

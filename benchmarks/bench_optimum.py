@@ -103,13 +103,13 @@ from i2ris_calib.fitting.pipeline import (  # noqa: E402
     split_masks,
     unfitted_model,
 )
-from i2ris_calib.hysteresis.model import Signals  # noqa: E402
 from i2ris_calib.hysteresis.presets import (  # noqa: E402
     gpi_values,
     random_i2ris_egpi_params,
     random_two_tendon_params,
 )
 from i2ris_calib.hysteresis.registry import kind_info  # noqa: E402
+from i2ris_calib.model import Signals  # noqa: E402
 
 KINDS = ("gpi", "egpi", "egpi_c", "agpi", "agpi_coupled", "bouc_wen", "maxwell_slip")
 PROTOCOLS = {

@@ -3,9 +3,9 @@
 Every ``import`` of ``i2ris_calib`` in ``src/i2ris_calib`` (at module level or inside a
 function: a late import is still a dependency) is read with :mod:`ast`. A file belongs
 to a *unit*: its subpackage (``fitting/fit.py`` -> ``fitting``) or, for a module at the
-package root, the module (``config.py`` -> ``config``). ``hysteresis/model.py`` is a unit
-of its own: the vocabulary every layer speaks (``Signals``, ``Parameter``, the ``Model``
-protocol; numpy only), below the argument checks that test for ``Signals``.
+package root, the module (``config.py`` -> ``config``). ``model.py`` is the vocabulary
+every layer speaks (``Signals``, ``Parameter``, the ``Model`` protocol; numpy only),
+below the argument checks that test for ``Signals``.
 """
 
 from __future__ import annotations
@@ -21,12 +21,12 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "i2ris_calib"
 #: bottom to top; a unit may import its own layer's units and lower ones, never higher
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors", "interrupts", "session", "_display"),  # plain types, no i2ris_calib import
-    ("hysteresis.model",),  # Signals, Parameter, Model: what models and data share
+    ("model",),  # Signals, Parameter, Model: what models and data share
     ("_validate",),  # argument checks of the public functions (one-line CalibError)
-    ("hysteresis",),  # the models: kernels, GPI/EGPI, registry, starts, input bands
+    ("hysteresis",),  # the models: kernels, GPI/EGPI, registry, starts, effects, the codec
     ("data",),  # synced recording -> motion-direction datasets, loading cycles
     ("fitting",),  # least squares, metrics, fit(model, data)
-    # the stages built on a fit (diagnosis extends models; compensation inverts them,
+    # the stages built on a fit (diagnosis names effects; compensation inverts models,
     # sync fits one jointly with the clock, simulation renders the catalogue's effects)
     ("diagnosis", "compensation", "sync", "tracking", "simulation", "report"),
     ("config",),  # PipelineConfig: every stage's section
@@ -40,10 +40,7 @@ FACE = "__init__"
 
 
 def unit_of_file(path: Path) -> str:
-    rel = path.relative_to(SRC).with_suffix("")
-    if rel.parts == ("hysteresis", "model"):
-        return "hysteresis.model"
-    return rel.parts[0]
+    return path.relative_to(SRC).with_suffix("").parts[0]
 
 
 def unit_of_module(module: str) -> str | None:
@@ -53,8 +50,6 @@ def unit_of_module(module: str) -> str | None:
         return None
     if len(parts) == 1:
         return FACE
-    if parts[1:3] == ["hysteresis", "model"]:
-        return "hysteresis.model"
     return parts[1]
 
 
@@ -191,12 +186,22 @@ def test_no_circle_between_files():
     assert not cycles, cycles
 
 
-#: Files outside hysteresis/ that may still write kind names out, until the branch that
-#: moves them lands: diagnosis/serialize.py, the branch moving it into the model layer.
-#: Remove each entry when its branch merges.
-KIND_LITERAL_EXEMPT = {
-    "diagnosis/serialize.py",
-}
+#: Units that name no effect through the diagnosis: the effects, their kernels and the
+#: model codec are the model layer's (``hysteresis/``), so reading or inverting a model
+#: with effects, or rendering one, does not load the diagnosis stage.
+WITHOUT_DIAGNOSIS = ("io", "compensation", "simulation")
+
+
+def test_effects_are_read_from_the_model_layer():
+    edges = unit_imports()
+    found = [f"{src} -> diagnosis: {edges[src, 'diagnosis']}" for src in WITHOUT_DIAGNOSIS
+             if (src, "diagnosis") in edges]  # fmt: skip
+    assert not found, "import the effects from hysteresis/:\n" + "\n".join(found)
+
+
+#: Files outside hysteresis/ that may still write kind names out (none since the
+#: codec moved into the model layer, hysteresis/codec.py).
+KIND_LITERAL_EXEMPT: set[str] = set()
 #: At most this many other files outside hysteresis/ may write a kind name out (issue 34).
 MAX_KIND_LITERAL_FILES = 1
 
@@ -260,6 +265,8 @@ def f(kind="egpi"):  # "agpi" in a comment
         ("config", "io"),
         ("_validate", "data"),
         ("io", "commands"),
+        ("model", "hysteresis"),
+        ("_validate", "hysteresis"),
     ],
 )
 def test_the_checker_sees_an_upward_import(src, dst):

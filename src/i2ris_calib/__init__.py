@@ -107,9 +107,8 @@ def _load(name: str):
                 if directions is not None:
                     directions = checked_directions(func, directions)
                 if columns is not None:
-                    from i2ris_calib.config import ColumnsConfig
-
-                    v.check_instance(func, "columns", columns, ColumnsConfig)
+                    columns_config = _import_module("i2ris_calib.config").ColumnsConfig
+                    v.check_instance(func, "columns", columns, columns_config)
                 return obj([path], axis, config, directions, columns=columns)
 
             return load_synced

@@ -18,8 +18,6 @@ from i2ris_calib.data.dataset import Dataset as Dataset
 from i2ris_calib.data.dataset import direction_datasets as direction_datasets
 from i2ris_calib.data.dataset import make_dataset as make_dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig as DiagnosisConfig
-from i2ris_calib.diagnosis.effects import CATALOGUE as CATALOGUE
-from i2ris_calib.diagnosis.effects import add_effect as add_effect
 from i2ris_calib.diagnosis.workflow import diagnose as diagnose
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts as diagnose_from_starts
 from i2ris_calib.errors import CalibError as CalibError
@@ -28,8 +26,8 @@ from i2ris_calib.fitting.fit import FitNote as FitNote
 from i2ris_calib.fitting.fit import FitResult as FitResult
 from i2ris_calib.fitting.fit import fit_model as fit_model
 from i2ris_calib.fitting.pipeline import fit as fit
-from i2ris_calib.hysteresis.model import Parameter as Parameter
-from i2ris_calib.hysteresis.model import Signals as Signals
+from i2ris_calib.hysteresis.effects import CATALOGUE as CATALOGUE
+from i2ris_calib.hysteresis.effects import add_effect as add_effect
 from i2ris_calib.hysteresis.models import continuous_egpi_model as continuous_egpi_model
 from i2ris_calib.hysteresis.models import egpi_model as egpi_model
 from i2ris_calib.hysteresis.models import gpi_model as gpi_model
@@ -37,6 +35,8 @@ from i2ris_calib.hysteresis.models import i2ris_egpi_model as i2ris_egpi_model
 from i2ris_calib.hysteresis.registry import MODEL_KINDS as MODEL_KINDS
 from i2ris_calib.hysteresis.registry import model_for_kind as model_for_kind
 from i2ris_calib.io.online import Compensator as Compensator
+from i2ris_calib.model import Parameter as Parameter
+from i2ris_calib.model import Signals as Signals
 from i2ris_calib.report.config import ReportConfig as ReportConfig
 from i2ris_calib.simulation.config import SimulationConfig as SimulationConfig
 from i2ris_calib.sync.config import SyncConfig as SyncConfig

@@ -10,7 +10,7 @@ or a string where a config belongs) is told what was wrong and how to fix it, e.
 
 Messages start with the function's name and name the argument. The checks cost
 O(n) once per call; nothing here runs inside a fit's iterations. This module imports
-only :mod:`i2ris_calib.errors` and :mod:`i2ris_calib.hysteresis.model` (numpy only),
+only :mod:`i2ris_calib.errors` and :mod:`i2ris_calib.model` (numpy only),
 so every module can use it.
 """
 
@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Mapping
 import numpy as np
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.model import Signals
 
 __all__ = [
     "as_1d_bool",
@@ -233,7 +233,7 @@ def same_length(func: str, **arrays: np.ndarray | None) -> int:
 
 
 def check_signals(func: str, name: str, signals: object):
-    """``signals`` (a :class:`~i2ris_calib.hysteresis.model.Signals` or an input array)
+    """``signals`` (a :class:`~i2ris_calib.model.Signals` or an input array)
     checked: a 1-D finite input ``v``, finite ``t_s`` / ``v_other`` of its length when
     given, ``theta_other_deg`` of its length (NaN allowed: an angle). Returns
     ``signals`` itself when it is a Signals, else the input as a float array."""

@@ -202,8 +202,8 @@ def test_cli_one_line_error_and_success(files, capsys):
 
 
 def test_diagnosed_model_with_delay(tmp_path):
-    from i2ris_calib.diagnosis.effects import add_effect
-    from i2ris_calib.diagnosis.serialize import model_to_dict
+    from i2ris_calib.hysteresis.codec import model_to_dict
+    from i2ris_calib.hysteresis.effects import add_effect
 
     P = _fit_json(tmp_path / "fit.json", kinds=("egpi",))
     model = add_effect(model_from_params("egpi", P, 30, 2.0), "time_delay", {"tau_s": 0.1})
@@ -350,8 +350,8 @@ def test_fit_json_not_an_object_or_missing_keys(files, capsys):
 
 
 def test_broken_final_model_json_names_file_and_key(tmp_path, capsys):
-    from i2ris_calib.diagnosis.effects import add_effect
-    from i2ris_calib.diagnosis.serialize import model_to_dict
+    from i2ris_calib.hysteresis.codec import model_to_dict
+    from i2ris_calib.hysteresis.effects import add_effect
 
     P = _fit_json(tmp_path / "fit.json", kinds=("egpi",))
     model = add_effect(model_from_params("egpi", P, 30, 2.0), "time_delay", {"tau_s": 0.1})
@@ -608,8 +608,8 @@ def test_older_fit_json_without_rate_falls_back_with_a_line(files, capsys):
 
 
 def test_model_file_lacking_the_fits_delay_refused(tmp_path):
-    from i2ris_calib.diagnosis.effects import add_effect
-    from i2ris_calib.diagnosis.serialize import model_to_dict
+    from i2ris_calib.hysteresis.codec import model_to_dict
+    from i2ris_calib.hysteresis.effects import add_effect
 
     P = _fit_json(tmp_path / "fit.json", kinds=("egpi",))
     base = model_from_params("egpi", P, 30, 2.0)

@@ -73,9 +73,9 @@ def test_outputs_are_complete_and_name_the_delay(diagnosed):
 
 def test_final_model_file_rebuilds_the_fitted_model(diagnosed):
     from i2ris_calib.commands.diagnose import diagnosis_dataset
-    from i2ris_calib.diagnosis.effects import model_values
-    from i2ris_calib.diagnosis.serialize import model_from_dict
     from i2ris_calib.fitting.config import FitConfig
+    from i2ris_calib.hysteresis.codec import model_from_dict
+    from i2ris_calib.hysteresis.effects import model_values
 
     _, out, _, csv = diagnosed
     obj = json.loads((out / "final_model.json").read_text())
@@ -143,8 +143,8 @@ def test_missing_file_is_a_one_line_error(tmp_path, capsys):
 
 
 def test_bad_model_file_is_a_calib_error():
-    from i2ris_calib.diagnosis.serialize import model_from_dict
     from i2ris_calib.errors import CalibError
+    from i2ris_calib.hysteresis.codec import model_from_dict
 
     with pytest.raises(CalibError, match="schema"):
         model_from_dict({"schema": "other"})
@@ -284,11 +284,11 @@ def _two_direction_csv(path, seed=4, tau_s=0.15, noise_deg=0.1):
     """A yaw recording with + then - loading cycles (paper-like EGPI per direction,
     driven by the direction's input over the whole history, a hidden delay)."""
     from i2ris_calib.data.dataset import direction_of_samples
-    from i2ris_calib.diagnosis.effects import build_model, model_values
     from i2ris_calib.diagnosis.synthetic import excitation
-    from i2ris_calib.hysteresis.model import Signals
+    from i2ris_calib.hysteresis.effects import build_model, model_values
     from i2ris_calib.hysteresis.models import i2ris_egpi_model
     from i2ris_calib.hysteresis.presets import paper_like_params
+    from i2ris_calib.model import Signals
 
     rng = np.random.default_rng(seed)
     t, v = excitation(rng, n_cycles=4)

@@ -77,7 +77,7 @@ def test_bad_model_file_is_one_line_error(tmp_path, capsys):
 def test_model_file_of_the_other_axis_is_refused(tmp_path, capsys):
     """final_model.json records the axis it was diagnosed on: a pitch± model is not
     refitted on yaw as "diagnosed"."""
-    from i2ris_calib.diagnosis.serialize import model_to_dict
+    from i2ris_calib.hysteresis.codec import model_to_dict
     from i2ris_calib.hysteresis.registry import model_for_kind
 
     csv = tmp_path / "s.csv"

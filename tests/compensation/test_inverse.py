@@ -10,9 +10,9 @@ from hypothesis import strategies as st
 from i2ris_calib.compensation import compensate
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation.inverse import forward, kernel_params
-from i2ris_calib.diagnosis.effects import add_effect
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.effects import add_effect
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params, random_i2ris_egpi_params
 
 KINDS = ("gpi", "egpi", "egpi_c")

@@ -108,7 +108,7 @@ def test_json_and_reference_stepper_reproduce_step(kind, tmp_path):
 
 
 def test_refusals_are_one_line(tmp_path):
-    from i2ris_calib.diagnosis.effects import add_effect
+    from i2ris_calib.hysteresis.effects import add_effect
 
     model, lim, _, _ = make("egpi")
     coupled = add_effect(model_for_kind("agpi_coupled"), "time_delay", {"tau_s": 0.1})

@@ -17,9 +17,9 @@ from i2ris_calib.compensation import compensate
 from i2ris_calib.compensation.inverse import forward
 from i2ris_calib.compensation.online import SCHEMA, UNSETTLED
 from i2ris_calib.compensation.safety import conditioning_sweep
-from i2ris_calib.diagnosis.effects import add_effect, base_of
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.effects import add_effect, base_of
 from i2ris_calib.hysteresis.presets import gpi_values, paper_like_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.io.online import Compensator
@@ -345,7 +345,7 @@ def test_reset_returns_to_the_state_after_the_history():
 
 
 def test_from_fit_diagnosed_model_with_its_delay(tmp_path):
-    from i2ris_calib.diagnosis.serialize import model_to_dict
+    from i2ris_calib.hysteresis.codec import model_to_dict
 
     pp = paper_like_params("yaw+")
     model = add_effect(model_from_params("egpi", pp, 30, 2.0), "time_delay", {"tau_s": 0.1})

@@ -7,9 +7,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pytest
 
-from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import paper_like_params
+from i2ris_calib.model import Parameter, Signals
 
 
 @dataclass(frozen=True)

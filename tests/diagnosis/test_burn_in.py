@@ -17,7 +17,7 @@ from i2ris_calib.diagnosis.data import (
 from i2ris_calib.diagnosis.workflow import diagnose, diagnose_from_starts
 from i2ris_calib.fitting.fit import InitialState
 from i2ris_calib.fitting.pipeline import fit_dataset
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.model import Signals
 from i2ris_calib.simulation.piezo import bouc_wen_actuator
 
 RATE_HZ = 200.0

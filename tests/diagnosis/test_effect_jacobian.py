@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from i2ris_calib.diagnosis._kernels import first_order_lag, lag_sum
-from i2ris_calib.diagnosis.effects import CATALOGUE, EffectModel, add_effect, model_values
 from i2ris_calib.diagnosis.refit import refit
 from i2ris_calib.fitting.fit import _analytic_jacobian
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.hysteresis.effect_kernels import first_order_lag, lag_sum
+from i2ris_calib.hysteresis.effects import CATALOGUE, EffectModel, add_effect, model_values
 from i2ris_calib.hysteresis.models import gpi_model
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.hysteresis.two_tendon import two_tendon_gpi_model
+from i2ris_calib.model import Signals
 
 #: The play operators make the output piecewise linear in the parameters, with kinks
 #: and, where a branch switches, jumps: a difference that straddles one is no

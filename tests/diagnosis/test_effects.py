@@ -7,8 +7,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from i2ris_calib.diagnosis._kernels import first_order_lag, play_varying, staged_backlash
-from i2ris_calib.diagnosis.effects import (
+from i2ris_calib.compensation.inverse import SUPPORTED_EFFECTS
+from i2ris_calib.diagnosis.results import (
+    SEPARATING_FROM_BASE,
+    separating_experiment,
+)
+from i2ris_calib.diagnosis.stats import RATE_EFFECTS
+from i2ris_calib.diagnosis.synthetic import STRENGTHS, excitation
+from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.codec import model_from_dict, model_to_dict
+from i2ris_calib.hysteresis.effect_kernels import first_order_lag, play_varying, staged_backlash
+from i2ris_calib.hysteresis.effects import (
     CATALOGUE,
     add_effect,
     base_of,
@@ -17,12 +26,9 @@ from i2ris_calib.diagnosis.effects import (
     model_values,
     other_axis_moves,
 )
-from i2ris_calib.diagnosis.serialize import model_from_dict, model_to_dict
-from i2ris_calib.diagnosis.synthetic import excitation
-from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Model, Parameter, Signals
 from i2ris_calib.hysteresis.models import gpi_model
 from i2ris_calib.hysteresis.registry import MODEL_KINDS, model_for_kind
+from i2ris_calib.model import Model, Parameter, Signals
 
 
 def _signals(seed: int = 0) -> Signals:
@@ -51,6 +57,38 @@ def test_parameters_are_declared_and_prefixed(name, egpi):
     for p in own:
         assert p.lower <= p.value <= p.upper and p.unit and p.doc
     assert CATALOGUE[name].meaning
+
+
+@pytest.mark.parametrize("name", list(CATALOGUE))
+def test_metadata_lives_on_the_effect_and_is_consistent(name, egpi):
+    """Each effect's strengths are three non-neutral sets inside its bounds (add_effect
+    accepts them); its ``separating`` names earlier catalogue effects, so each pair is
+    written once; the diagnosis and compensation tables are read from the effects."""
+    e = CATALOGUE[name]
+    assert len(e.strengths) == 3
+    for values in e.strengths:
+        ext = add_effect(egpi, name, values)  # CalibError outside the declared bounds
+        assert not np.array_equal(ext.effect_values, e.neutral())
+    earlier = list(CATALOGUE)[: list(CATALOGUE).index(name)]
+    assert set(e.separating) <= set(earlier) and all(e.separating.values())
+    assert STRENGTHS[name] == tuple(dict(p) for p in e.strengths)
+    assert (name in RATE_EFFECTS) == e.rate and (name in SUPPORTED_EFFECTS) == e.compensated
+    assert SEPARATING_FROM_BASE.get(name, "") == e.separating_from_base
+    for other, text in e.separating.items():
+        assert separating_experiment(other, name) == text
+
+
+def test_the_diagnosis_re_exports_the_model_layers_effects_and_codec():
+    """docs/diagnosis.md documents diagnosis.effects and diagnosis.serialize: the same
+    objects as in the model layer."""
+    import i2ris_calib.diagnosis.effects as old_effects
+    import i2ris_calib.diagnosis.serialize as old_serialize
+    import i2ris_calib.hysteresis.codec as codec
+    import i2ris_calib.hysteresis.effects as effects
+
+    assert all(getattr(old_effects, n) is getattr(effects, n) for n in old_effects.__all__)
+    assert old_serialize.model_from_dict is codec.model_from_dict
+    assert old_serialize.SCHEMA == codec.MODEL_SCHEMA == "i2ris-calib.model/1"
 
 
 def test_with_values_round_trip_and_stacking(egpi):

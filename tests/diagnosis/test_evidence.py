@@ -12,7 +12,7 @@ from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analy
 from i2ris_calib.diagnosis.report import diagnosis_markdown, not_excluded_sentence, step_verdict
 from i2ris_calib.diagnosis.results import SEPARATING_FROM_BASE, Alternative, separating_experiment
 from i2ris_calib.diagnosis.stats import autocovariance, sse_reduction_z
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.model import Signals
 
 
 def _ar1(rng, n, phi, sigma):

@@ -8,7 +8,6 @@ import numpy as np
 
 from i2ris_calib.data.dataset import input_bands, make_dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.effects import build_model, model_values
 from i2ris_calib.diagnosis.stats import (
     SPEED_EXPERIMENT,
     speed_follows_level,
@@ -16,9 +15,10 @@ from i2ris_calib.diagnosis.stats import (
 )
 from i2ris_calib.diagnosis.synthetic import make_case
 from i2ris_calib.diagnosis.workflow import diagnose, fit_start_model
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.hysteresis.effects import build_model, model_values
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import paper_like_params
+from i2ris_calib.model import Signals
 
 
 def _sine(seed=0, n_periods=10, hz=0.2, rate_hz=30.0, noise=0.2):

@@ -16,7 +16,6 @@ import pytest
 
 from i2ris_calib.data.dataset import make_dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
-from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.diagnosis.synthetic import (
     STRENGTHS,
     case_dataset,
@@ -25,6 +24,7 @@ from i2ris_calib.diagnosis.synthetic import (
 )
 from i2ris_calib.diagnosis.workflow import check_dataset, diagnose, fit_start_model
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.effects import model_values
 
 
 def _run(seed, effect, params=None, noise=0.2, signals=None, **cfg):

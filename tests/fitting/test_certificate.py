@@ -10,10 +10,10 @@ import pytest
 import i2ris_calib.fitting.fit as F
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import fit_kind, fit_warnings, search_starts
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.presets import loading_trajectory, paper_like_params
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.io.fit import model_record
+from i2ris_calib.model import Signals
 
 
 @pytest.fixture(scope="module")

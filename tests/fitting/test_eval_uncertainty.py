@@ -11,9 +11,9 @@ import pytest
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.fit import FitResult, fit_model
 from i2ris_calib.fitting.metrics import NAN_METRICS
-from i2ris_calib.hysteresis.model import NamedParameters, Parameter, Signals
 from i2ris_calib.hysteresis.models import continuous_egpi_model, gpi_model
 from i2ris_calib.hysteresis.presets import loading_trajectory
+from i2ris_calib.model import NamedParameters, Parameter, Signals
 
 
 @dataclass(frozen=True)

@@ -14,11 +14,11 @@ from i2ris_calib.fitting import fit as F
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import fit_kind
 from i2ris_calib.hysteresis.coupled import coupled_two_tendon_model
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import random_two_tendon_params, through_zero_trajectory
 from i2ris_calib.hysteresis.registry import model_for_kind
 from i2ris_calib.hysteresis.two_tendon import two_tendon_gpi_model
+from i2ris_calib.model import Signals
 
 
 def _signals(n=3000, seed=0, phase=0.0):

@@ -9,9 +9,9 @@ import numpy as np
 
 from i2ris_calib.fitting import fit as F
 from i2ris_calib.hysteresis.coupled import coupled_two_tendon_model
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import continuous_egpi_model, gpi_model
 from i2ris_calib.hysteresis.two_tendon import two_tendon_gpi_model
+from i2ris_calib.model import Signals
 
 
 def _signals(n=3000, seed=0, other=True):

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from i2ris_calib.diagnosis.effects import CATALOGUE, add_effect
 from i2ris_calib.diagnosis.synthetic import case_dataset, make_case
 from i2ris_calib.fitting.fit import fit_model, starts_at_rest
 from i2ris_calib.fitting.pipeline import fit, fit_warnings, split_masks
+from i2ris_calib.hysteresis.effects import CATALOGUE, add_effect
 from i2ris_calib.hysteresis.models import continuous_egpi_model, gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import gpi_values, loading_trajectory, paper_like_params
 from i2ris_calib.io.fit import model_record

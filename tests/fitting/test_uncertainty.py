@@ -22,9 +22,9 @@ import pytest
 
 from i2ris_calib.fitting.fit import fit_model
 from i2ris_calib.hysteresis.kernel import play_operators
-from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import ParametricModel, gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
+from i2ris_calib.model import Parameter, Signals
 
 NOISE = 0.1  # deg (the linear case)
 Z_NOISE = 0.02  # deg (the z-score problems: small enough for the linearised errors)

@@ -7,7 +7,6 @@ import pytest
 from hyst_reference import triangle
 
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Model, Signals
 from i2ris_calib.hysteresis.models import (
     ContinuousEGPIModel,
     GPIModel,
@@ -25,6 +24,7 @@ from i2ris_calib.hysteresis.presets import (
     random_i2ris_egpi_params,
 )
 from i2ris_calib.hysteresis.registry import MODEL_KINDS, model_for_kind
+from i2ris_calib.model import Model, Signals
 
 V = triangle([0, 6000, 1500, 5000, 0, 3500, 200, 6000, 0])
 

@@ -12,7 +12,6 @@ from hyst_reference import refine
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.pipeline import unfitted_model
 from i2ris_calib.hysteresis.bouc_wen import BoucWenModel, bouc_wen_state
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import (
     DIAGNOSIS_STARTS,
     INVERSE_KINDS,
@@ -25,6 +24,7 @@ from i2ris_calib.hysteresis.registry import (
     model_for_kind,
 )
 from i2ris_calib.hysteresis.slip import SlipModel
+from i2ris_calib.model import Signals
 
 SETTINGS = settings(max_examples=40, deadline=None)
 signed_inputs = st.lists(st.integers(-6000, 6000), min_size=2, max_size=50).map(

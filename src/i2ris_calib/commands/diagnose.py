@@ -23,15 +23,15 @@ from i2ris_calib.diagnosis.blas import single_threaded_blas
 from i2ris_calib.diagnosis.cycles import loading_mask
 from i2ris_calib.diagnosis.data import check_dataset
 from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record, paths_record
-from i2ris_calib.diagnosis.serialize import model_to_dict
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.codec import model_to_dict
 from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts, kind_info
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
 from i2ris_calib.io.outputs import claim_output_dir, output_dir, output_lock
 from i2ris_calib.io.provenance import provenance
 from i2ris_calib.io.synced import frame_datasets, frames_for_fit, read_frames
+from i2ris_calib.model import Model
 
 STARTS = ("auto", *DIAGNOSIS_STARTS)
 SCHEMA = "i2ris-calib.diagnosis/1"

@@ -16,12 +16,12 @@ import numpy as np
 
 from i2ris_calib.compensation.inverse import CompensationResult, compensate
 from i2ris_calib.compensation.plan import COUPLED_KINDS, AxisPlan, decided_kind
-from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.errors import CalibError
+from i2ris_calib.hysteresis.effects import model_values
 from i2ris_calib.hysteresis.kinds import DIAGNOSED
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import INVERSE_KINDS
 from i2ris_calib.interrupts import deferred
+from i2ris_calib.model import Signals
 
 #: Smallest output jump (deg) at a switch of the shown operator family that counts as an
 #: output step: ``max(STEP_MIN_DEG, 10 tol_deg)`` (as the spike repair's output test)

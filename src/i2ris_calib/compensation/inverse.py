@@ -17,12 +17,12 @@ import i2ris_calib._display as _display
 from i2ris_calib.compensation import kernel as K
 from i2ris_calib.compensation._args import check_args
 from i2ris_calib.compensation.safety import entry_ramp, find_spikes
-from i2ris_calib.diagnosis.effects import base_of, effects_of, model_values
 from i2ris_calib.errors import CalibError
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.hysteresis.effects import CATALOGUE, base_of, effects_of, model_values
 from i2ris_calib.hysteresis.models import density, thresholds
 from i2ris_calib.hysteresis.registry import KINDS, kind_of
 from i2ris_calib.interrupts import deferred
+from i2ris_calib.model import Signals
 
 STATUS_NAMES = {
     K.STATUS_OK: "reached",
@@ -40,7 +40,7 @@ or the reversal jump of the ``r = 0`` operator), the nearer side is taken;
 ``within_delay`` - the first ``delay_s`` seconds of a model with a time delay, which
 no command can reach any more."""
 
-SUPPORTED_EFFECTS = ("time_delay",)
+SUPPORTED_EFFECTS = tuple(name for name, e in CATALOGUE.items() if e.compensated)
 
 #: Per-sample flags of a result (:attr:`CompensationResult.flags`), in this order:
 #: the status reasons (``rate_limit`` is called ``rate_limited`` here) and

@@ -50,7 +50,7 @@ from i2ris_calib._validate import (
 from i2ris_calib.data.cycles import cycle_index, holdout_mask
 from i2ris_calib.errors import CalibError
 from i2ris_calib.hysteresis.bands import Bands, input_bands
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.model import Signals
 
 DIRECTIONS = ("+", "-", "±")
 AXES = ("yaw", "pitch")

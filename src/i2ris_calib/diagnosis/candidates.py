@@ -9,7 +9,12 @@ import numpy as np
 
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.diagnosis.data import SearchData
-from i2ris_calib.diagnosis.effects import (
+from i2ris_calib.diagnosis.refit import refit, sse
+from i2ris_calib.diagnosis.results import Candidate
+from i2ris_calib.diagnosis.stats import n_free_of, score_of
+from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.fit import fit_model
+from i2ris_calib.hysteresis.effects import (
     CATALOGUE,
     Effect,
     EffectModel,
@@ -17,14 +22,9 @@ from i2ris_calib.diagnosis.effects import (
     effects_of,
     model_values,
 )
-from i2ris_calib.diagnosis.refit import refit, sse
-from i2ris_calib.diagnosis.results import Candidate
-from i2ris_calib.diagnosis.stats import n_free_of, score_of
-from i2ris_calib.errors import CalibError
-from i2ris_calib.fitting.fit import fit_model
-from i2ris_calib.hysteresis.model import Model
 from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.start import initial_values, start_values
+from i2ris_calib.model import Model
 
 
 def _restart_base(current: Model, x_cur: np.ndarray, effect, s0: np.ndarray, d: SearchData):

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from i2ris_calib._validate import validated_config
-from i2ris_calib.diagnosis.effects import CATALOGUE
+from i2ris_calib.hysteresis.effects import CATALOGUE
 
 
 @dataclass(frozen=True)

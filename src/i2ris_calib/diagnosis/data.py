@@ -14,7 +14,7 @@ from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.fit import InitialState, prehistory_signals, starts_at_rest
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.model import Signals
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from i2ris_calib.hysteresis.model import Signals
+from i2ris_calib.model import Signals
 
 
 def _corr(a: np.ndarray, b: np.ndarray) -> float:

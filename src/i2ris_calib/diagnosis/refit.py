@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from i2ris_calib.fitting.fit import _analytic_jacobian
-from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.model import Model, Signals
 
 
 @dataclass(frozen=True)

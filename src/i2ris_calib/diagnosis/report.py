@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of
 from i2ris_calib.diagnosis.results import Diagnosis
+from i2ris_calib.hysteresis.effects import CATALOGUE, effects_of
 
 
 def diagnosis_record(diag: Diagnosis, figures: list[str], auto=None) -> dict:

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import i2ris_calib._display as _display
-from i2ris_calib.diagnosis.effects import effects_of
-from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.effects import CATALOGUE, effects_of
+from i2ris_calib.model import Model
 
 
 @dataclass(frozen=True)
@@ -165,48 +165,12 @@ class Alternative:
         return dict(self.__dict__)
 
 
-_LONG_HOLDS = (
-    "long holds (10 s or more) after fast ramps: creep keeps moving over seconds, a "
-    "delay settles within its delay"
-)
-
-#: Recordings that separate two effects the held-out cycles could not tell apart.
+#: Recordings that separate two effects the held-out cycles could not tell apart: each
+#: effect's ``separating`` (:class:`~i2ris_calib.hysteresis.effects.Effect`), by pair.
 SEPARATING_EXPERIMENTS: dict[frozenset, str] = {
-    frozenset({"time_delay", "rate_dependent_thresholds"}): (
-        "a slow and a fast ramp to the same level, and a triangle without a hold at the "
-        "top: a delay overshoots a reversal taken at speed and lags by the same time at "
-        "every speed, rate-dependent thresholds hold flat at the reversal"
-    ),
-    frozenset({"time_delay", "creep"}): _LONG_HOLDS,
-    frozenset({"creep", "creep_log"}): (
-        "holds of 30-60 s: first-order creep settles after a few time constants, "
-        "logarithmic creep gains the same amount every decade of time"
-    ),
-    frozenset({"time_delay", "creep_log"}): _LONG_HOLDS,
-    frozenset({"dead_zone", "backlash"}): (
-        "a ramp that reverses mid-range and a return to zero: backlash holds the "
-        "output after every reversal, a dead zone only near zero input"
-    ),
-    frozenset({"dead_zone", "multi_stage_backlash"}): (
-        "partial unloading cycles that reverse above and below mid-range: a further "
-        "backlash stage holds on falling input below its flag point, a dead zone holds "
-        "only below its break point, rising or falling"
-    ),
-    frozenset({"backlash", "multi_stage_backlash"}): (
-        "small reversals at several input levels: backlash holds at every reversal, a "
-        "further stage only below its flag point"
-    ),
-    frozenset({"rate_dependent_thresholds", "rate_dependent_weights"}): (
-        "ramps at three speeds to the same level with holds: rate-dependent weights "
-        "change the slope of the loop while moving, rate-dependent thresholds its width"
-    ),
-    frozenset({"time_delay", "rate_dependent_weights"}): (
-        "ramps at three speeds to the same level with holds: a delay shifts the loop in "
-        "time, rate-dependent weights scale it with speed"
-    ),
-    frozenset({"saturation", "rate_dependent_weights"}): (
-        "slow ramps to full scale: saturation flattens the top at any speed"
-    ),
+    frozenset({name, other}): text
+    for name, e in CATALOGUE.items()
+    for other, text in e.separating.items()
 }
 
 
@@ -215,36 +179,10 @@ def separating_experiment(a: str, b: str) -> str:
     return SEPARATING_EXPERIMENTS.get(frozenset({a, b}), "")
 
 
-#: What would show an effect the start model absorbs (the ``not_excluded`` entries).
+#: What would show an effect the start model absorbs (the ``not_excluded`` entries):
+#: each effect's ``separating_from_base``.
 SEPARATING_FROM_BASE: dict[str, str] = {
-    "backlash": (
-        "no input-angle recording while the model's operator bands are not inverted: a "
-        "play of half-width h on the input of a GPI/EGPI with linear envelopes is again "
-        "one, its envelope offsets moved by slope x h (a2 - a1 h, a4 + a3 h, a6 + a5 h); "
-        "measure the slack itself (motor travel after a reversal before the tendon "
-        "tension changes)"
-    ),
-    "multi_stage_backlash": SEPARATING_EXPERIMENTS[
-        frozenset({"dead_zone", "multi_stage_backlash"})
-    ],
-    "dead_zone": (
-        "returns to zero input and small moves near zero: a dead zone holds the angle "
-        "only below its break point"
-    ),
-    "time_delay": (
-        "a fast ramp that stops without a hold-in: a delay keeps the angle moving for "
-        "its delay after the input stops"
-    ),
-    "creep": _LONG_HOLDS,
-    "creep_log": _LONG_HOLDS,
-    "rate_dependent_thresholds": (
-        "ramps at three speeds to the same level with holds: the loop widens with speed"
-    ),
-    "rate_dependent_weights": (
-        "ramps at three speeds to the same level with holds: the loop's slope changes with speed"
-    ),
-    "saturation": "slow ramps to the largest safe input: saturation flattens the top",
-    "axis_coupling": "move the other axis alone while this one holds its input",
+    name: e.separating_from_base for name, e in CATALOGUE.items() if e.separating_from_base
 }
 
 

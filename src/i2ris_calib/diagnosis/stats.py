@@ -10,10 +10,10 @@ from scipy import stats
 
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.diagnosis.data import SearchData
-from i2ris_calib.diagnosis.effects import model_values
 from i2ris_calib.diagnosis.results import Comparison, ModelScore
 from i2ris_calib.fitting.metrics import information_criteria
-from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.effects import CATALOGUE, model_values
+from i2ris_calib.model import Model
 
 
 def n_free_of(model: Model) -> int:
@@ -126,8 +126,9 @@ def compare(
 
 
 #: Effects whose only signature is the input speed: on a recording where the speed is
-#: a function of the input level they fit as well as a static (rate-independent) shape.
-RATE_EFFECTS = ("rate_dependent_thresholds", "rate_dependent_weights")
+#: a function of the input level they fit as well as a static (rate-independent) shape
+#: (each effect's ``rate`` flag, :class:`~i2ris_calib.hysteresis.effects.Effect`).
+RATE_EFFECTS = tuple(name for name, e in CATALOGUE.items() if e.rate)
 
 #: The recording that separates a rate effect from a static shape.
 SPEED_EXPERIMENT = (
@@ -160,7 +161,7 @@ def speed_level_spread(signals, mask: np.ndarray, n_bins: int = 20) -> float:
     n_bins : int
         Input levels per branch.
     """
-    from i2ris_calib.diagnosis.effects import RATE_WINDOW_S, _speed
+    from i2ris_calib.hysteresis.effects import RATE_WINDOW_S, _speed
 
     if signals.t_s is None:
         return float("nan")

@@ -14,41 +14,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2ris_calib.data.dataset import direction_of_samples, input_bands, make_dataset
-from i2ris_calib.diagnosis.effects import build_model, model_values
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.hysteresis.model import Model, Signals
+from i2ris_calib.hysteresis.effects import CATALOGUE, build_model, model_values
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import paper_like_params
+from i2ris_calib.model import Model, Signals
 
-#: Hidden-effect parameter sets per effect, weakest first (input 0..6000 counts,
-#: angle ~0..37 deg, speeds 300-2000 counts/s).
+#: Hidden-effect parameter sets per effect, weakest first: each effect's ``strengths``
+#: (:class:`~i2ris_calib.hysteresis.effects.Effect`), by name in catalogue order.
 STRENGTHS: dict[str, tuple[dict[str, float], ...]] = {
-    "multi_stage_backlash": (
-        {"v_flag_counts": 2500.0, "width_counts": 300.0},
-        {"v_flag_counts": 3000.0, "width_counts": 450.0},
-        {"v_flag_counts": 2000.0, "width_counts": 600.0},
-    ),
-    "axis_coupling": ({"gain_angle": 0.05}, {"gain_angle": 0.1}, {"gain_angle": -0.15}),
-    "time_delay": ({"tau_s": 0.06}, {"tau_s": 0.12}, {"tau_s": 0.25}),
-    "rate_dependent_thresholds": ({"beta_s": 0.08}, {"beta_s": 0.15}, {"beta_s": 0.3}),
-    "rate_dependent_weights": ({"gain": 0.08}, {"gain": 0.15}, {"gain": -0.15}),
-    "creep": (
-        {"gain": 0.1, "tau_s": 0.7},
-        {"gain": 0.2, "tau_s": 1.0},
-        {"gain": 0.3, "tau_s": 1.5},
-    ),
-    "creep_log": (
-        {"gamma_per_decade": 0.03, "tau0_s": 0.2},
-        {"gamma_per_decade": 0.05, "tau0_s": 0.3},
-        {"gamma_per_decade": 0.08, "tau0_s": 0.5},
-    ),
-    "dead_zone": ({"d_counts": 300.0}, {"d_counts": 500.0}, {"d_counts": 800.0}),
-    "backlash": ({"width_counts": 200.0}, {"width_counts": 350.0}, {"width_counts": 550.0}),
-    "saturation": (
-        {"knee_deg": 28.0, "limit_deg": 6.0},
-        {"knee_deg": 25.0, "limit_deg": 5.0},
-        {"knee_deg": 22.0, "limit_deg": 4.0},
-    ),
+    name: tuple(dict(p) for p in e.strengths) for name, e in CATALOGUE.items()
 }
 
 

@@ -56,7 +56,6 @@ from i2ris_calib.diagnosis.data import (
     search_data,
     start_rule,
 )
-from i2ris_calib.diagnosis.effects import CATALOGUE, effects_of, model_values
 from i2ris_calib.diagnosis.locate import concentration_sentences, residual_analysis
 from i2ris_calib.diagnosis.refit import refit
 from i2ris_calib.diagnosis.results import (
@@ -87,7 +86,7 @@ from i2ris_calib.fitting.pipeline import (
     fit_dataset,
     pick_after_fit,
 )
-from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.hysteresis.effects import CATALOGUE, effects_of, model_values
 from i2ris_calib.hysteresis.registry import (
     DIAGNOSIS_STARTS,
     SIGNED_DEFAULT,
@@ -95,6 +94,7 @@ from i2ris_calib.hysteresis.registry import (
     diagnosis_starts,
     fit_order,
 )
+from i2ris_calib.model import Model
 
 __all__ = [
     "AutoDiagnosis",

@@ -46,8 +46,9 @@ from i2ris_calib.fitting.lm import least_squares_lm
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
 from i2ris_calib.fitting.results import ParamTable
 from i2ris_calib.hysteresis.kernel import ordered_sum
-from i2ris_calib.hysteresis.model import Model, Parameter, Signals
 from i2ris_calib.hysteresis.models import as_signals
+from i2ris_calib.model import Model, Parameter, Signals
+from i2ris_calib.model import analytic_method as _analytic_jacobian
 
 PROFILE_PARAMS = ("v_f",)
 _BIG = 1e6
@@ -1103,19 +1104,18 @@ class FitResult:
         return results.plot_fit(self, signals, theta_deg, ax=ax, band=band, sigma=sigma)
 
     def save(self, path) -> Path:
-        """Write the fit to ``path`` as JSON (format ``i2ris-calib.fit/1``): the model's
-        kind, settings and every parameter's declaration and value, standard errors,
-        start, covariance, residuals, metrics, notes and message. A file already at
-        ``path`` is replaced (written beside it and renamed, never half-written).
-        :meth:`load` rebuilds a result whose ``predict`` is this one's to the last bit.
-        A model with diagnosed effects is saved too; loading it needs the effect
-        catalogue imported (``from i2ris_calib import add_effect``). Returns the path."""
+        """Write the fit to ``path`` as JSON (format ``i2ris-calib.fit-result/1``,
+        docs/formats.md): the model's kind, settings and every parameter's declaration
+        and value, standard errors, start, covariance, residuals, metrics, notes and
+        message. A file already at ``path`` is replaced (written beside it and renamed,
+        never half-written). :meth:`load` rebuilds a result whose ``predict`` is this
+        one's to the last bit, a model with diagnosed effects too. Returns the path."""
         return results.write_record(path, results.fit_record(self))
 
     @classmethod
     def load(cls, path) -> FitResult:
-        """The FitResult :meth:`save` wrote to ``path``; CalibError naming the file when
-        it is not one."""
+        """The FitResult :meth:`save` wrote to ``path`` (also a file of the older id
+        ``i2ris-calib.fit/1``); CalibError naming the file when it is not one."""
         kw = results.fit_fields(results.read_record(path), str(path))
         state = kw.pop("initial_state")
         cert = kw.pop("certificate")
@@ -1273,20 +1273,6 @@ class _Counter:
             jac = self._with_differences(full, jac, cols)
         # one sum tells whether every entry is finite (an overflow to inf is only rechecked)
         return jac if np.isfinite(jac.sum()) else np.where(np.isfinite(jac), jac, 0.0)
-
-
-def _analytic_jacobian(model, method: str = "jacobian"):
-    """``model.<method>`` (``jacobian``, ``flag_point_families``) when the model's class
-    defines it together with the ``evaluate`` it stands for (a subclass overriding only
-    ``evaluate`` falls back to finite differences / plain evaluations), else None."""
-    cls = type(model)
-
-    def owner(name):
-        return next((c for c in cls.__mro__ if name in c.__dict__), None)
-
-    if owner(method) is None or owner(method) is not owner("evaluate"):
-        return None
-    return getattr(model, method)
 
 
 def _validate(signals: Signals, theta: np.ndarray, n_free: int, used: np.ndarray) -> None:
@@ -1576,7 +1562,7 @@ def _fit_model(
     nested : bool
         For a model that extends another (``model.nested()`` gives the wrapped model
         and the values that switch the extension off, e.g. an effect added by
-        :func:`~i2ris_calib.diagnosis.effects.add_effect`): fit the wrapped model
+        :func:`~i2ris_calib.hysteresis.effects.add_effect`): fit the wrapped model
         first (same data and options, the wrapped part of every start) and add its
         fitted values with the extension off as a start. The result is never worse
         than that fit (the fitter never ends worse than a start inside the bounds).
@@ -2846,7 +2832,7 @@ functools.update_wrapper(fit_model, _fit_model, assigned=("__doc__", "__annotati
 
 def innermost(model: Model) -> Model:
     """The model at the bottom of a stack of extensions (``model.nested()``, e.g.
-    effects added by :func:`~i2ris_calib.diagnosis.effects.add_effect`); ``model``
+    effects added by :func:`~i2ris_calib.hysteresis.effects.add_effect`); ``model``
     itself when it extends nothing. Its parameters come first in ``model``'s vector."""
     while callable(getattr(model, "nested", None)):
         model = model.nested()[0]

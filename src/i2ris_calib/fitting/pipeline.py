@@ -27,7 +27,6 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.decision import Evidence, decide, decide_fits, output_jump, pooled
 from i2ris_calib.fitting.fit import FitResult, fit_model, fit_notices, innermost
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.registry import (
     COUPLED_DEFAULT,
@@ -43,6 +42,7 @@ from i2ris_calib.hysteresis.registry import (
     start_recipe,
 )
 from i2ris_calib.hysteresis.start import default_deadband, keep_fixed
+from i2ris_calib.model import Signals
 
 __all__ = [
     "MODEL_KINDS",

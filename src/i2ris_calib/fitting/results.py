@@ -9,15 +9,14 @@
   band (``FitResult.eval_uncertainty``), and the residuals, as lmfit's
   ``ModelResult.plot``.
 * :func:`fit_record` / :func:`fit_fields` (``FitResult.save`` / ``FitResult.load``): a
-  fit as strict JSON (format ``i2ris-calib.fit/1``): the model's kind, settings and
+  fit as strict JSON (format :data:`SCHEMA`, ``i2ris-calib.fit-result/1``; files of
+  the older id ``i2ris-calib.fit/1`` still load): the model's kind, settings and
   every parameter's declaration and value, the standard errors, covariance, residuals,
   metrics and messages. Loading rebuilds the same model, so ``predict`` gives the
   saved fit's output to the last bit.
 
-Models are written by *codecs*: the registry kinds (:mod:`i2ris_calib.hysteresis.registry`)
-and the general EGPI here; models extended by diagnosed effects by the codec
-:mod:`i2ris_calib.diagnosis.effects` registers (:func:`register_model_codec`) when it is
-imported (``from i2ris_calib import add_effect`` does).
+The model is written by the model codec (:mod:`i2ris_calib.hysteresis.codec`: the
+registry kinds, the general EGPI and models extended by any catalogue effect).
 """
 
 from __future__ import annotations
@@ -26,8 +25,8 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,12 +36,14 @@ import i2ris_calib._display as _display
 from i2ris_calib import __version__
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.metrics import Metrics
-from i2ris_calib.hysteresis.model import Model, Signals
-from i2ris_calib.hysteresis.models import EGPIModel, egpi_model
-from i2ris_calib.hysteresis.registry import kind_of, model_for_kind
+from i2ris_calib.hysteresis.codec import decode_model, encode_model
+from i2ris_calib.model import Signals
 
-#: The format of a saved fit (``FitResult.save``).
-SCHEMA = "i2ris-calib.fit/1"
+#: The format of a saved fit (``FitResult.save``); not the ``fit`` command's fit.json.
+SCHEMA = "i2ris-calib.fit-result/1"
+#: The formats :func:`fit_fields` reads: files saved before the two formats had their
+#: own ids carry the fit.json's (they hold a ``model``, fit.json a ``datasets`` list).
+SCHEMAS_READ = (SCHEMA, "i2ris-calib.fit/1")
 
 
 # ----------------------------------------------------------------------- the table
@@ -365,118 +366,6 @@ def plot_fit(res, signals=None, theta_deg=None, ax=None, band=True, sigma=2.0):
     return fig
 
 
-# ------------------------------------------------------------------- model codecs
-
-#: ``(name, encode)``: ``encode(model)`` -> JSON-ready record, or None when the codec
-#: does not write this model. Tried in order; the first record wins.
-_ENCODERS: list[tuple[str, Callable[[Model], dict | None]]] = []
-#: ``name -> decode(record)`` -> Model.
-_DECODERS: dict[str, Callable[[Mapping], Model]] = {}
-
-
-def register_model_codec(
-    name: str, encode: Callable[[Model], dict | None], decode: Callable[[Mapping], Model]
-) -> None:
-    """Let saved fits carry a further kind of model.
-
-    ``encode(model)`` returns the model's JSON-ready record (or None for a model it does
-    not write); ``decode(record)`` rebuilds the model. Registered codecs are tried before
-    the built-in ones; registering a name again replaces it.
-    """
-    global _ENCODERS
-    _ENCODERS = [(name, encode)] + [(n, e) for n, e in _ENCODERS if n != name]
-    _DECODERS[name] = decode
-
-
-def encode_model(model: Model) -> dict:
-    """JSON-ready record of ``model``: its codec, structure and every parameter's value,
-    bounds and fixed flag (:func:`decode_model` rebuilds it)."""
-    for name, enc in (*_ENCODERS, ("kind", _encode_kind)):
-        rec = enc(model)
-        if rec is not None:
-            return {"codec": name, **rec}
-    raise CalibError(
-        f"cannot save model '{model.name}' ({type(model).__name__}): saved fits carry the "
-        "registry's model kinds, the general EGPI and models extended by catalogue effects"
-    )
-
-
-def decode_model(rec: Mapping) -> Model:
-    """The model :func:`encode_model` wrote."""
-    name = rec.get("codec")
-    if name == "kind":
-        return _decode_kind(rec)
-    if name not in _DECODERS:
-        hint = (
-            " (a model with diagnosed effects: import i2ris_calib.diagnosis.effects first, "
-            "e.g. `from i2ris_calib import add_effect`)"
-            if name == "effects"
-            else ""
-        )
-        raise CalibError(f"saved model: unknown codec {name!r}{hint}")
-    return _DECODERS[name](rec)
-
-
-def declarations(model: Model) -> list[dict]:
-    """Every parameter's ``name``, ``value``, ``lower``, ``upper``, ``fixed``."""
-    return [
-        {"name": p.name, "value": float(p.value), "lower": float(p.lower),
-         "upper": float(p.upper), "fixed": bool(p.fixed)}
-        for p in model.parameters
-    ]  # fmt: skip
-
-
-def declared(model, decl: Sequence[Mapping]):
-    """``model`` (a ParametricModel) with the values, bounds and fixed flags of ``decl``
-    (units and meanings stay the model's); CalibError when the names differ."""
-    names = [d["name"] for d in decl]
-    if list(model.names) != names:
-        raise CalibError(
-            f"saved model: parameters {names} do not match model '{model.name}' "
-            f"({list(model.names)})"
-        )
-    params = tuple(
-        replace(p, value=float(d["value"]), lower=float(d["lower"]), upper=float(d["upper"]),
-                fixed=bool(d["fixed"]))
-        for p, d in zip(model.parameters, decl, strict=True)
-    )  # fmt: skip
-    return replace(model, parameters=params)
-
-
-def _encode_kind(model: Model) -> dict | None:
-    info = kind_of(model)
-    if info is not None and type(model) is info.model_class:
-        rec = {"kind": info.kind, "n": int(model.n), "parameters": declarations(model)}
-        if info.uses_deadband:
-            rec["deadband_counts"] = float(model.deadband_counts)
-        return rec
-    if type(model) is EGPIModel:
-        return {
-            "kind": "egpi_general",
-            "envelopes": [[el.kind, er.kind] for el, er in model.envelopes],
-            "n": int(model.n),
-            "deadband": float(model.deadband),
-            "parameters": declarations(model),
-        }
-    return None
-
-
-def _decode_kind(rec: Mapping) -> Model:
-    decl = rec["parameters"]
-    if rec["kind"] == "egpi_general":
-        values = {d["name"]: float(d["value"]) for d in decl}
-        model = egpi_model(
-            [tuple(e) for e in rec["envelopes"]], values, n=int(rec["n"]),
-            deadband=float(rec["deadband"]),
-        )  # fmt: skip
-    else:
-        extra = (
-            {"deadband_counts": float(rec["deadband_counts"])} if "deadband_counts" in rec else {}
-        )
-        model = model_for_kind(rec["kind"], n=int(rec["n"]), **extra)
-    return declared(model, decl)
-
-
 # ---------------------------------------------------------------------- the file
 
 
@@ -548,7 +437,7 @@ def fit_fields(obj: Mapping, where: str = "fit file") -> dict:
     """The FitResult fields of a record :func:`fit_record` wrote (``notes`` as dicts,
     ``initial_state`` a dict or None: the caller builds them); CalibError naming
     ``where`` for a record of another format or a missing key."""
-    if not isinstance(obj, Mapping) or obj.get("schema") != SCHEMA:
+    if not isinstance(obj, Mapping) or obj.get("schema") not in SCHEMAS_READ:
         got = obj.get("schema") if isinstance(obj, Mapping) else type(obj).__name__
         raise CalibError(f"{where}: schema is {got!r}, expected '{SCHEMA}' (FitResult.save)")
     if "datasets" in obj and "model" not in obj:

@@ -43,7 +43,6 @@ import numpy as np
 from numba import njit
 
 from i2ris_calib.hysteresis.kernel import motion_direction
-from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
     ParametricModel,
     _input,
@@ -52,6 +51,7 @@ from i2ris_calib.hysteresis.models import (
     guessed_model,
 )
 from i2ris_calib.hysteresis.start import _line, reversal_distance
+from i2ris_calib.model import Parameter, Signals
 
 __all__ = ["BoucWenModel", "MAX_STEP", "bouc_wen_model", "bouc_wen_output", "bouc_wen_starts"]
 

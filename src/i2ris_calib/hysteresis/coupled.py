@@ -31,7 +31,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
     _gpi_columns,
     _input,
@@ -52,6 +51,7 @@ from i2ris_calib.hysteresis.two_tendon import (
     side_input,
     two_tendon_gpi_model,
 )
+from i2ris_calib.model import Parameter, Signals
 
 __all__ = [
     "COUPLING_SIDES",

@@ -59,8 +59,8 @@ from i2ris_calib.hysteresis.kernel import (
     select_stage,
     thresholds,
 )
-from i2ris_calib.hysteresis.model import NamedParameters, Parameter, Signals
 from i2ris_calib.hysteresis.start import default_deadband, initial_values, keep_fixed
+from i2ris_calib.model import NamedParameters, Parameter, Signals
 
 __all__ = [
     "ContinuousEGPIModel",

@@ -226,7 +226,7 @@ def kind_info(kind: str) -> ModelKind:
 
 def kind_of(model: object) -> ModelKind | None:
     """The registry row of a model's class (its nearest registered base class), or
-    None (a general EGPI, a model extended by effects: see ``diagnosis.effects.base_of``)."""
+    None (a general EGPI, a model extended by effects: see ``hysteresis.effects.base_of``)."""
     for cls in type(model).__mro__:
         for k in KINDS:
             if k.model_class is cls:

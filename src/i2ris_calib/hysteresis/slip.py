@@ -36,7 +36,6 @@ import numpy as np
 from numba import njit
 from scipy.optimize import lsq_linear
 
-from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
     ParametricModel,
     _input,
@@ -45,6 +44,7 @@ from i2ris_calib.hysteresis.models import (
     guessed_model,
 )
 from i2ris_calib.hysteresis.start import _line
+from i2ris_calib.model import Parameter, Signals
 
 __all__ = ["SlipModel", "slip_fixed", "slip_model", "slip_operators", "slip_starts"]
 

@@ -34,7 +34,7 @@ from scipy.stats import qmc
 
 from i2ris_calib.hysteresis.bands import input_bands
 from i2ris_calib.hysteresis.kernel import density, motion_direction, thresholds
-from i2ris_calib.hysteresis.model import Model
+from i2ris_calib.model import Model
 
 #: Parameters of the models the recipe applies to (model order)
 GPI_PARAMETERS = ("a1", "a2", "a3", "a4", "lam", "sigma", "r1", "rn")

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from i2ris_calib.hysteresis.kernel import gather_rows
-from i2ris_calib.hysteresis.model import Parameter, Signals
 from i2ris_calib.hysteresis.models import (
     ParametricModel,
     _find_runs,
@@ -45,6 +44,7 @@ from i2ris_calib.hysteresis.models import (
     guessed_model,
 )
 from i2ris_calib.hysteresis.start import start_values
+from i2ris_calib.model import Parameter, Signals
 
 __all__ = [
     "SIDES",

@@ -18,8 +18,6 @@ import pandas as pd
 
 from i2ris_calib.compensation.rate import max_input_rate
 from i2ris_calib.data.dataset import Dataset
-from i2ris_calib.diagnosis.effects import base_of
-from i2ris_calib.diagnosis.serialize import model_from_dict
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import Decision
 from i2ris_calib.fitting.limits import RecordingLimits
@@ -29,6 +27,8 @@ from i2ris_calib.fitting.pipeline import (
     ModelChoice,
     fit_warnings,
 )
+from i2ris_calib.hysteresis.codec import model_from_dict
+from i2ris_calib.hysteresis.effects import base_of
 from i2ris_calib.hysteresis.registry import fit_order
 from i2ris_calib.io.fit_schema import FIT_SCHEMA, check_fit_doc, check_model_doc
 

@@ -1,5 +1,6 @@
 """Checks of the saved model files: fit.json (schema ``i2ris-calib.fit/1``, docs/fit.md)
-and final_model.json (schema ``i2ris-calib.model/1``, docs/diagnosis.md).
+and final_model.json (schema ``i2ris-calib.model/1``, docs/diagnosis.md); a fit saved by
+``FitResult.save`` has a schema of its own (``i2ris-calib.fit-result/1``).
 
 Every reader of these files goes through here (:func:`check_fit_doc`:
 ``io.fit.read_fit_json`` for ``compensate``, ``io.run_folder`` for ``report``;
@@ -19,8 +20,9 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from i2ris_calib.data.dataset import AXES
-from i2ris_calib.diagnosis.serialize import SCHEMA as MODEL_SCHEMA
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.results import SCHEMA as SAVED_FIT
+from i2ris_calib.hysteresis.codec import MODEL_SCHEMA
 from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, model_for_kind
 
@@ -176,8 +178,9 @@ def check_fit_doc(doc: Any, path: str | Path, *, complete: bool = True) -> dict[
             f"{p}: expected a JSON object at top level, got {type(doc).__name__}; {FIX_FIT}"
         )
     if (complete or "schema" in doc) and doc.get("schema") != FIT_SCHEMA:
+        what = " (a file FitResult.save wrote: one fit)" if doc.get("schema") == SAVED_FIT else ""
         raise CalibError(
-            f"{p}: schema is {doc.get('schema')!r}, expected {FIT_SCHEMA!r}; re-run 'fit'"
+            f"{p}: schema is {doc.get('schema')!r}{what}, expected {FIT_SCHEMA!r}; re-run 'fit'"
         )
     if complete:
         if "axis" not in doc:

@@ -94,7 +94,7 @@ class SimulationConfig:
     drop_fraction: float = 0.0  # fraction of frames missing from each video
     occlusions: int = 0  # number of occlusion events per camera
     occlusion_s: float = 0.4  # duration of one occlusion event
-    # --- hidden effects (applied by i2ris_calib.diagnosis.effects) ----------------
+    # --- hidden effects (applied by i2ris_calib.hysteresis.effects) ----------------
     effects: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -23,7 +23,7 @@ with the hysteresis engineer's paper-like parameters
 (:func:`i2ris_calib.hysteresis.presets.paper_like_params`, scaled to the dataset's
 amplitude; overridable per dataset with ``models``) maps |encoder| -> |angle|; the angle is ``sign * model(|v|)`` (the paper fits
 negative-input datasets on absolute values). Hidden effects (config ``effects``)
-wrap the model via :func:`i2ris_calib.diagnosis.effects.build_model`.
+wrap the model via :func:`i2ris_calib.hysteresis.effects.build_model`.
 
 Continuity: each dataset starts from the model's initial state at zero input. The
 model output at zero input (small, from the envelope offsets) is faded in with a
@@ -42,11 +42,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from i2ris_calib.data.dataset import direction_input, direction_of_samples, input_bands
-from i2ris_calib.diagnosis.effects import build_model, model_values
+from i2ris_calib.hysteresis.effects import build_model, model_values
 from i2ris_calib.hysteresis.kinds import LAB_TRUTH
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.models import i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import paper_like_params
+from i2ris_calib.model import Signals
 from i2ris_calib.simulation.config import SimulationConfig
 from i2ris_calib.simulation.lab import lab_drive
 from i2ris_calib.simulation.trajectory import (

@@ -51,8 +51,8 @@ from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.fit import PROFILE_PARAMS, fit_model
 from i2ris_calib.fitting.pipeline import choose_model, fit_kind, unfitted_model
-from i2ris_calib.hysteresis.model import Signals
 from i2ris_calib.hysteresis.registry import kind_info
+from i2ris_calib.model import Signals
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
 from i2ris_calib.sync.config import SyncConfig
 from i2ris_calib.sync.log import EncoderLog

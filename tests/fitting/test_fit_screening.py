@@ -157,11 +157,11 @@ def test_level_output_is_evaluate_to_the_last_bit():
                 trial = full.copy()
                 trial[idx] = u
                 np.testing.assert_array_equal(turn(u), fc.evaluate(s, trial))
-    # the other motor's own pre-history (five levels): the own levels' shortcut is
-    # still the whole model bit for bit; the other motor's levels have none
+    # the other motor's own pre-history (six levels, three a motor): the own levels'
+    # shortcut is still the whole model bit for bit; the other motor's levels have none
     f4 = F._FromLevel(m, s.v, 30, s.v_other)
-    assert f4.levels == 5 and f4.n_other == 2
-    full4 = np.append(m.values, [900.0, -800.0, 300.0, 0.0, 0.0])
+    assert f4.levels == 6 and f4.n_other == 3
+    full4 = np.append(m.values, [-600.0, 900.0, -800.0, 300.0, 0.0, 0.0])
     for idx in (len(full4) - 1, len(full4) - 2, len(full4) - 3):
         out4 = f4.level_output(s, full4, idx)
         for u in (float(s.v.min()), 0.0, 1234.5):
@@ -215,3 +215,27 @@ def test_bounded_polish_ends_at_a_bounded_minimum_no_worse_than_trf():
     assert cost == c.cost(end)
     trf_cost, _, _ = search.run(x0, 300, F.POLISH_STEPS, "trf")
     assert cost <= trf_cost * (1 + 1e-6)
+
+
+def test_the_other_motor_holds_during_the_replayed_cycle():
+    """The replayed first cycle is this motor's: the other motor's input holds its
+    first value meanwhile, after its own levels (three turning points, in order)."""
+    s = _signals(phase=1.0)
+    vo = np.asarray(s.v_other, dtype=float)
+    sig, n_pre = F.prehistory_signals(s, 0.0, cycle=40, other_levels=(-900.0, 800.0, -300.0))
+    v_pre, vo_pre = np.asarray(sig.v)[:n_pre], np.asarray(sig.v_other)[:n_pre]
+    np.testing.assert_array_equal(v_pre[-40:], np.asarray(s.v)[:40])
+    assert np.all(vo_pre[-40:] == vo[0])
+    turns = vo_pre[np.flatnonzero(np.diff(np.sign(np.diff(vo_pre))) != 0) + 1]
+    assert vo_pre[0] == -900.0 and list(turns[:2]) == [800.0, -300.0]
+
+
+def test_state_levels_of_the_other_motor():
+    """An initial state's levels in the fitted model's order, the other motor's three
+    first; a missing turning point is the next one's."""
+    st = F.InitialState(10.0, 5, 0.0, "", v_turn=-20.0, other_v_turn=7.0, other_v_from=-3.0,
+                        v0_other=1.0, v_turn2=30.0, other_v_turn2=-9.0)  # fmt: skip
+    assert F.state_levels(st, 6) == [-9.0, 7.0, -3.0, 30.0, -20.0, 10.0]
+    assert F.state_levels(st, 4, 2) == [7.0, -3.0, -20.0, 10.0]
+    bare = F.InitialState(10.0, 5, 0.0, "", other_v_from=-3.0, v0_other=1.0)
+    assert F.state_levels(bare, 6) == [-3.0, -3.0, -3.0, 10.0, 10.0, 10.0]

@@ -214,7 +214,8 @@ def _after_prehistory(d: SearchData, st: InitialState) -> SearchData:
     other = None
     if st.other_v_from is not None:
         o_turn = st.other_v_from if st.other_v_turn is None else st.other_v_turn
-        other = (o_turn, st.other_v_from)
+        o_turn2 = st.other_v_turn2
+        other = (o_turn if o_turn2 is None else o_turn2, o_turn, st.other_v_from)
     sig, n_pre = prehistory_signals(
         d.signals,
         st.v_from,

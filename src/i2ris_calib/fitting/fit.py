@@ -217,9 +217,10 @@ class InitialState:
     after sweeping its range (a periodic lab input: circles, figure-eights, sines),
     may also start after its own first cycle replayed (:func:`opening_cycle`): the
     pre-history is then the ramp, then the recording's first ``cycle_samples``
-    samples, for both motors, so the state of every operator the loop sweeps, and the
-    other motor's state for a model that reads it, is the loop's own. The fit tries
-    the start with and without the replayed cycle and keeps the lower cost.
+    samples of this motor, so the state of every operator the loop sweeps is the
+    loop's own (the other motor, for a model that reads it, holds its first value
+    meanwhile: its state is its own levels'). The fit tries the start with and without
+    the replayed cycle and keeps the lower cost.
 
     Attributes
     ----------
@@ -249,9 +250,18 @@ class InitialState:
         The other motor's pre-history, for a model with a state of its input
         (hysteretic coupling): relaxed at ``other_v_turn``, ramping to
         ``other_v_from`` and to its first value ``v0_other``, before this motor's
-        ramps (None: it held its first value, relaxed there).
+        ramps (None: it held its first value, relaxed there). The other motor holds its
+        first value during the replayed cycle: its state is its levels' (a cycle of
+        this motor's is not one of the other's, and a recording's first cycle need not
+        end at the turning points the other motor came from).
     v0_other : float or None
         The other motor's first input value (with its levels).
+    other_v_turn2 : float or None
+        A turning point of the other motor before ``other_v_turn`` (relaxed there;
+        None: as without it). Each side of the other input is a GPI of its own that
+        remembers its largest excursion through the other side's: a loop's largest
+        excursion on either side and the turning point of the current one are three
+        levels.
     """
 
     v_from: float
@@ -264,11 +274,13 @@ class InitialState:
     other_v_from: float | None = None
     v0_other: float | None = None
     v_turn2: float | None = None
+    other_v_turn2: float | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready form."""
         return {
             "v_turn2": self.v_turn2,
+            "other_v_turn2": self.other_v_turn2,
             "other_v_turn": self.other_v_turn,
             "other_v_from": self.other_v_from,
             "v0_other": self.v0_other,
@@ -388,8 +400,10 @@ def _head_of(signals: Signals, m: int) -> Signals:
 
 
 def _with_cycle(signals: Signals, k: int) -> Signals:
-    """``signals`` with their first ``k`` samples replayed before them (every per-sample
-    array: both motors' inputs, the other angle, extras; times run back from ``t[0]``)."""
+    """``signals`` with their first ``k`` samples replayed before them (this motor's
+    input and every per-sample extra; times run back from ``t[0]``); the other motor's
+    input and angle hold their first values meanwhile (:class:`InitialState`: its state
+    is its own levels')."""
     if k <= 0:
         return signals
     v = np.asarray(signals.v)
@@ -400,6 +414,12 @@ def _with_cycle(signals: Signals, k: int) -> Signals:
         a = np.asarray(a)
         return np.concatenate([a[:k], a]) if a.shape == v.shape else a
 
+    def hold(a):
+        if a is None:
+            return None
+        a = np.asarray(a)
+        return np.concatenate([np.full(k, a[0], dtype=a.dtype), a]) if a.shape == v.shape else a
+
     t = None
     if signals.t_s is not None:
         t0 = np.asarray(signals.t_s, dtype=float)
@@ -407,8 +427,8 @@ def _with_cycle(signals: Signals, k: int) -> Signals:
         t = np.concatenate([t0[0] - dt * np.arange(k, 0, -1), t0])
     extra = {key: rep(a) if isinstance(a, np.ndarray) else a for key, a in signals.extra.items()}
     return Signals(
-        v=rep(v), t_s=t, v_other=rep(signals.v_other),
-        theta_other_deg=rep(signals.theta_other_deg), extra=extra,
+        v=rep(v), t_s=t, v_other=hold(signals.v_other),
+        theta_other_deg=hold(signals.theta_other_deg), extra=extra,
     )  # fmt: skip
 
 
@@ -460,21 +480,23 @@ def prehistory_signals(
     step: float | None = None,
     cycle: int = 0,
     v_turn: float | None = None,
-    other_levels: tuple[float, float] | None = None,
+    other_levels: tuple[float, ...] | None = None,
     other_step: float | None = None,
     v_turn2: float | None = None,
 ) -> tuple[Signals, int]:
     """(``signals`` with the synthetic pre-history of :class:`InitialState` prepended,
     its length): the input ramps from ``v_from`` to ``v[0]`` in steps of ``step``
     (default :func:`prehistory_step` of ``v``), then (``cycle`` > 0) the recording's
-    first ``cycle`` samples are replayed (both motors); the times run back from
+    first ``cycle`` samples are replayed (this motor; the other holds its first value);
+    the times run back from
     ``t[0]`` at the median interval; during the ramp the other motor's input and angle
     and every per-sample extra hold their first value. A model run on the result and
     cut by the length starts in the state the fit estimated (:meth:`FitResult.predict`
     does this). ``v_turn``: an earlier turning point, the operators relaxed there and
-    the input ramping to ``v_from`` first. ``other_levels`` (o_turn, o_from): the
-    other motor's own pre-history, run first (this motor held where its ramps begin):
-    relaxed at o_turn, ramping to o_from and to its first value in steps of
+    the input ramping to ``v_from`` first. ``other_levels`` ((o_turn2,) o_turn,
+    o_from): the other motor's own pre-history, run first (this motor held where its
+    ramps begin): relaxed at the first, ramping through the others to its first value in
+    steps of
     ``other_step``; without them it holds its first value (relaxed there).
     ``v_turn2``: a turning point before ``v_turn`` (relaxed there, ramping to
     ``v_turn``, or to ``v_from`` when ``v_turn`` is None)."""
@@ -571,6 +593,7 @@ class _FromLevel:
     TURN2 = "initial_state.v_turn2"
     TURN = "initial_state.v_turn"
     PARAM = "initial_state.v_from"
+    OTHER_TURN2 = "initial_state.other_v_turn2"
     OTHER_TURN = "initial_state.other_v_turn"
     OTHER_FROM = "initial_state.other_v_from"
 
@@ -589,14 +612,17 @@ class _FromLevel:
             if vo.size and np.all(np.isfinite(vo)) and np.ptp(vo) > 0:
                 olo, ohi = level_bounds(vo)
                 other = (
+                    Parameter(self.OTHER_TURN2, float(vo[0]), olo, ohi, unit="input",
+                              doc="a turning point of the other motor's input before "
+                                  "other_v_turn"),
                     Parameter(self.OTHER_TURN, float(vo[0]), olo, ohi, unit="input",
                               doc="an earlier turning point of the other motor's input"),
                     Parameter(self.OTHER_FROM, float(vo[0]), olo, ohi, unit="input",
                               doc="level the other motor's input came from"),
-                )  # fmt: skip
+                )[3 - self.n_own :]  # as many as this motor's  # fmt: skip
                 self.other_step = prehistory_step(vo)
-        #: Number of level parameters at the end of the vector: (other motor's two,)
-        #: then v_turn2, v_turn, v_from.
+        #: Number of level parameters at the end of the vector: (the other motor's
+        #: as many as this one's,) then (v_turn2,) v_turn, v_from.
         self.n_other = len(other)
         self.levels = self.n_own + self.n_other
         self.parameters = (
@@ -617,12 +643,12 @@ class _FromLevel:
 
     def prehistory(self, signals: Signals, levels) -> tuple[Signals, int]:
         """(signals with the pre-history through ``levels`` (the last
-        :attr:`levels` values: (other motor's turn and level,) v_turn2, v_turn, v_from)
+        :attr:`levels` values: (the other motor's levels,) (v_turn2,) v_turn, v_from)
         prepended, its length)."""
         lv = tuple(float(x) for x in levels)
         own = lv[-self.n_own :]
         ut2, ut, u = own[0], own[-2], own[-1]
-        other = lv[:2] if len(lv) == self.n_own + 2 else None
+        other = lv[: self.n_other] if self.n_other else None
         key = (id(signals.v), *lv)
         hit = self._cache.get(key)
         if hit is not None and hit[0] is signals.v:  # the same array, not a reused id
@@ -665,8 +691,8 @@ class _FromLevel:
         k = self.levels
         inner = np.asarray(values[:-k], float)
         levels = np.asarray(values[-self.n_own :], dtype=float).copy()
-        # the other motor holds its first value during this motor's ramps (its terms
-        # change only in its own pre-history, before them, and in the replayed cycle):
+        # the other motor holds its first value during this motor's ramps and the
+        # replayed cycle (its terms change only in its own pre-history, before them):
         # terms of [its pre-history | the cycle | the recording], from the recording on
         base = _with_cycle(signals, self.cycle)
         n_o = 0
@@ -1931,6 +1957,28 @@ def _starts_with_level(search: _Search, starts, inner_fit) -> list[np.ndarray]:
     ]
     if inner_fit is not None:
         out[-1][-own:] = u_nested
+    return _with_other_levels(search, out) if counter.model.n_other else out
+
+
+def _with_other_levels(search: _Search, starts: list[np.ndarray]) -> list[np.ndarray]:
+    """``starts`` with the other motor's levels, in pairs of starts (so both of this
+    motor's branches meet both): relaxed at its first value (as without levels), and at
+    the best of :func:`_pair_grid` on the lowest-cost start, a loop's two extremes, as
+    the other motor came through its last loop. Where the other motor came from is as
+    much a basin of the cost as this motor's branch (measured on agpi_coupled:31 of
+    bench_optimum: every start relaxed, the fit ended at 1.025 x the truth's cost; every
+    start at the grid's best, at 0.993; agpi_coupled:5 the other way round). Up to
+    :data:`LARGE_ROWS` samples (measured on bench_speed's 50,000-sample coupled
+    recording: the grid took its fit from 4.0 to 7.2 s CPU, to the same end)."""
+    if len(starts) < 3 or search.v.size > LARGE_ROWS:
+        return starts  # a warm refit: its start's state; a long recording: its loops
+    costs = [search.counter.cost(x) for x in starts]
+    best = starts[int(np.argmin(costs))]
+    turns, last = _motors_levels(search)[1]
+    levels = _pair_grid(search, best, turns, last)[1][[*turns, last]]
+    out = [np.asarray(x, dtype=float).copy() for x in starts]
+    for x in out[2::4] + out[3::4]:
+        x[[*turns, last]] = levels
     return out
 
 
@@ -1983,15 +2031,21 @@ def _plain_fit_end(model, s, theta, opts, starts, search: _Search) -> np.ndarray
 
 
 def state_levels(st: InitialState, k: int, n_own: int = 3) -> list[float]:
-    """The ``k`` level values of :class:`_FromLevel` (of ``n_own`` own levels) for the
-    start state ``st`` ((other motor's turn and level,) (v_turn2,) v_turn, v_from)."""
-    turn = st.v_from if st.v_turn is None else st.v_turn
-    own = [turn if st.v_turn2 is None else st.v_turn2, turn, st.v_from][-n_own:]
+    """The ``k`` level values of :class:`_FromLevel` (of ``n_own`` own levels and
+    ``k - n_own`` of the other motor's) for the start state ``st`` ((the other motor's
+    (other_v_turn2,) other_v_turn, other_v_from,) (v_turn2,) v_turn, v_from)."""
+    own = _staircase(st.v_turn2, st.v_turn, st.v_from)[-n_own:]
     if k == n_own:
         return own
     o_from = st.v0_other if st.other_v_from is None else st.other_v_from
-    o_turn = o_from if st.other_v_turn is None else st.other_v_turn
-    return [o_turn, o_from, *own]
+    other = _staircase(st.other_v_turn2, st.other_v_turn, o_from)
+    return [*other[3 - (k - n_own) :], *own]
+
+
+def _staircase(turn2: float | None, turn: float | None, last: float) -> list[float]:
+    """[turn2, turn, last] of a pre-history, a missing turning point equal to the next."""
+    turn = last if turn is None else turn
+    return [turn if turn2 is None else turn2, turn, last]
 
 
 #: Screening runs on at most about this many fitted samples: a fit with more screens
@@ -2242,8 +2296,10 @@ def _levels_researched(search: _Search, found: _Found, cap) -> None:
     The levels of a staircase pre-history (:class:`InitialState`) interact: one level
     profiled at a time from where the starts put them can stop short of a turning point
     the recording's state needs. Two moves from the best end: sweeps over every level
-    (:func:`_level_sweeps`), and the same after the own levels shifted one turning point
-    back (``v_turn2, v_turn, v_from`` <- ``v_turn, v_from, new``: a newer, smaller loop
+    (:func:`_level_sweeps`; for a model with the other motor's state, then
+    :func:`_pair_grid` over its last two turning points, swept again when lower), and the
+    same sweeps after the own levels shifted one
+    turning point back (``v_turn2, v_turn, v_from`` <- ``v_turn, v_from, new``: a newer, smaller loop
     inside the last one, the wiping-out staircase grown by one step; ``new`` the best
     level, and the best on the other side of ``v[0]``), polished when within
     :data:`STATE_POLISH_RATIO` of the best cost (the other parameters move with the
@@ -2252,6 +2308,10 @@ def _levels_researched(search: _Search, found: _Found, cap) -> None:
     bench_optimum, 1.195 -> 0.947 x the truth's cost)."""
     cost0, x0 = found.best()[:2]
     cost, x = _level_sweeps(search, x0)
+    if search.counter.model.n_other:  # the other motor's two extremes together
+        grid_cost, grid_x = _pair_grid(search, x, *_motors_levels(search)[1])
+        if grid_cost < cost * (1 - SAME_MINIMUM):
+            cost, x = _level_sweeps(search, grid_x)
     if cost < cost0 * (1 - SAME_MINIMUM):
         found.polished.append(_polished_end(search, x, cap))
     own = list(search.level_idx[-search.counter.model.n_own :])
@@ -2277,6 +2337,49 @@ def _levels_researched(search: _Search, found: _Found, cap) -> None:
         cost, x = _level_sweeps(search, _branch_level(search, shifted, oth[-1], vo0))
         if cost < STATE_POLISH_RATIO * cost0:
             found.polished.append(_polished_end(search, x, cap))
+
+
+#: Levels per axis of the grid over a motor's last two turning points (:func:`_pair_grid`).
+PAIR_GRID = 13
+
+
+def _motors_levels(search: _Search) -> list[tuple[list[int], int]]:
+    """([indices of the earlier turning points], index of the last level) of each motor
+    whose pre-history is fitted: this one's, and the other motor's for a model with a
+    state of its input."""
+    model = search.counter.model
+    own = list(search.level_idx[-model.n_own :])
+    out = [(own[:-1], own[-1])]
+    if model.n_other:
+        oth = list(search.level_idx[: model.n_other])
+        out.append((oth[:-1], oth[-1]))
+    return out
+
+
+def _pair_grid(search: _Search, full: np.ndarray, turns: list[int], last: int):
+    """(cost, point): ``full`` at the best of a :data:`PAIR_GRID` x :data:`PAIR_GRID`
+    grid (the bounds included) over one motor's pre-history of two reversals, relaxed
+    at a level (every index of ``turns``) and ramping to another (``last``), the other
+    parameters held (``full`` itself when no grid point is lower).
+
+    The levels are profiled one at a time elsewhere; a motor's last two reversals
+    interact (the order of a loop's two extremes is the branch it starts on), so one
+    level moved alone can keep a loop that needs both moved (measured on
+    agpi_coupled:5 of bench_optimum, the other motor from its first value via the lower
+    bound, 1.013 x the truth's cost; the loop's two extremes, its own history, 1.000).
+    """
+    c = search.counter
+    best = (c.cost(full), np.asarray(full, dtype=float))
+    lo, hi = search.lower, search.upper
+    for a in np.linspace(lo[turns[0]], hi[turns[0]], PAIR_GRID):
+        for b in np.linspace(lo[last], hi[last], PAIR_GRID):
+            trial = np.asarray(full, dtype=float).copy()
+            trial[turns] = a
+            trial[last] = b
+            cost = c.cost(trial)
+            if cost < best[0]:
+                best = (cost, trial)
+    return best
 
 
 #: Later polishes (after the first) run LM for at most this multiple of the first
@@ -2634,19 +2737,21 @@ def _without_level(
     n_pre = st.prehistory(sig, full[-st.levels :])[1]
     other = {}
     if st.n_other:
-        o_turn, o_from = float(full[-n_own - 2]), float(full[-n_own - 1])
+        o_lv = [float(x) for x in full[-st.levels : -n_own]]
+        o_turn2, o_turn, o_from = [o_lv[0]] * (3 - len(o_lv)) + o_lv
         vo0 = float(np.asarray(v_other, float)[0])
         other = dict(
-            other_v_turn=None if o_turn == o_from else o_turn, other_v_from=o_from, v0_other=vo0
-        )
-        if not (o_turn == o_from == vo0):
-            branch += (
-                f"; the other motor from {o_turn:.6g}"
-                + (f" via {o_from:.6g}" if o_turn != o_from else "")
-                + f" to {vo0:.6g}"
-            )
+            other_v_turn=None if o_turn == o_from else o_turn, other_v_from=o_from, v0_other=vo0,
+            other_v_turn2=None if o_turn2 == o_turn else o_turn2,
+        )  # fmt: skip
+        o_path = [x for i, x in enumerate((o_turn2, o_turn, o_from, vo0))
+                  if i == 0 or x != (o_turn2, o_turn, o_from, vo0)[i - 1]]  # fmt: skip
+        if len(o_path) > 1:
+            branch += f"; the other motor from {o_path[0]:.6g}" + "".join(
+                f" via {x:.6g}" for x in o_path[1:-1]
+            ) + f" to {vo0:.6g}"
     replay = (
-        f", then the recording's first {cycle} samples (its first cycle, both motors) replayed"
+        f", then the recording's first {cycle} samples (its first cycle) replayed"
         if cycle
         else ""
     )

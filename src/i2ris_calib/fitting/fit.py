@@ -2747,13 +2747,13 @@ def _without_level(
         o_path = [x for i, x in enumerate((o_turn2, o_turn, o_from, vo0))
                   if i == 0 or x != (o_turn2, o_turn, o_from, vo0)[i - 1]]  # fmt: skip
         if len(o_path) > 1:
-            branch += f"; the other motor from {o_path[0]:.6g}" + "".join(
-                f" via {x:.6g}" for x in o_path[1:-1]
-            ) + f" to {vo0:.6g}"
+            branch += (
+                f"; the other motor from {o_path[0]:.6g}"
+                + "".join(f" via {x:.6g}" for x in o_path[1:-1])
+                + f" to {vo0:.6g}"
+            )
     replay = (
-        f", then the recording's first {cycle} samples (its first cycle) replayed"
-        if cycle
-        else ""
+        f", then the recording's first {cycle} samples (its first cycle) replayed" if cycle else ""
     )
     text = (
         f"the recording starts mid-range (input {v[0]:.6g}, not at rest): initial state "

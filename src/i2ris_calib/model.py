@@ -10,7 +10,7 @@ function of (signals, parameter vector).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import KW_ONLY, dataclass, field, replace
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -20,7 +20,8 @@ import i2ris_calib._display as _display
 
 @dataclass(frozen=True)
 class Parameter:
-    """One model parameter.
+    """One model parameter: ``Parameter("a1", value=0.01, lower=0.0, unit="deg/count")``
+    (every field after the name by keyword).
 
     Attributes
     ----------
@@ -39,6 +40,7 @@ class Parameter:
     """
 
     name: str
+    _: KW_ONLY
     value: float
     lower: float = -np.inf
     upper: float = np.inf

@@ -24,7 +24,7 @@ from i2ris_calib.hysteresis.presets import (
     random_i2ris_egpi_params,
 )
 from i2ris_calib.hysteresis.registry import MODEL_KINDS, model_for_kind
-from i2ris_calib.model import Model, Signals
+from i2ris_calib.model import Model, Parameter, Signals
 
 V = triangle([0, 6000, 1500, 5000, 0, 3500, 200, 6000, 0])
 
@@ -165,3 +165,11 @@ def test_only_the_paper_egpi_steps_at_its_flag_point():
     from i2ris_calib.hysteresis.registry import KINDS
 
     assert [k.kind for k in KINDS if k.output_steps] == ["egpi"]
+
+
+def test_parameter_fields_after_the_name_are_keyword_only():
+    """``Parameter("a1", 0.5)`` is refused: a positional 0.5 could be a value or a bound."""
+    with pytest.raises(TypeError):
+        Parameter("a1", 0.5)  # type: ignore[misc]
+    p = Parameter("a1", value=0.5, lower=0.0, upper=1.0)
+    assert (p.name, p.value, p.lower, p.upper, p.fixed) == ("a1", 0.5, 0.0, 1.0, False)

@@ -612,12 +612,12 @@ class _FromLevel:
             if vo.size and np.all(np.isfinite(vo)) and np.ptp(vo) > 0:
                 olo, ohi = level_bounds(vo)
                 other = (
-                    Parameter(self.OTHER_TURN2, float(vo[0]), olo, ohi, unit="input",
+                    Parameter(self.OTHER_TURN2, value=float(vo[0]), lower=olo, upper=ohi, unit="input",
                               doc="a turning point of the other motor's input before "
                                   "other_v_turn"),
-                    Parameter(self.OTHER_TURN, float(vo[0]), olo, ohi, unit="input",
+                    Parameter(self.OTHER_TURN, value=float(vo[0]), lower=olo, upper=ohi, unit="input",
                               doc="an earlier turning point of the other motor's input"),
-                    Parameter(self.OTHER_FROM, float(vo[0]), olo, ohi, unit="input",
+                    Parameter(self.OTHER_FROM, value=float(vo[0]), lower=olo, upper=ohi, unit="input",
                               doc="level the other motor's input came from"),
                 )[3 - self.n_own :]  # as many as this motor's  # fmt: skip
                 self.other_step = prehistory_step(vo)
@@ -628,11 +628,11 @@ class _FromLevel:
         self.parameters = (
             *model.parameters,
             *other,
-            *[Parameter(self.TURN2, float(v[0]), lo, hi, unit="input",
+            *[Parameter(self.TURN2, value=float(v[0]), lower=lo, upper=hi, unit="input",
                         doc="a turning point of the input before v_turn")][: self.n_own - 2],
-            Parameter(self.TURN, float(v[0]), lo, hi, unit="input",
+            Parameter(self.TURN, value=float(v[0]), lower=lo, upper=hi, unit="input",
                       doc="an earlier turning point of the input before the recording"),
-            Parameter(self.PARAM, float(v[0]), lo, hi, unit="input",
+            Parameter(self.PARAM, value=float(v[0]), lower=lo, upper=hi, unit="input",
                       doc="level the input came from before the recording"),
         )  # fmt: skip
         self.step = prehistory_step(v)

@@ -254,17 +254,17 @@ class MultiStageBacklash(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "v_flag_counts",
-            0.0,
-            -1e9,
-            1e9,
+            value=0.0,
+            lower=-1e9,
+            upper=1e9,
             unit="counts",
             doc="input below which the stage's slack is taken up on a falling branch",
         ),
         Parameter(
             "width_counts",
-            0.0,
-            0.0,
-            1e9,
+            value=0.0,
+            lower=0.0,
+            upper=1e9,
             unit="counts",
             doc="slack of the stage: input travel during which the output holds",
         ),
@@ -302,17 +302,17 @@ class AxisCoupling(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "gain_angle",
-            0.0,
-            -2.0,
-            2.0,
+            value=0.0,
+            lower=-2.0,
+            upper=2.0,
             unit="deg/deg",
             doc="angle added per degree of the other axis's angle",
         ),
         Parameter(
             "gain_input_deg_per_count",
-            0.0,
-            -1.0,
-            1.0,
+            value=0.0,
+            lower=-1.0,
+            upper=1.0,
             unit="deg/count",
             doc="angle added per count of the other axis's input",
         ),
@@ -351,7 +351,14 @@ class TimeDelay(Effect):
 
     name: str = "time_delay"
     params: tuple[Parameter, ...] = (
-        Parameter("tau_s", 0.0, 0.0, 5.0, unit="s", doc="delay of the output behind the input"),
+        Parameter(
+            "tau_s",
+            value=0.0,
+            lower=0.0,
+            upper=5.0,
+            unit="s",
+            doc="delay of the output behind the input",
+        ),
     )
     meaning: str = "transport delay (tendon wave, controller or logging latency)"
     needs: tuple[str, ...] = ("t_s",)
@@ -392,17 +399,17 @@ class RateDependentThresholds(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "beta_s",
-            0.0,
-            0.0,
-            5.0,
+            value=0.0,
+            lower=0.0,
+            upper=5.0,
             unit="s",
             doc="threshold increase (input units) per input unit/s of speed",
         ),
         Parameter(
             "linear_deg_per_count",
-            0.0,
-            -1.0,
-            1.0,
+            value=0.0,
+            lower=-1.0,
+            upper=1.0,
             unit="deg/count",
             doc="slope of the rate-independent (threshold-0) part, which does not widen",
         ),
@@ -468,9 +475,9 @@ class RateDependentWeights(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "gain",
-            0.0,
-            -0.5,
-            1.0,
+            value=0.0,
+            lower=-0.5,
+            upper=1.0,
             unit="1",
             doc="relative change of the output at the 95th-percentile input speed",
         ),
@@ -551,14 +558,19 @@ class Creep(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "gain",
-            0.0,
-            0.0,
-            0.6,
+            value=0.0,
+            lower=0.0,
+            upper=0.6,
             unit="1",
             doc="fraction of an output change that arrives slowly",
         ),
         Parameter(
-            "tau_s", 1.0, 0.3, 100.0, unit="s", doc="time constant of the slow part (>= 0.3 s)"
+            "tau_s",
+            value=1.0,
+            lower=0.3,
+            upper=100.0,
+            unit="s",
+            doc="time constant of the slow part (>= 0.3 s)",
         ),
     )
     meaning: str = "first-order creep: part of every move arrives with one time constant"
@@ -609,14 +621,19 @@ class LogCreep(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "gamma_per_decade",
-            0.0,
-            0.0,
-            0.2,
+            value=0.0,
+            lower=0.0,
+            upper=0.2,
             unit="1/decade",
             doc="fraction of an output change added per decade of time after it",
         ),
         Parameter(
-            "tau0_s", 0.3, 0.05, 10.0, unit="s", doc="time from which the drift is logarithmic"
+            "tau0_s",
+            value=0.3,
+            lower=0.05,
+            upper=10.0,
+            unit="s",
+            doc="time from which the drift is logarithmic",
         ),
     )
     meaning: str = (
@@ -680,9 +697,9 @@ class DeadZone(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "d_counts",
-            0.0,
-            0.0,
-            1e9,
+            value=0.0,
+            lower=0.0,
+            upper=1e9,
             unit="counts",
             doc="input magnitude below which the output does not move",
         ),
@@ -717,9 +734,9 @@ class Backlash(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "width_counts",
-            0.0,
-            0.0,
-            1e9,
+            value=0.0,
+            lower=0.0,
+            upper=1e9,
             unit="counts",
             doc="input travel after a reversal before the output moves",
         ),
@@ -766,17 +783,17 @@ class Saturation(Effect):
     params: tuple[Parameter, ...] = (
         Parameter(
             "knee_deg",
-            1e6,
-            0.0,
-            1e6,
+            value=1e6,
+            lower=0.0,
+            upper=1e6,
             unit="deg",
             doc="|angle| above which the output starts to flatten",
         ),
         Parameter(
             "limit_deg",
-            10.0,
-            0.01,
-            1e3,
+            value=10.0,
+            lower=0.01,
+            upper=1e3,
             unit="deg",
             doc="largest |angle| reachable beyond the knee",
         ),

@@ -249,6 +249,7 @@ def test_angle_that_does_not_follow_its_input_is_flagged(tmp_path, capsys):
     assert any("check the axis, the columns" in w for w in rec["warnings"])
 
 
+@pytest.mark.slow  # ~14 s (keeps the default run under 5 minutes)
 def test_low_variance_warning_names_the_model_that_explains_the_angle(tmp_path, capsys):
     """Pitch following the yaw motor (a lab's two-motor recording, 5 Hz, 250 samples):
     the uncoupled models explain little of it, the coupled one nearly all; their

@@ -6,10 +6,12 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from i2ris_calib.cli import main
 
 
+@pytest.mark.slow  # ~17 s: a diagnose then a fit; fit --model-file on the default run: test_diagnose_command.py
 def test_diagnosed_model_is_refitted_and_beats_plain_egpi(tmp_path):
     from i2ris_calib.diagnosis.synthetic import make_case
 

@@ -308,6 +308,7 @@ def test_fit_output_folder_gives_the_model_sections_alone(tmp_path):
     assert "predictions.csv: not found" in text
 
 
+@pytest.mark.slow  # ~20 s: a coupled two-motor fit; signed fits in the report on the default run: tests/report/ (test_model_choice_line_per_axis_and_signed_curves_drawn)
 def test_fit_folder_report_of_a_signed_two_motor_fit(tmp_path):
     """`fit` on a two-motor recording through zero chooses the signed two-tendon models
     (agpi, agpi_coupled); `report FIT_DIR` shows them in every part."""

@@ -73,6 +73,7 @@ def test_one_loop_through_zero_gets_its_physical_kind_at_the_noise(truth, kind):
     assert f"picked after fitting: {kind}" in choice.why
 
 
+@pytest.mark.slow  # ~8 s; bouc_wen on the default run: the one-loop-through-zero test
 def test_bouc_wen_fitted_in_volts_recovers_the_classic_parameters():
     """The fit divides a volt input by 0.01 (``input_scale``) and converts back:
     ``k`` (1/count) as a slope; the classic values are recovered."""

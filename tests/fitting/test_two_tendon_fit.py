@@ -32,7 +32,10 @@ def lab_frame(seed: int, n: int = 3000, rate_hz: float = 30.0):
     return frame, y
 
 
-@pytest.mark.parametrize(("seed", "rate_hz", "n"), [(11, 30.0, 3000), (12, 5.0, 400)])
+@pytest.mark.parametrize(
+    ("seed", "rate_hz", "n"),
+    [pytest.param(11, 30.0, 3000, marks=pytest.mark.slow), (12, 5.0, 400)],  # 3000: ~8 s
+)
 def test_default_fit_through_zero_is_the_two_tendon_model_at_the_noise(tmp_path, seed, rate_hz, n):
     frame, truth = lab_frame(seed, n, rate_hz)
     frame.to_csv(tmp_path / "s.csv", index=False)

@@ -10,6 +10,8 @@ from hypothesis import strategies as st
 from scipy.optimize import least_squares
 
 from i2ris_calib.fitting.lm import ScaledSystem, _norm, least_squares_lm, lm_parameter
+from i2ris_calib.hysteresis.models import gpi_model
+from i2ris_calib.hysteresis.presets import gpi_values, loading_trajectory, paper_like_params
 
 
 def _tanh_problem(seed, m=3000, n=6):
@@ -167,3 +169,18 @@ def test_ill_conditioned_system_goes_to_qr():
     qr = ScaledSystem.of_qr(j, f, diag)
     p = qr.step(0.0) / diag
     np.testing.assert_allclose(p, -np.linalg.lstsq(j, f, rcond=None)[0], rtol=1e-6)
+
+
+def test_forward_jacobian_matches_the_exact_one():
+    """A model without an exact Jacobian gets forward differences (scipy's 2-point
+    steps) for the project's LM: on a GPI they agree with the model's exact Jacobian."""
+    from i2ris_calib.fitting.fit import _forward_jacobian
+
+    rng = np.random.default_rng(8)
+    _, v = loading_trajectory(rng, n_cycles=3, n_samples=400)
+    model = gpi_model()
+    x0 = model.vector(gpi_values(paper_like_params("yaw+")))
+    fd = _forward_jacobian(lambda x: model.evaluate(v, x))(x0)
+    exact = model.jacobian(v, x0)
+    scale = np.abs(exact).max(axis=0) + 1e-12
+    np.testing.assert_allclose(fd / scale, exact / scale, atol=1e-5)

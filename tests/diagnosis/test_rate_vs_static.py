@@ -5,6 +5,7 @@ both are listed with the separating recording."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from i2ris_calib.data.dataset import input_bands, make_dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
@@ -66,6 +67,7 @@ def test_one_frequency_sine_names_no_rate_effect_and_lists_both():
     assert listed["rate_dependent_thresholds"].experiment == SPEED_EXPERIMENT
 
 
+@pytest.mark.slow  # ~14 s; the one-frequency sine on the default run: the test above
 def test_one_frequency_sine_says_rate_dependence_cannot_be_tested():
     """A static EGPI driven by a one-frequency sine: no rate effect fits better, and the
     diagnosis still says the recording could not have shown one, with the recording

@@ -37,6 +37,8 @@ def _run(seed, effect, params=None, noise=0.2, signals=None, **cfg):
     return case, diagnose(start, data, config)
 
 
+@pytest.mark.slow  # ~22 s; a hidden effect named on the default run: test_independent_generators (dead_zone,
+# rate_dependent_thresholds) and the delay by the command: test_diagnose_command's outputs test
 def test_hidden_delay_is_named_recovered_and_gap_closes():
     case, d = _run(13, "time_delay", {"tau_s": 0.2}, noise=0.1, max_steps=2)
     assert d.named_effects == ["time_delay"]

@@ -31,6 +31,7 @@ def test_xcorr_is_biased_by_backlash():
     assert abs(_mid_error_s(clk, case)) > 0.010
 
 
+@pytest.mark.slow  # ~20 s; the model method on the default run: test_auto_refines_a_coarse_event_with_the_model
 def test_model_method_recovers_offset_with_6deg_backlash():
     """No sync event, 6 deg backlash: offset error <= 5 ms (the requirement), and
     within 4 standard errors."""

@@ -86,7 +86,9 @@ def _perturbed(fitted, tmp_path) -> Path:
 
 def _auto(model) -> SimpleNamespace:
     """The part of a diagnosis the replacement reads: the gpi path's refits of its base."""
-    return SimpleNamespace(paths={"gpi": SimpleNamespace(base_refits=(BaseRefit(model, FOUND_BY),))})
+    return SimpleNamespace(
+        paths={"gpi": SimpleNamespace(base_refits=(BaseRefit(model, FOUND_BY),))}
+    )
 
 
 def _good_model(fitted, dset):

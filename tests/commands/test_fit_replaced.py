@@ -201,3 +201,37 @@ def test_a_fit_of_other_data_or_settings_is_refused_before_any_work(fitted, tmp_
         stored_fit_record(out / "fit.json", dset2, cfg)
     with pytest.raises(CalibError, match="fit.json"):
         stored_fit_record(tmp_path / "nope.json", dset, cfg)
+
+
+@pytest.mark.slow  # ~40 s: fit of every kind, then a diagnosis from gpi and egpi
+def test_diagnose_fit_option_replaces_a_worse_stored_optimum_end_to_end(tmp_path, capsys):
+    """`fit`, a fit.json whose egpi sits at a worse point, `diagnose --fit`: the
+    diagnosis's refit of its egpi start costs less, fit.json is replaced and said so on
+    the terminal, in diagnosis.json and diagnosis.md; a second `diagnose --fit` finds
+    no lower cost and leaves fit.json byte-identical."""
+    csv = tmp_path / "synced.csv"
+    _synced(csv)
+    out = tmp_path / "fit"
+    assert main(["fit", str(csv), "--axis", "yaw", "--out", str(out)]) == 0
+    path = out / "fit.json"
+    doc = json.loads(path.read_text())
+    doc["datasets"][0]["models"]["egpi"]["params"]["a1"] *= 1.3
+    doc["models"] = doc["datasets"][0]["models"]
+    path.write_text(json.dumps(doc, indent=2) + "\n")
+    capsys.readouterr()
+    args = ["diagnose", str(csv), "--axis", "yaw", "--fit", str(path), "--config"]
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text('[diagnose]\nmax_steps = 1\ncandidates = ["time_delay"]\n')
+    assert main([*args, str(cfg), "--out", str(tmp_path / "d1")]) == 0
+    said = capsys.readouterr().out
+    rec = read_fit_json(path)["datasets"][0]["models"]["egpi"]["replaced"]
+    assert rec["text"].startswith("fit.json's yaw+ egpi replaced: cost ")
+    assert rec["found_by"].startswith("diagnose's refit")
+    assert rec["text"] in said
+    diag = json.loads((tmp_path / "d1" / "diagnosis.json").read_text())
+    assert rec["text"] in [c["text"] for c in diag["fit_replaced"]]
+    assert rec["text"] in (tmp_path / "d1" / "diagnosis.md").read_text()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main([*args, str(cfg), "--out", str(tmp_path / "d2")]) == 0
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert json.loads((tmp_path / "d2" / "diagnosis.json").read_text())["fit_replaced"] == []

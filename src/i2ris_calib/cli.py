@@ -399,6 +399,13 @@ def diagnose(
         metavar="COLUMNS",
         help='Your file\'s columns and units: "time_s=Img TS,yaw_deg=yaws,...".',
     ),
+    fit: Path | None = typer.Option(
+        None,
+        "--fit",
+        metavar="FIT.json",
+        help="fit.json of 'fit' on this file (same config): replaced when the diagnosis "
+        "finds a lower cost of a model it holds (docs/diagnosis.md).",
+    ),
 ) -> None:
     """Find where model and measurement disagree, name the missing effect, add it, refit."""
     cfg = _config(config)
@@ -407,11 +414,15 @@ def diagnose(
     from i2ris_calib.io.synced import with_columns
 
     cfg = with_columns(cfg, columns)
-    rec = diagnose_file(data, axis=axis, start=start, out=out, config=cfg, direction=direction)
+    rec = diagnose_file(
+        data, axis=axis, start=start, out=out, config=cfg, direction=direction, fit_json=fit
+    )
     typer.echo(verdict_line(rec))  # the whole verdict, paths and alternatives: diagnosis.md
     for note in rec.get("notes", []):
         if note.startswith("coupling"):  # coupling named, or not separable (issue 20)
             typer.echo(note)
+    for change in rec.get("fit_replaced", []):  # a lower cost of a stored fit (issue 31)
+        typer.echo(change["text"])
     typer.echo(f"wrote {out} (details in {out / 'diagnosis.md'})")
 
 

@@ -55,6 +55,16 @@ def test_hidden_delay_is_named_recovered_and_gap_closes():
     assert abs(step.analysis_before["by_rate"]["corr_res_rate"]) > 0.3
     # and what remains is noise-like
     assert abs(d.analysis_final["autocorr"]["lag_1"]) < 0.3
+    # the refits of the starting model (no effect, its kind and names) are handed back:
+    # the start polished, the base refitted from the finalist's values before the first
+    # effect is named (issue 31: `diagnose --fit` costs them against the stored fit)
+    hows = [r.how for r in d.base_refits]
+    assert hows == ["refit of its starting fit", "refit from time_delay's values"]
+    assert d.base_refits[0].model is d.start_model
+    names = [p.name for p in d.start_model.parameters]
+    for r in d.base_refits:
+        assert type(r.model) is type(d.start_model)
+        assert [p.name for p in r.model.parameters] == names
 
 
 def test_clean_data_names_nothing():

@@ -359,6 +359,8 @@ def _axis_doc(
     ramp = res.entry_commands
     bad = np.flatnonzero(~res.reachable)
     n_cond, n_pre, dt0 = result.n_cond, result.n_pre, result.dt0
+    replaced = rec["models"][c.kind].get("replaced")  # a later stage's lower cost (issue 31)
+    said = {"fit_replaced": replaced["text"]} if isinstance(replaced, dict) else {}
     return {
         "dataset": a.name,
         "fit_json": a.fit.where,
@@ -393,6 +395,7 @@ def _axis_doc(
         "status_codes": {str(k): v for k, v in STATUS_NAMES.items()},
         "reachable_deg": list(o.reach),
         "warnings": o.warnings,
+        **said,
     }
 
 
@@ -455,4 +458,6 @@ def summary_lines(doc: dict) -> list[str]:
         )
         if rec.get("substitute"):
             lines.append(f"note: {rec['substitute']}")
+        if rec.get("fit_replaced"):  # the model inverted is the rerun's (docs/diagnosis.md)
+            lines.append(f"note: {rec['fit_replaced']}")
     return lines

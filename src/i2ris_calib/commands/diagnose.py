@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from rich.console import Console
 from rich.progress import Progress
 
+from i2ris_calib.commands.fit import LowerCost, rerun_fit, stored_fit_record, stored_model
 from i2ris_calib.config import PipelineConfig
 from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.blas import single_threaded_blas
@@ -25,6 +26,8 @@ from i2ris_calib.diagnosis.data import check_dataset
 from i2ris_calib.diagnosis.report import diagnosis_markdown, diagnosis_record, paths_record
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
 from i2ris_calib.errors import CalibError
+from i2ris_calib.fitting.fit import lower_optimum
+from i2ris_calib.fitting.pipeline import dataset_cost
 from i2ris_calib.hysteresis.codec import model_to_dict
 from i2ris_calib.hysteresis.registry import DIAGNOSIS_STARTS, diagnosis_starts, kind_info
 from i2ris_calib.io.atomic import atomic_path, write_json, write_text
@@ -165,8 +168,13 @@ def diagnose_file(
     out: Path | None = None,
     config=None,
     direction: str = "auto",
+    fit_json: Path | None = None,
 ) -> dict:
     """Run the diagnosis on ``data`` and write ``out`` (see module doc). Returns diagnosis.json.
+
+    ``fit_json``: the fit.json of ``fit`` on the same file and ``[fit]`` settings
+    (``--fit``); when the diagnosis reaches a lower cost of a model it holds, the fit
+    is rerun from it and fit.json replaced (:func:`replace_stored_fit`).
 
     The diagnosed dataset is :func:`diagnosis_dataset` (the one reader, ``[fit]``
     bands and held-out cycles): ``fit --model-file OUT/final_model.json`` with the
@@ -183,7 +191,7 @@ def diagnose_file(
     dset = diagnosis_dataset(Path(data), axis, direction, cfg.fit, cfg.columns)
     check_start(start, dset, data)
     check_dataset(dset, cfg.diagnose)
-    return diagnose_dataset(dset, axis, start, out, cfg, sources=[Path(data)])
+    return diagnose_dataset(dset, axis, start, out, cfg, sources=[Path(data)], fit_json=fit_json)
 
 
 def diagnose_dataset(
@@ -194,15 +202,19 @@ def diagnose_dataset(
     cfg,
     sources: list[Path],
     show_progress: bool = True,
+    fit_json: Path | None = None,
 ) -> dict:
     """Diagnose one dataset and write ``out`` (see module doc); returns diagnosis.json.
 
     Used by ``diagnose`` (one file) and by ``run`` (``[run] diagnose = true``, every
-    axis and direction of the session).
+    axis and direction of the session; ``fit_json``: the run's fit of the axis).
+    ``fit_json``: see :func:`diagnose_file`; diagnosis.json's ``fit_replaced`` lists
+    what was replaced, and a note says it.
     """
     out = claim_output_dir(
         Path(out) if out is not None else Path("diagnose_out"), "diagnose", sources, OUTPUTS
     )
+    stored = stored_fit_record(fit_json, dset, cfg) if fit_json is not None else None
     with output_lock(out, command="diagnose"):  # one diagnose at a time into ``out``
         auto = _diagnosed(dset, start, cfg, show_progress)
         diag = auto.diagnosis
@@ -211,6 +223,10 @@ def diagnose_dataset(
         figures = [f"residual_{i:02d}_{lab}.png" for i, lab in enumerate(labels)]
         record = diagnosis_record(diag, figures, auto=auto)
         record.update(_dataset_fields(dset, axis, start, auto, sources, cfg))
+        if stored is not None:
+            changes = replace_stored_fit(Path(fit_json), stored, dset, auto, cfg)
+            record["fit_replaced"] = changes
+            record["notes"] = [*record.get("notes", []), *(c["text"] for c in changes)]
         with output_dir(out, "diagnose", sources, OUTPUTS) as tmp:
             for i, (m, name) in enumerate(zip(models, figures, strict=True)):
                 title = f"{dset.name}: {' + '.join([auto.start, *labels[1 : i + 1]])}"
@@ -223,6 +239,38 @@ def diagnose_dataset(
             write_json(tmp / "final_model.json", final)
             write_text(tmp / "diagnosis.md", diagnosis_markdown(record))
         return record
+
+
+def lower_costs(stored: tuple[dict, dict], path: Path, dset: Dataset, auto, cfg) -> list:
+    """The :class:`~i2ris_calib.commands.fit.LowerCost` of each model the fit.json
+    ``stored`` = (document, ``dset``'s record, read from ``path``) holds and a path of
+    the diagnosis ``auto`` started from: the lowest of the diagnosis's refits of it
+    (:attr:`~i2ris_calib.diagnosis.results.Diagnosis.base_refits`) by the fit's own
+    cost on the whole dataset (run after the stored fit's start state), when it is
+    lower than the stored fit's (:func:`~i2ris_calib.fitting.fit.lower_optimum`)."""
+    doc, record = stored
+    out = []
+    for kind, diag in auto.paths.items():
+        if kind not in record["models"] or not diag.base_refits:
+            continue
+        model, state = stored_model(doc, record, kind, path)
+        before = dataset_cost(model, dset, cfg.fit, state)
+        costs = [(dataset_cost(r.model, dset, cfg.fit, state), r) for r in diag.base_refits]
+        cost, best = min(costs, key=lambda c: c[0])
+        if lower_optimum(before, cost):
+            params = {p.name: float(p.value) for p in best.model.parameters}
+            out.append(LowerCost(dset.name, kind, params, cost, before, f"diagnose's {best.how}"))
+    return out
+
+
+def replace_stored_fit(path: Path, stored, dset: Dataset, auto, cfg) -> list[dict]:
+    """Rerun the fit of ``path`` from the lower costs the diagnosis found
+    (:func:`lower_costs`; the fit's own code: :func:`~i2ris_calib.commands.fit.rerun_fit`),
+    replacing fit.json and predictions.csv; returns the changes (empty: none found, and
+    fit.json is not touched)."""
+    with single_threaded_blas():
+        lower = lower_costs(stored, path, dset, auto, cfg)
+        return rerun_fit(path, lower, cfg, stage="diagnose") if lower else []
 
 
 def _diagnosed(dset: Dataset, start: str, cfg, show_progress: bool):

@@ -320,7 +320,10 @@ def diagnose_direction(
     or fewer than the minimum loading cycles, see
     :func:`~i2ris_calib.diagnosis.workflow.check_dataset`) do not stop the run:
     ``out/skipped.json`` records why and the report shows the other diagnoses.
-    Returns None when diagnosed, else ``"skipped: <why>"`` (what ``run`` prints).
+    Returns None when diagnosed, else ``"skipped: <why>"`` (what ``run`` prints), or
+    ``"ran; fit.json's <dataset> <kind> replaced: ..."`` when the diagnosis found a
+    lower cost of a model of the run's fit (replaced: :func:`~i2ris_calib.commands.
+    diagnose.diagnose_dataset`), before compensate and report read it.
     """
     try:
         if not axis_moves(synced, axis):
@@ -344,8 +347,13 @@ def diagnose_direction(
                 tmp / "skipped.json", {"axis": axis, "direction": direction, "reason": str(exc)}
             )
         return f"skipped: {exc}"
-    diagnose_dataset(dset, axis, "auto", out, config, sources=[synced], show_progress=False)
-    return None
+    fit_json = out.parent.parent / "fit" / axis / "fit.json"  # the run's fit of this axis
+    rec = diagnose_dataset(
+        dset, axis, "auto", out, config, sources=[synced], show_progress=False,
+        fit_json=fit_json if fit_json.is_file() else None,
+    )  # fmt: skip
+    changes = [c["text"] for c in rec.get("fit_replaced", [])]
+    return f"ran; {'; '.join(changes)}" if changes else None
 
 
 def compensation_target(session: Path, target: str) -> Path:

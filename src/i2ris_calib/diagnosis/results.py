@@ -187,6 +187,26 @@ SEPARATING_FROM_BASE: dict[str, str] = {
 
 
 @dataclass(frozen=True)
+class BaseRefit:
+    """The starting model (no effect) refitted by the diagnosis: another end of the
+    same model on the same data, which ``diagnose`` compares with the stored fit by
+    the fit's own cost (a lower one replaces it: docs/diagnosis.md).
+
+    Attributes
+    ----------
+    model : Model
+        The starting model's kind with the refitted values.
+    how : str
+        Where the diagnosis refitted it: ``"refit of its starting fit"`` (the start
+        polished on the search data) or ``"refit from creep_log's values"`` (the base
+        refitted from a finalist's base values, :func:`_null_reference` of the workflow).
+    """
+
+    model: Model
+    how: str
+
+
+@dataclass(frozen=True)
 class Diagnosis:
     """Result of :func:`diagnose`.
 
@@ -213,6 +233,10 @@ class Diagnosis:
         angle by more than the noise: the data cannot tell them from the final
         model (e.g. a backlash that the base's envelope offsets absorb). ``z`` is
         the final model's held-out z over the candidate.
+    base_refits : tuple of BaseRefit
+        The starting model refitted on the search data (its polish, and the base
+        refitted from the best finalist's values before the first effect is named):
+        ends of the starting model that a stored fit of it may not have reached.
     """
 
     start_model: Model
@@ -227,6 +251,7 @@ class Diagnosis:
     decimation: int
     notes: tuple[str, ...] = field(default_factory=tuple)
     not_excluded: tuple[Alternative, ...] = ()
+    base_refits: tuple[BaseRefit, ...] = ()
 
     @property
     def named_effects(self) -> list[str]:

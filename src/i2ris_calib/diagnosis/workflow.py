@@ -62,6 +62,7 @@ from i2ris_calib.diagnosis.results import (
     SEPARATING_FROM_BASE,
     Alternative,
     AutoDiagnosis,
+    BaseRefit,
     Candidate,
     Diagnosis,
     ModelScore,
@@ -192,7 +193,8 @@ def _finalists(cands, current, cur_m, d, cfg, progress) -> list[Candidate]:
 
 
 def _null_reference(current, cur_m, best: Candidate, d, cfg):
-    """(reference model and metrics, note or None) for judging the winner.
+    """(reference model and metrics, note or None, the refit as a :class:`BaseRefit`)
+    for judging the winner.
 
     The current model is refitted from the winner's base values; if that alone is
     a significant improvement, the winner was partly a better optimum of the base
@@ -202,14 +204,15 @@ def _null_reference(current, cur_m, best: Candidate, d, cfg):
     nul = refit(current, d.signals, d.theta, d.fit, inner_x, max_nfev=cfg.max_nfev)
     null_model = current.with_values(nul.values)
     null_m = score_of(null_model, nul.values, d, n_free_of(null_model))
+    refitted = BaseRefit(null_model, f"refit from {best.effect}'s values")
     if not compare((current, cur_m), (null_model, null_m), d, cfg).significant:
-        return (current, cur_m), None
+        return (current, cur_m), None, refitted
     note = (
         f"the base model refitted from {best.effect}'s values fits better (held-out RMSE "
         f"{null_m.holdout_rmse_deg:.3g} vs {cur_m.holdout_rmse_deg:.3g} deg); candidates "
         "were judged against it"
     )
-    return (null_model, null_m), note
+    return (null_model, null_m), note, refitted
 
 
 def _alternatives(best: Candidate, finals, d: SearchData, cfg) -> tuple[Alternative, ...]:
@@ -440,6 +443,7 @@ def _diagnose(start, data: Dataset, cfg, progress, initial_state=None) -> Diagno
     names = _candidate_names(cfg, coupling_note)
     current, cur_m = _polished(start, d, cfg)
     baseline, start_polished = cur_m, current
+    base_refits = [BaseRefit(current, "refit of its starting fit")]
     steps: list[Step] = []
     last: tuple[Candidate, ...] = ()
     start_note = start_rule(data, initial_state)[1]
@@ -455,7 +459,9 @@ def _diagnose(start, data: Dataset, cfg, progress, initial_state=None) -> Diagno
         confounded += rate
         if not passing:
             break
-        ref, passing, note = _against_reference(current, cur_m, passing, d, cfg)
+        ref, passing, note, refitted = _against_reference(current, cur_m, passing, d, cfg)
+        if not effects_of(current):  # the starting model itself, refitted
+            base_refits.append(refitted)
         if note:
             notes.append(f"step {len(steps) + 1}: {note}")
         if not passing:
@@ -482,6 +488,7 @@ def _diagnose(start, data: Dataset, cfg, progress, initial_state=None) -> Diagno
         decimation=step,
         notes=tuple(notes + more),
         not_excluded=not_excluded,
+        base_refits=tuple(base_refits),
     )
 
 
@@ -494,14 +501,14 @@ def _polished(start: Model, d: SearchData, cfg) -> tuple[Model, ModelScore]:
 
 def _against_reference(current, cur_m, passing: list[Candidate], d, cfg):
     """(reference = (model, metrics), the finalists still significant against it, note
-    or None): the reference is ``current`` unless the base refitted from the best
+    or None, the base refit as a :class:`BaseRefit`): the reference is ``current`` unless the base refitted from the best
     finalist's values is itself significantly better (:func:`_null_reference`); the
     finalists are then judged against that refit."""
     best = min(passing, key=lambda c: c.metrics.holdout_rmse_deg)
-    ref, note = _null_reference(current, cur_m, best, d, cfg)
+    ref, note, refitted = _null_reference(current, cur_m, best, d, cfg)
     if note:
         passing = [c for c in passing if compare(ref, (c.model, c.metrics), d, cfg).significant]
-    return ref, passing, note
+    return ref, passing, note, refitted
 
 
 def _candidate_names(cfg, coupling_note: str) -> list[str]:

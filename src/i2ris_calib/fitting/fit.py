@@ -116,6 +116,11 @@ class SearchCertificate:
         (NaN when every polished end reached the best).
     hops : int
         Basin-hopping restarts run.
+    replaced : str
+        Set when a later stage found a lower cost for this model on the same data and
+        the fit was rerun with that end as one more start (``fit.json``'s ``replaced``
+        record): what found it and the cost before and after; ``""`` for a fit's own
+        search. The counts are the rerun's (the later stage's start among them).
     """
 
     starts: int
@@ -124,6 +129,7 @@ class SearchCertificate:
     best_cost: float
     next_cost: float
     hops: int
+    replaced: str = ""
 
     @property
     def certified(self) -> bool:
@@ -140,9 +146,10 @@ class SearchCertificate:
             else ""
         )
         hops = f", {self.hops} restart(s) from perturbations of the best" if self.hops else ""
+        rerun = f"; rerun: {self.replaced}" if self.replaced else ""
         return (
             f"{self.at_best} of {self.starts + self.hops} starts reached the best cost "
-            f"(within {100 * SAME_MINIMUM:.1f} %; {self.polished} polished{hops}){nxt}"
+            f"(within {100 * SAME_MINIMUM:.1f} %; {self.polished} polished{hops}){nxt}{rerun}"
         )
 
     @property
@@ -163,8 +170,9 @@ class SearchCertificate:
         )
 
     def as_dict(self) -> dict:
-        """JSON-ready fields (``next_cost`` None when NaN) with ``text``."""
-        return {
+        """JSON-ready fields (``next_cost`` None when NaN) with ``text``; ``replaced``
+        only when set."""
+        out = {
             "starts": self.starts,
             "polished": self.polished,
             "at_best": self.at_best,
@@ -174,6 +182,9 @@ class SearchCertificate:
             "certified": self.certified,
             "text": self.text,
         }
+        if self.replaced:
+            out["replaced"] = self.replaced
+        return out
 
     @classmethod
     def from_dict(cls, d: dict) -> SearchCertificate:
@@ -182,6 +193,7 @@ class SearchCertificate:
         return cls(
             int(d["starts"]), int(d["polished"]), int(d["at_best"]), float(d["best_cost"]),
             float("nan") if nxt is None else float(nxt), int(d.get("hops", 0)),
+            str(d.get("replaced") or ""),
         )  # fmt: skip
 
 
@@ -1757,6 +1769,44 @@ def _loss_samples(theta, fit_mask, holdout_mask) -> tuple[np.ndarray, np.ndarray
     if fit_mask is not None:
         used &= np.asarray(fit_mask, bool)
     return hold, used
+
+
+def lower_optimum(stored_cost: float, cost: float) -> bool:
+    """True when ``cost`` is lower than ``stored_cost`` by more than :data:`SAME_MINIMUM`
+    (relative): another minimum of the same model on the same data, not the same one
+    reached again (the certificate's tolerance). The one rule by which a later stage's
+    refit replaces a stored fit."""
+    return bool(np.isfinite(cost) and cost < stored_cost * (1.0 - SAME_MINIMUM))
+
+
+def fit_cost(
+    model: Model,
+    signals: Signals | np.ndarray,
+    theta_deg: np.ndarray,
+    *,
+    holdout_mask: np.ndarray | None = None,
+    fit_mask: np.ndarray | None = None,
+    initial_state: InitialState | None = None,
+    loss: str = "linear",
+    f_scale_deg: float = 0.5,
+) -> float:
+    """The cost :func:`fit_model` minimises, at ``model``'s values: the sum of
+    rho(r^2) over the samples in the loss (every finite angle not held out; rho of
+    ``loss``, plain squares for ``"linear"``: :attr:`SearchCertificate.best_cost`), the
+    model run after the pre-history of ``initial_state`` (a fit's
+    :attr:`FitResult.initial_state`; None: from rest) as :meth:`FitResult.predict` runs
+    it. A later stage compares a refit of a stored model with it (:func:`lower_optimum`)."""
+    s = as_signals(signals)
+    theta = np.asarray(theta_deg, dtype=float)
+    _, used = _loss_samples(theta, fit_mask, holdout_mask)
+    x = np.array([p.value for p in model.parameters], dtype=float)
+    fitted, full = model, x
+    if initial_state is not None:
+        st = initial_state
+        fitted = _FromLevel(model, np.asarray(s.v, dtype=float), st.cycle_samples,
+                            s.v_other if st.other_v_from is not None else None)  # fmt: skip
+        full = np.append(x, state_levels(st, fitted.levels))
+    return _Counter(fitted, s, theta, used, loss, f_scale_deg).cost(full)
 
 
 def _check_loss(loss: str, method: str) -> None:

@@ -26,7 +26,14 @@ from i2ris_calib.data.excursions import Excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.decision import Evidence, decide, decide_fits, output_jump, pooled
-from i2ris_calib.fitting.fit import LARGE_ROWS, FitResult, fit_model, fit_notices, innermost
+from i2ris_calib.fitting.fit import (
+    LARGE_ROWS,
+    FitResult,
+    fit_cost,
+    fit_model,
+    fit_notices,
+    innermost,
+)
 from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.registry import (
     COUPLED_DEFAULT,
@@ -48,6 +55,7 @@ __all__ = [
     "MODEL_KINDS",
     "ModelChoice",
     "choose_model",
+    "dataset_cost",
     "output_jump",
     "pick_after_fit",
     "unfitted_model",
@@ -307,6 +315,7 @@ def fit_kind(
     *,
     deadband: float | None = None,
     related: tuple[FitResult, ...] = (),
+    given: tuple[dict[str, float], ...] = (),
 ) -> FitResult:
     """Fit one model kind with data-driven, seeded multi-start (docs/fit.md).
 
@@ -333,6 +342,10 @@ def fit_kind(
         ``v'`` dead band (input unit); default :func:`deadband_for`.
     related : tuple of FitResult
         Fits of models with the same parameter names, tried as further starts.
+    given : tuple of dict
+        Further starts, ``{parameter: value}`` in the input's own unit (missing names:
+        the default start): a lower cost of this kind that a later stage found on the
+        same data (``diagnose``'s refit of its base), the fit rerun from it.
     """
     s = signals if isinstance(signals, Signals) else Signals(v=np.asarray(signals, dtype=float))
     v = np.asarray(s.v, dtype=float)
@@ -347,6 +360,8 @@ def fit_kind(
             kind, replace(s, v=v / scale, v_other=v_other), theta, config, holdout,
             None if gpi_fit is None else _scaled_fit(gpi_fit, 1.0 / scale),
             deadband=db / scale, related=tuple(_scaled_fit(r, 1.0 / scale) for r in related),
+            given=tuple(_scaled_params(g, unfitted_model(kind, v, config, db), 1.0 / scale)
+                        for g in given),
         )  # fmt: skip
         return _scaled_fit(res, scale, unfitted_model(kind, v, config, db))
     model = unfitted_model(kind, v, config, db)
@@ -369,6 +384,7 @@ def fit_kind(
             # against its many loops (and its searches keep their time: bench_speed)
             theta_rest = rested_angle(theta_fit, gpi_fit, s)
             starts += info.start(model, s, theta_rest, gpi_fit.params, n_starts, rng, db)[1][1:]
+        starts += [model.vector(g) for g in given]
         starts = [keep_fixed(model, x) for x in starts]
         return _fit_configured(model, s, theta, holdout, starts, config)
     starts = info.start(model, v, theta_fit, n_starts, rng, db) if fit_sel.sum() > 2 else None
@@ -379,6 +395,8 @@ def fit_kind(
         for other in related:
             if set(other.params) == set(model.names):
                 starts.append(model.vector(other.params))
+    if given:
+        starts = [*(starts or [model.vector({})]), *(model.vector(g) for g in given)]
     if starts is not None:
         starts = [keep_fixed(model, x) for x in starts]
     return _fit_configured(model, s, theta, holdout, starts, config, kind)
@@ -437,6 +455,13 @@ def input_scale(v: np.ndarray) -> float:
     return float(10.0 ** np.round(np.log10(peak / 1e4)))
 
 
+def _scaled_params(params: dict[str, float], model, scale: float) -> dict[str, float]:
+    """``params`` for the input ``v * scale`` (as :func:`_scaled_fit` converts a fit)."""
+    unit = {p.name: p.unit for p in model.parameters}
+    factor = {"deg/count": 1.0 / scale, "1/count": 1.0 / scale, "count": scale}
+    return {k: float(x * factor.get(unit.get(k, ""), 1.0)) for k, x in params.items()}
+
+
 def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = None) -> FitResult:
     """``res`` with its parameters expressed for the input ``v * scale`` (slopes, in
     deg per input unit, divided by ``scale``; inputs such as the flag point multiplied
@@ -465,10 +490,12 @@ def fit_dataset(
     data: Dataset,
     config: FitConfig = FitConfig(),
     earlier: dict[str, FitResult] | None = None,
+    given: tuple[dict[str, float], ...] = (),
 ) -> FitResult:
     """Fit one model kind to a direction dataset (whole history, its loss mask and
     held-out cycles). ``earlier``: fits of other kinds on the same dataset, used as
-    starts (GPI nested in EGPI, EGPI for the continuous EGPI)."""
+    starts (GPI nested in EGPI, EGPI for the continuous EGPI); ``given``: further
+    starts (:func:`fit_kind`)."""
     earlier = earlier or {}
     db = data.bands.deadband if config.deadband_counts < 0 else float(config.deadband_counts)
     nested = kind_info(kind).nested
@@ -476,6 +503,17 @@ def fit_dataset(
     return fit_kind(
         kind, data.signals, data.theta_deg, config, data.holdout,
         None if nested is None else earlier.get(nested), deadband=db, related=related,
+        given=tuple(given),
+    )  # fmt: skip
+
+
+def dataset_cost(model, data: Dataset, config: FitConfig, initial_state=None) -> float:
+    """The cost :func:`fit_dataset` minimises (``config``'s loss over the dataset's
+    fitted samples, :func:`~i2ris_calib.fitting.fit.fit_cost`) at ``model``'s values,
+    run after ``initial_state`` (a fit's; None: from rest)."""
+    return fit_cost(
+        model, data.signals, data.theta_deg, holdout_mask=data.holdout,
+        initial_state=initial_state, loss=config.loss, f_scale_deg=config.f_scale_deg,
     )  # fmt: skip
 
 

@@ -106,12 +106,16 @@ def fit_document(
     choice: ModelChoice | None = None,
     decisions: Sequence[Decision] | None = None,
     limits: Sequence[RecordingLimits] | None = None,
+    replaced: dict[tuple[str, str], dict] | None = None,
 ) -> dict[str, Any]:
     """The fit.json document (schema i2ris-calib.fit/1); ``choice``: which models on
     which input and why (``model_choice``); ``decisions``: the recommended model of
     each dataset (``decision``, :mod:`i2ris_calib.fitting.decision`), in ``fitted``'s
     order; ``limits``: each dataset's noise, repeatability, baselines and
-    cross-validation (``limits``, :mod:`i2ris_calib.fitting.limits`)."""
+    cross-validation (``limits``, :mod:`i2ris_calib.fitting.limits`); ``replaced``:
+    (dataset name, kind) -> the model's :func:`replacement_record` (a fit rerun from a
+    lower cost a later stage found)."""
+    replaced = replaced or {}
     datasets = []
     decisions = list(decisions) if decisions is not None else [None] * len(fitted)
     limits = list(limits) if limits is not None else [None] * len(fitted)
@@ -139,6 +143,9 @@ def fit_document(
                 ),
             }
         )
+        for kind, rec in datasets[-1]["models"].items():
+            if (d.name, kind) in replaced:
+                rec["replaced"] = replaced[d.name, kind]
         if dec is not None:
             datasets[-1]["decision"] = dec.as_dict()
         if lim is not None:
@@ -154,6 +161,44 @@ def fit_document(
         doc["model_choice"] = choice.as_dict()
     doc["provenance"] = provenance
     return doc
+
+
+def replacement_record(
+    dataset: str,
+    kind: str,
+    previous_cost: float,
+    cost: float,
+    found_by: str,
+    stage: str,
+    previous_params: dict[str, float],
+    previous_sha256: str,
+) -> dict[str, Any]:
+    """A fit.json model's ``replaced`` record (docs/formats.md): a later stage found a
+    lower cost of this model on the same data and the fit was rerun from it. The
+    costs are the fit's own (its loss over the fitted samples, deg^2); ``found_by``
+    says where the lower cost came from; ``previous_sha256`` names the fit.json it
+    replaced (its values are ``previous_params``); ``text`` is the one sentence
+    (:func:`replacement_text`) the report and ``compensate`` repeat."""
+    return {
+        "previous_cost": float(previous_cost),
+        "cost": float(cost),
+        "stage": stage,
+        "found_by": found_by,
+        "previous_params": {k: float(v) for k, v in previous_params.items()},
+        "previous_sha256": previous_sha256,
+        "text": replacement_text(dataset, kind, previous_cost, cost, found_by),
+    }
+
+
+def replacement_text(
+    dataset: str, kind: str, previous_cost: float, cost: float, found_by: str
+) -> str:
+    """The one sentence on a replaced fit, e.g. ``fit.json's pitch+ egpi replaced: cost
+    6.43 -> 0.545 (found by diagnose's refit from creep_log's values)``."""
+    return (
+        f"fit.json's {dataset} {kind} replaced: cost {previous_cost:.4g} -> {cost:.4g} "
+        f"(found by {found_by})"
+    )
 
 
 def predictions_frame(fitted) -> pd.DataFrame:

@@ -123,7 +123,7 @@ def _missing(run: RunData, label: str) -> Note:
 
 def overview_section(run: RunData) -> Section:
     """Which stage outputs were found, and the headline result per dataset."""
-    blocks: list = model_choice_verdicts(run.fits)
+    blocks: list = model_choice_verdicts(run.fits) + replaced_fit_verdicts(run.fits)
     recs = recommendation_table(run.fits)
     if recs is not None:
         blocks.append(recs)
@@ -362,6 +362,21 @@ def model_choice_verdicts(fits: tuple[FitData, ...]) -> list[Verdict]:
     return out
 
 
+def replaced_fit_verdicts(fits: tuple[FitData, ...]) -> list[Verdict]:
+    """One line per model of a fit.json that a later stage replaced (its ``replaced``
+    record: a lower cost of the same model on the same data, the fit rerun from it),
+    e.g. ``pitch: fit.json's pitch+ egpi replaced: cost 6.43 -> 0.545 (found by
+    diagnose's refit from creep_log's values)``; nothing for a fit as ``fit`` wrote it."""
+    out = []
+    for fd in fits:
+        for d in tables.fit_datasets(fd.fit):
+            for rec in (d.get("models") or {}).values():
+                r = rec.get("replaced") if isinstance(rec, Mapping) else None
+                if isinstance(r, Mapping) and isinstance(r.get("text"), str):
+                    out.append(Verdict(f"{fd.axis}: {r['text']}", "info"))
+    return out
+
+
 def _no_fit_note(run: RunData) -> Note:
     absent = [f"{k}: {v}" for k, v in run.absent.items() if k.endswith("/fit.json")]
     why = "; ".join(absent) if absent else "no fit/AXIS/fit.json in the run folder"
@@ -402,6 +417,7 @@ def accuracy_section(run: RunData) -> Section:
             if ds
             else Note(f"fit/{fd.axis}/fit.json has no datasets.")
         )
+        blocks += replaced_fit_verdicts((fd,))
         samples = tables.samples_table(fd.axis, ds, _predictions_by_dataset(fd)) if ds else None
         if samples is not None:
             blocks.append(samples)

@@ -175,10 +175,7 @@ def _compensate_into(
     check_ramp_lengths(plans, t)
     past = None
     if history is not None:
-        ranges = {
-            x: {"name": a.name, "sign": a.sign, "lo": a.lo, "hi": a.hi} for x, a in plans.items()
-        }  # what read_history checks the counts against
-        past = read_history(history, ranges)
+        past = read_history(history, plans)  # in each plan's convention and range
         plans = after_history(plans, past, start_counts, str(history))
     plans = with_start(plans, start_state(plans, conditioning, history is not None), past, t)
     mf = None if model_file is None else Path(model_file)

@@ -22,7 +22,6 @@ The fitted result is a new object; the input model is never changed.
 from __future__ import annotations
 
 import functools
-import html
 import inspect
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -41,7 +40,7 @@ from i2ris_calib._validate import (
     describe,
 )
 from i2ris_calib.errors import CalibError
-from i2ris_calib.fitting import results
+from i2ris_calib.fitting import present, results
 from i2ris_calib.fitting.lm import least_squares_lm
 from i2ris_calib.fitting.metrics import NAN_METRICS, Metrics, information_criteria, metrics
 from i2ris_calib.fitting.results import ParamTable
@@ -788,7 +787,10 @@ def _method_of(model, method: str):
 
 @dataclass(frozen=True)
 class FitResult:
-    """Outcome of :func:`fit_model`.
+    """Outcome of :func:`fit_model`: the fitted numbers and what follows from them
+    (``predict``, the bands, ``chisqr``, ``correlations``). How it is shown (the text
+    report, the notebook display, the figure) is :mod:`~i2ris_calib.fitting.present`;
+    its parameter table and saved file, :mod:`~i2ris_calib.fitting.results`.
 
     Attributes
     ----------
@@ -1024,62 +1026,6 @@ class FitResult:
                     out[(names[i], names[j])] = float(self.covariance[i, j] / d)
         return out
 
-    def fit_report(self, min_correl: float = 0.5) -> str:
-        """Plain-text summary like lmfit's: fit statistics, parameters with standard
-        errors and units, correlations above ``min_correl``, notes."""
-        m, h = self.metrics, self.holdout_metrics
-        profiled = self.profiled
-        lines = [
-            f"[[Fit of {self.model.name}]]",
-            f"    converged          = {self.converged} ({self.message})",
-            f"    samples in loss    = {self.n_samples}, free parameters = {self.n_fitted}"
-            + (f" (+ {', '.join(profiled)} profiled)" if profiled else ""),
-            f"    function evals     = {self.nfev}, starts = {self.starts_tried}",
-            *(
-                [f"    global search      = {self.certificate.text}"]
-                + (
-                    [f"    WARNING            : {self.certificate.warning}"]
-                    if self.certificate.warning
-                    else []
-                )
-                if self.certificate is not None
-                else []
-            ),
-            f"    RMSE / max |err|   = {m.rmse_deg:.4g} / {m.max_abs_err_deg:.4g} deg "
-            f"(NRMSE {m.nrmse_pct:.3g} %)",
-            f"    held-out RMSE      = {h.rmse_deg:.4g} deg on {h.n_samples} samples",
-            f"    reduced chi-square = {self.redchi:.4g} deg^2",
-            f"    AIC / BIC          = {self.aic:.5g} / {self.bic:.5g}",
-            "[[Parameters]]",
-        ]
-        for p in self.model.parameters:
-            se = self.stderr.get(p.name, float("nan"))
-            reason = self.stderr_reasons.get(p.name, "")
-            if p.name not in self.free:
-                how = "(fixed)"
-            elif np.isfinite(se):
-                how = f"+/- {se:.3g}"
-            elif p.name in profiled:
-                how = "(profiled)"
-            elif reason.startswith("at its bound"):
-                how = "(at its bound)"
-            else:
-                how = "(not identified)"
-            lines.append(
-                f"    {p.name:<8} = {self.params[p.name]:<12.6g} {how:<20} {p.unit:<10} {p.doc}"
-            )
-        cor = sorted(
-            ((k, c) for k, c in self.correlations.items() if abs(c) >= min_correl),
-            key=lambda kc: -abs(kc[1]),
-        )
-        if cor:
-            lines.append(f"[[Correlations]] (|C| >= {min_correl})")
-            lines += [f"    C({a}, {b}) = {c:+.3f}" for (a, b), c in cor]
-        if self.notes:
-            lines.append("[[Notes]]")
-            lines += [f"    {n.code}: {n.text}" for n in self.notes]
-        return "\n".join(lines)
-
     @property
     def profiled(self) -> tuple[str, ...]:
         """Free parameters placed by a profile search (the EGPI flag point ``v_f``): no
@@ -1094,17 +1040,21 @@ class FitResult:
         without the :attr:`profiled` ones."""
         return len(self.free) - len(self.profiled)
 
-    def __repr__(self) -> str:
-        h = self.holdout_metrics.rmse_deg
-        held = f", held-out {h:.3g} deg" if np.isfinite(h) else ""
-        prof = f" (+{len(self.profiled)} profiled)" if self.profiled else ""
-        return (
-            f"<FitResult {self.model.name}: RMSE {self.metrics.rmse_deg:.3g} deg{held}, "
-            f"{self.n_samples} samples, {self.n_fitted} free{prof}, "
-            f"{'converged' if self.converged else 'NOT converged'}>"
-        )
+    # ---- shown (fitting/present.py); the table and the file (fitting/results.py) ----
 
-    # ---- the table, the figure and the file (fitting/results.py) ----
+    def __repr__(self) -> str:
+        return present.summary(self)
+
+    def _repr_html_(self) -> str:
+        """Notebook display: the statistics, the parameter table (value, stderr, start,
+        bounds, unit, meaning) and the correlations above 0.9."""
+        return present.report_html(self)
+
+    def fit_report(self, min_correl: float = 0.5) -> str:
+        """Plain-text summary like lmfit's: fit statistics, parameters with standard
+        errors and units, correlations above ``min_correl``, notes
+        (:func:`~i2ris_calib.fitting.present.fit_report`)."""
+        return present.fit_report(self, min_correl)
 
     @property
     def parameters(self) -> ParamTable:
@@ -1139,7 +1089,7 @@ class FitResult:
         -------
         matplotlib.figure.Figure
         """
-        return results.plot_fit(self, signals, theta_deg, ax=ax, band=band, sigma=sigma)
+        return present.plot_fit(self, signals, theta_deg, ax=ax, band=band, sigma=sigma)
 
     def save(self, path) -> Path:
         """Write the fit to ``path`` as JSON (format ``i2ris-calib.fit-result/1``,
@@ -1166,21 +1116,6 @@ class FitResult:
                 "initial_state": None if state is None else InitialState(**state),
                 "certificate": None if cert is None else SearchCertificate.from_dict(cert),
             }
-        )
-
-    def _repr_html_(self) -> str:
-        """Notebook display: the statistics, the parameter table (value, stderr, start,
-        bounds, unit, meaning) and the correlations above 0.9."""
-        m, h = self.metrics, self.holdout_metrics
-        cor = [f"C({a}, {b}) = {c:+.3f}" for (a, b), c in sorted(self.correlations.items(), key=lambda kc: -abs(kc[1])) if abs(c) >= 0.9]  # fmt: skip
-        return (
-            f"<b>FitResult {html.escape(self.model.name)}</b>: "
-            f"{'converged' if self.converged else '<b>NOT converged</b>'}; RMSE "
-            f"{m.rmse_deg:.4g} deg, held-out {h.rmse_deg:.4g} deg, max {m.max_abs_err_deg:.4g} deg, "
-            f"reduced chi-square {self.redchi:.4g}, AIC {self.aic:.5g}, BIC {self.bic:.5g}, "
-            f"{self.n_samples} samples"
-            + self.parameters._repr_html_()
-            + (f"<p>correlations: {html.escape('; '.join(cor))}</p>" if cor else "")
         )
 
 

@@ -1,13 +1,10 @@
-"""What a scientist expects of a fit: the parameter table, correlations, a figure, a file.
+"""A fit as data beyond its fields: the parameter table and the saved-fit file.
 
 * :class:`ParamTable` (``FitResult.parameters``): a frozen mapping name ->
   :class:`FittedParameter` (value, standard error, start, bounds, fixed, unit,
   meaning, why a standard error is missing), with the :class:`Correlations` of the
   parameters the covariance covers and a DataFrame view (``to_frame()``), as lmfit's
   ``Parameters``.
-* :func:`plot_fit` (``FitResult.plot``): angle vs input and vs time with the prediction
-  band (``FitResult.eval_uncertainty``), and the residuals, as lmfit's
-  ``ModelResult.plot``.
 * :func:`fit_record` / :func:`fit_fields` (``FitResult.save`` / ``FitResult.load``): a
   fit as strict JSON (format :data:`SCHEMA`, ``i2ris-calib.fit-result/1``; files of
   the older id ``i2ris-calib.fit/1`` still load): the model's kind, settings and
@@ -16,7 +13,9 @@
   saved fit's output to the last bit.
 
 The model is written by the model codec (:mod:`i2ris_calib.hysteresis.codec`: the
-registry kinds, the general EGPI and models extended by any catalogue effect).
+registry kinds, the general EGPI and models extended by any catalogue effect). How a
+fit is shown (the text report, the notebook display, the figure) is
+:mod:`i2ris_calib.fitting.present`.
 """
 
 from __future__ import annotations
@@ -37,7 +36,6 @@ from i2ris_calib import __version__
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.metrics import Metrics
 from i2ris_calib.hysteresis.codec import decode_model, encode_model
-from i2ris_calib.model import Signals
 
 #: The format of a saved fit (``FitResult.save``); not the ``fit`` command's fit.json.
 SCHEMA = "i2ris-calib.fit-result/1"
@@ -279,91 +277,6 @@ def param_table(res) -> ParamTable:
         for p in res.model.parameters
     ]
     return ParamTable(rows, res.covariance, res.model.name)
-
-
-# ---------------------------------------------------------------------- the figure
-
-
-def _plot_inputs(res, signals, theta_deg):
-    """(signals, measured angle, fitted mask, held-out mask) for :func:`plot_fit`."""
-    from i2ris_calib.data.dataset import Dataset
-
-    if signals is None:
-        signals = res.extra.get("signals")
-        if signals is None:
-            raise CalibError(
-                "plot: this FitResult does not keep its data; pass them, e.g. res.plot(data) "
-                "with the Dataset, or res.plot(signals, theta_deg)"
-            )
-    if isinstance(signals, Dataset):
-        data = signals
-        theta = np.asarray(data.theta_measured_deg if theta_deg is None else theta_deg, float)
-        hold = np.asarray(data.holdout, bool) & np.isfinite(theta)
-        used = np.asarray(data.in_direction, bool) & np.isfinite(theta) & ~hold
-        return data.signals, theta, used, hold
-    s = signals if isinstance(signals, Signals) else Signals(v=np.asarray(signals, dtype=float))
-    n = np.asarray(s.v).size
-    if theta_deg is None:
-        if np.size(res.residuals) != n:
-            raise CalibError(
-                f"plot: {n} input samples but the fit has {np.size(res.residuals)} residuals; "
-                "pass theta_deg (the measured angle) too"
-            )
-        theta = None  # the fitted samples' angle: predicted - residual (set by the caller)
-    else:
-        theta = np.asarray(theta_deg, dtype=float)
-        if theta.shape != (n,):
-            raise CalibError(f"plot: theta_deg has shape {theta.shape}; give one angle per input")
-    used = np.isfinite(theta) if theta is not None else np.isfinite(res.residuals)
-    return s, theta, used, np.zeros(n, bool)
-
-
-def plot_fit(res, signals=None, theta_deg=None, ax=None, band=True, sigma=2.0):
-    """The figure of a fit: angle vs input, angle vs time with the prediction band,
-    residuals vs time. See ``FitResult.plot``."""
-    import matplotlib.pyplot as plt
-
-    s, theta, used, hold = _plot_inputs(res, signals, theta_deg)
-    y = res.predict(s)
-    if theta is None:
-        theta = np.where(np.isfinite(res.residuals), y - np.asarray(res.residuals, float), np.nan)
-    t = np.arange(y.size, dtype=float) if s.t_s is None else np.asarray(s.t_s, dtype=float)
-    t_label = "sample" if s.t_s is None else "time (s)"
-    v = np.asarray(s.v, dtype=float)
-    if ax is None:
-        fig, axes = plt.subplots(3, 1, figsize=(8, 9), constrained_layout=True)
-    else:
-        axes = list(ax) if isinstance(ax, (list, tuple, np.ndarray)) else [ax]
-        if len(axes) != 3:
-            raise CalibError("plot: ax must be three matplotlib Axes (loop, time, residuals)")
-        fig = axes[0].figure
-    a_loop, a_time, a_res = axes
-    width = res.eval_uncertainty(s, sigma) if band else None
-    name = res.model.name
-    a_loop.plot(v[used], theta[used], ".", ms=2, color="0.6", label="measured (fitted)")
-    if hold.any():
-        a_loop.plot(v[hold], theta[hold], ".", ms=2, color="tab:orange", label="held out")
-    a_loop.plot(v, y, "-", lw=0.8, color="tab:blue", label=name)
-    a_loop.set(xlabel="input", ylabel="angle (deg)", title=f"{name}: angle vs input")
-    a_loop.legend(loc="best", fontsize="small")
-    shown = used | hold
-    a_time.plot(t[shown], theta[shown], ".", ms=2, color="0.6", label="measured")
-    a_time.plot(t, y, "-", lw=0.8, color="tab:blue", label=name)
-    if width is not None:
-        a_time.fill_between(t, y - width, y + width, color="tab:blue", alpha=0.3,
-                            label=f"{_display.num(sigma)}-sigma band")  # fmt: skip
-    a_time.set(xlabel=t_label, ylabel="angle (deg)", title="angle vs time")
-    a_time.legend(loc="best", fontsize="small")
-    r = theta - y
-    a_res.axhline(0.0, color="0.3", lw=0.6)
-    a_res.plot(t[used], r[used], ".", ms=2, color="0.4", label="fitted")
-    if hold.any():
-        a_res.plot(t[hold], r[hold], ".", ms=2, color="tab:orange", label="held out")
-    if width is not None:
-        a_res.fill_between(t, -width, width, color="tab:blue", alpha=0.3, label="band")
-    a_res.set(xlabel=t_label, ylabel="measured - model (deg)", title="residuals")
-    a_res.legend(loc="best", fontsize="small")
-    return fig
 
 
 # ---------------------------------------------------------------------- the file

@@ -19,6 +19,10 @@ effects) <-> a JSON-ready record, for the files that hold models (docs/formats.m
   ``effects`` are innermost first (the order they were added); ``params`` repeats
   every value under the extended model's parameter names, for readers that only want
   numbers.
+* :func:`fit_json_fields` / :func:`model_from_fit_json`: what a model record of the
+  ``fit`` command's fit.json (schema ``i2ris-calib.fit/1``, docs/fit.md, written by
+  :mod:`i2ris_calib.io.fit`) says of the model itself: the parameter units, the base
+  model's operators and dead band; its ``params`` are the fitted values.
 
 Both know every effect of the catalogue (:mod:`i2ris_calib.hysteresis.effects`): a
 model with effects loads with no import beforehand.
@@ -187,17 +191,27 @@ def base_kind(model: Model) -> str:
     )
 
 
+def _base_settings(model: Model, n_missing: int) -> tuple[int, dict]:
+    """The base model's number of operators (``n_missing`` for a base without) and
+    ``{"deadband_counts": ...}`` for a base with a dead band in counts (else ``{}``)."""
+    base = base_of(model)
+    n = int(getattr(base, "n", n_missing))
+    if hasattr(base, "deadband_counts"):
+        return n, {"deadband_counts": float(base.deadband_counts)}
+    return n, {}
+
+
 def model_to_dict(model: Model) -> dict:
     """JSON-ready dict of an (extended) model with its parameter values."""
     base = base_of(model)
+    n, deadband = _base_settings(model, DEFAULT_N_OPERATORS)
     rec = {
         "kind": base_kind(model),
-        "n": int(getattr(base, "n", DEFAULT_N_OPERATORS)),
+        "n": n,
         "params": {p.name: float(p.value) for p in base.parameters},
         "fixed": [p.name for p in base.parameters if p.fixed],
+        **deadband,
     }
-    if hasattr(base, "deadband_counts"):
-        rec["deadband_counts"] = float(base.deadband_counts)
     return {
         "schema": MODEL_SCHEMA,
         "base": rec,
@@ -246,3 +260,28 @@ def model_from_dict(obj: Mapping) -> Model:
         except (KeyError, TypeError) as exc:
             raise CalibError(f"model file: bad effect record {e!r} ({exc})") from None
     return model
+
+
+# ------------------------------------------------------ fit.json's model records
+
+
+def fit_json_fields(model: Model) -> dict:
+    """What a fit.json model record says of ``model`` itself, in the record's key order:
+    ``units`` (every parameter's), ``n_operators`` (the base model's; 0 for a base
+    without operators) and, for a base with a dead band in counts, ``deadband_counts``.
+    The record's other keys (``params``, ``stderr``, metrics, ...) are the fit's."""
+    n, deadband = _base_settings(model, 0)
+    return {"units": {p.name: p.unit for p in model.parameters}, "n_operators": n, **deadband}
+
+
+def model_from_fit_json(kind: str, rec: Mapping) -> Model:
+    """The fitted model of registry kind ``kind`` a fit.json model record ``rec``
+    describes: its ``params`` on the kind's model with the record's ``n_operators`` and
+    ``deadband_counts`` (the registry's defaults when missing), built by
+    :func:`~i2ris_calib.hysteresis.registry.model_for_kind`."""
+    return model_for_kind(
+        kind,
+        n=int(rec.get("n_operators") or DEFAULT_N_OPERATORS),
+        deadband_counts=float(rec.get("deadband_counts", DEFAULT_DEADBAND_COUNTS)),
+        **rec["params"],
+    )

@@ -27,8 +27,7 @@ from i2ris_calib.fitting.pipeline import (
     ModelChoice,
     fit_warnings,
 )
-from i2ris_calib.hysteresis.codec import model_from_dict
-from i2ris_calib.hysteresis.effects import base_of
+from i2ris_calib.hysteresis.codec import fit_json_fields, model_from_dict
 from i2ris_calib.hysteresis.registry import fit_order
 from i2ris_calib.io.fit_schema import FIT_SCHEMA, check_fit_doc, check_model_doc
 
@@ -41,10 +40,11 @@ PRED_COLUMNS = ("dataset", "time_s", "v", "theta_deg", *(f"{k}_deg" for k in MOD
 def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str, Any]:
     """The fit.json record M of one fitted model (docs/fit.md); ``v``: the dataset's
     input, for the warnings (:func:`i2ris_calib.fitting.pipeline.fit_warnings`)."""
+    own = fit_json_fields(model)  # the model codec's: units, operators, dead band
     rec = {
         "params": res.params,
         "stderr": res.stderr,
-        "units": {p.name: p.unit for p in model.parameters},
+        "units": own["units"],
         "free": list(res.free),
         "metrics": res.metrics.as_dict(),
         "holdout_metrics": res.holdout_metrics.as_dict(),
@@ -56,15 +56,15 @@ def model_record(res, kind: str, model, v: np.ndarray | None = None) -> dict[str
         "nfev": res.nfev,
         "n_samples": res.n_samples,
         "n_holdout": res.holdout_metrics.n_samples,
-        "n_operators": int(getattr(base_of(model), "n", 0)),
+        "n_operators": own["n_operators"],
         "v_f": res.params.get("v_f"),
         "warnings": list(fit_warnings(res, np.zeros(0) if v is None else v)),
         "stderr_reasons": dict(res.stderr_reasons),
         "initial_state": None if res.initial_state is None else res.initial_state.as_dict(),
         "certificate": None if res.certificate is None else res.certificate.as_dict(),
     }
-    if hasattr(base_of(model), "deadband_counts"):
-        rec["deadband_counts"] = float(base_of(model).deadband_counts)
+    if "deadband_counts" in own:
+        rec["deadband_counts"] = own["deadband_counts"]
     return rec
 
 

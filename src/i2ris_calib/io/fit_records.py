@@ -13,7 +13,7 @@ import numpy as np
 from i2ris_calib.compensation.plan import FittedDataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import Decision
-from i2ris_calib.fitting.pipeline import model_from_params
+from i2ris_calib.hysteresis.codec import model_from_fit_json
 from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.io.fit import read_model_file
 
@@ -108,12 +108,7 @@ def load_model(
             )
         return base.with_values(np.array([rec["params"][n] for n in names], dtype=float))
     try:  # the values are numbers (read_fit_json); the model may still refuse them
-        return model_from_params(
-            kind,
-            rec["params"],
-            int(rec.get("n_operators") or 30),
-            float(rec.get("deadband_counts", 2.0)),
-        )
+        return model_from_fit_json(kind, rec)
     except CalibError as exc:
         raise CalibError(
             f"{path}: dataset '{record['name']}', model '{kind}': {exc} (re-run 'fit' or "

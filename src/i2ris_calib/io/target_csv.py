@@ -3,12 +3,13 @@ commands sent before (``--history``); formats in docs/compensate.md."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from i2ris_calib.compensation.plan import AxisPlan
 from i2ris_calib.errors import CalibError
 from i2ris_calib.io.csv_file import read_csv_file
 from i2ris_calib.io.epoch import epoch_unit_problem
@@ -90,14 +91,16 @@ def _check_target_step(p: Path, t: np.ndarray, unit_s: float) -> None:
     )
 
 
-def read_history(path: str | Path, setup: dict) -> dict[str, np.ndarray]:
-    """The commands sent before (``--history``): per axis of ``setup`` its ``enc_<axis>``
-    column (signed counts, oldest first) in the model's convention (``sign`` x counts).
-    One-line CalibError for an unreadable file, a missing column, non-numeric values or
-    counts outside the fit's input range (the model is not known there)."""
+def read_history(path: str | Path, plans: Mapping[str, AxisPlan]) -> dict[str, np.ndarray]:
+    """The commands sent before (``--history``): per axis of ``plans`` (the compensation
+    plans, :class:`~i2ris_calib.compensation.plan.AxisPlan`) its ``enc_<axis>`` column
+    (signed counts, oldest first) in the model's convention (the plan's ``sign`` x
+    counts). One-line CalibError for an unreadable file, a missing column, non-numeric
+    values or counts outside the plan's input range ``lo..hi`` (the fit's: the model is
+    not known beyond it)."""
     p = Path(path)
     df = read_csv_file(p, "--history file not found (a CSV of the commands sent before)")
-    need = [f"enc_{axis}" for axis in setup]
+    need = [f"enc_{axis}" for axis in plans]
     missing = [c for c in need if c not in df.columns]
     if missing or len(df) == 0:
         raise CalibError(
@@ -106,7 +109,7 @@ def read_history(path: str | Path, setup: dict) -> dict[str, np.ndarray]:
             "encoder log)"
         )
     out = {}
-    for axis, a in setup.items():
+    for axis, a in plans.items():
         col = f"enc_{axis}"
         v = pd.to_numeric(df[col], errors="coerce").to_numpy(dtype=float)
         bad = np.flatnonzero(~np.isfinite(v))
@@ -115,12 +118,12 @@ def read_history(path: str | Path, setup: dict) -> dict[str, np.ndarray]:
                 f"{p}: column '{col}' has {bad.size} missing/non-numeric value(s) (first at "
                 f"line {bad[0] + 2}); --history needs every command sent"
             )
-        m = a["sign"] * v
-        off = np.flatnonzero((m < a["lo"]) | (m > a["hi"]))
+        m = a.sign * v
+        off = np.flatnonzero((m < a.lo) | (m > a.hi))
         if off.size:
-            rng = sorted((a["sign"] * a["lo"] + 0.0, a["sign"] * a["hi"] + 0.0))
+            rng = sorted((a.sign * a.lo + 0.0, a.sign * a.hi + 0.0))
             raise CalibError(
-                f"{p}: {col} = {v[off[0]]:g} at line {off[0] + 2} is outside the {a['name']} "
+                f"{p}: {col} = {v[off[0]]:g} at line {off[0] + 2} is outside the {a.name} "
                 f"fit's input range {rng[0]:g}..{rng[1]:g} counts (the model is not known "
                 "there); give a history inside it or --conditioning sweep without --history"
             )

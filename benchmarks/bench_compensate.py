@@ -326,7 +326,8 @@ def smooth_target(rng: np.random.Generator, n: int = 1000, lo: float = 6.0, hi: 
 
 
 def safety(config: FitConfig, n_targets: int) -> bool:
-    from i2ris_calib.compensation.safety import find_spikes, max_input_rate
+    from i2ris_calib.compensation.rate import max_input_rate
+    from i2ris_calib.compensation.safety import find_spikes
 
     print(f"\n== 5. safety: {n_targets} random smooth targets per plant")
     ok = True

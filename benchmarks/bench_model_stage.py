@@ -192,7 +192,7 @@ def _sync_with_true_clock(session: Path, run_dir: Path, cfg) -> None:
     from i2ris_calib.io.angles import read_angles
     from i2ris_calib.io.atomic import write_csv
     from i2ris_calib.io.encoders import read_encoder_log
-    from i2ris_calib.io.session import encoder_log_path, load_session  # noqa: F401
+    from i2ris_calib.io.session import load_session
     from i2ris_calib.sync.clock import ClockModel
     from i2ris_calib.sync.estimate import synced_table
 

@@ -239,3 +239,60 @@ def test_state_levels_of_the_other_motor():
     assert F.state_levels(st, 4, 2) == [7.0, -3.0, -20.0, 10.0]
     bare = F.InitialState(10.0, 5, 0.0, "", other_v_from=-3.0, v0_other=1.0)
     assert F.state_levels(bare, 6) == [-3.0, -3.0, -3.0, 10.0, 10.0, 10.0]
+
+
+def test_last_levels_are_also_profiled_close_to_the_first_input():
+    """The wide profile of each motor's last level (``v_from``, ``other_v_from``) also
+    tries the first input +- 1, 2, 4, ... pre-history steps (below the grid's spacing,
+    within the bounds); the earlier turning points only the grid."""
+    m = _coupled()
+    s = _signals(phase=1.0)
+    fl = F._FromLevel(m, s.v, 0, s.v_other)
+    n = len(fl.parameters)
+    lo, hi = F.level_bounds(np.asarray(s.v))
+    spacing = (hi - lo) / (F.INITIAL_STATE_GRID - 1)
+    near = F._near_first(fl, s, n - 1, lo, hi)
+    d = np.abs(near - float(s.v[0])) / fl.step
+    assert near.size and np.all((near >= lo) & (near <= hi))
+    np.testing.assert_allclose(np.log2(d), np.round(np.log2(d)))
+    assert d.min() == 1.0 and d.max() * fl.step <= spacing < 2 * d.max() * fl.step
+    olo, ohi = F.level_bounds(np.asarray(s.v_other))
+    other = F._near_first(fl, s, n - fl.n_own - 1, olo, ohi)
+    assert other.size and np.min(np.abs(other - float(s.v_other[0]))) == fl.other_step
+    for idx in (n - 2, n - 3, n - fl.n_own - 2, 0):
+        assert F._near_first(fl, s, idx, lo, hi).size == 0
+    assert F._near_first(m, s, n - 1, lo, hi).size == 0
+
+
+def test_pair_grid_tries_its_loop_one_turning_point_back():
+    """The other motor came through a loop and turned a few steps before the first
+    sample: the 13 x 13 grid (relaxed at one level, ramping to another) cannot stand for
+    it, its loop one turning point back with the last reversal profiled close to the
+    first input finds the truth's state (the other parameters held)."""
+    m = _coupled()
+    s = _signals(phase=1.0)
+    fl = F._FromLevel(m, s.v, 0, s.v_other)
+    vo0, step = float(s.v_other[0]), fl.other_step
+    d = -step * (4.0 if s.v_other[1] > s.v_other[0] else -4.0)  # behind its first motion
+    olo, ohi = F.level_bounds(np.asarray(s.v_other))
+    loop = np.linspace(olo, ohi, F.PAIR_GRID)[[2, -3]]
+    if d > 0:
+        loop = loop[::-1]  # the loop ends on the far side of the reversal
+    truth = np.append(m.values, [loop[0], loop[1], vo0 + d, 0.0, 0.0, 0.0])
+    theta = fl.evaluate(s, truth)
+    search = _search(fl, s, theta)
+    start = truth.copy()
+    start[-6:-3] = vo0
+    turns, last = F._motors_levels(search)[1]
+    grid = np.linspace(olo, ohi, F.PAIR_GRID)
+    on_grid = []
+    for a in grid:
+        for b in grid:
+            trial = start.copy()
+            trial[turns], trial[last] = a, b
+            on_grid.append(search.counter.cost(trial))
+    assert min(on_grid) > 1e-6 * search.counter.cost(start)
+    cost, full = F._pair_grid(search, start, turns, last)
+    assert cost == search.counter.cost(full) <= 1e-20
+    # the loop's second extreme and the last reversal (the first: as far as it is seen)
+    np.testing.assert_array_equal(full[-5:-3], truth[-5:-3])

@@ -147,6 +147,22 @@ def test_coupling_starts_without_the_base_start_state_reach_the_truths_cost(kind
     test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)
 
 
+#: A mid-loop coupled case whose other motor turned a few samples before the recording
+#: (issue 31): every start's other motor arrived at its first value from the far side of
+#: its last loop, the reversal 19 counts back beyond the level grids' spacing (361); now
+#: the last level is also profiled close to the first input and the grid's loop is tried
+#: one turning point back (fit.py ``_near_first``, ``_pair_grid``). Fit / truth cost
+#: before: 1.0010 (0.998 after).
+LAST_REVERSAL_CASES = [
+    pytest.param("agpi_coupled", 7, "circles_mid", marks=_SLOW),  # 500 Hz, n=16,598
+]
+
+
+@pytest.mark.parametrize("kind, seed, protocol", LAST_REVERSAL_CASES, ids=["agpi_coupled:7"])
+def test_last_reversal_before_the_recording_reaches_the_truths_cost(kind, seed, protocol):
+    test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)
+
+
 #: EGPI flag-point basins (issue 31): every data-driven start's screened end stayed at
 #: its own flag-point estimate, far from the best end's, so no start tried its shape
 #: where the flag point belongs; now screened again at the best end's flag point

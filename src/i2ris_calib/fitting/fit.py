@@ -1349,11 +1349,13 @@ def _profile(counter, full, idx, grid, cost=None):
 
 def _refine_level(counter, full, idx, lower, upper, wide=True):
     """Profile search over the initial-state level ``v_from`` (index ``idx``), the
-    others held: ``wide``, ``INITIAL_STATE_GRID`` levels over its whole range; else 21
-    levels within +-2.5 % of the range around the current one. Never worse."""
+    others held: ``wide``, ``INITIAL_STATE_GRID`` levels over its whole range (a motor's
+    last level also close to its first input, :func:`_near_first`); else 21 levels
+    within +-2.5 % of the range around the current one. Never worse."""
     lo, hi = lower[idx], upper[idx]
     if wide:
         grid = np.linspace(lo, hi, INITIAL_STATE_GRID)
+        grid = np.concatenate([grid, _near_first(counter.model, counter.signals, idx, lo, hi)])
     else:
         h = 0.025 * (hi - lo)
         grid = np.clip(np.linspace(full[idx] - h, full[idx] + h, 21), lo, hi)
@@ -1361,6 +1363,37 @@ def _refine_level(counter, full, idx, lower, upper, wide=True):
     full = full.copy()
     full[idx] = best
     return full
+
+
+def _near_first(model, signals: Signals, idx: int, lo: float, hi: float) -> np.ndarray:
+    """Levels close to the first input, for the last level of a motor's pre-history
+    (``v_from``, ``other_v_from`` of :class:`_FromLevel`; empty for every other
+    parameter): the first input +- the pre-history's step x 1, 2, 4, ... up to the
+    wide grid's spacing, within the bounds.
+
+    The last level is the last reversal before the recording; the operators it sets are
+    those narrower than its distance from the first input, and a recording that starts
+    while the input moves has its last reversal anywhere from a few samples back to a
+    loop away. The wide grid (:data:`INITIAL_STATE_GRID` levels) cannot place a reversal
+    a few samples back, and the fine one only moves around where the level is (measured
+    on agpi_coupled:7 of bench_optimum: the other motor had turned 19 counts before the
+    recording, the grid's spacing 361; every start arrived from its far side, the fit
+    ended at 1.0010 x the truth's cost; from the reversal 20 counts back, below it)."""
+    if not isinstance(model, _FromLevel):
+        return np.empty(0)
+    n = len(model.parameters)
+    if idx == n - 1:
+        v0, step = float(np.asarray(signals.v)[0]), model.step
+    elif model.n_other and idx == n - model.n_own - 1:
+        v0, step = float(np.asarray(signals.v_other)[0]), model.other_step
+    else:
+        return np.empty(0)
+    spacing = (hi - lo) / (INITIAL_STATE_GRID - 1)
+    if not (np.isfinite(v0) and step > 0 and spacing > step):
+        return np.empty(0)
+    d = step * 2.0 ** np.arange(int(np.floor(np.log2(spacing / step))) + 1)
+    near = np.concatenate([v0 - d, v0 + d])
+    return near[(near >= lo) & (near <= hi)]
 
 
 def _refine_profiled(counter, full, pidx, v, lower, upper, wide=True):
@@ -2399,6 +2432,16 @@ def _pair_grid(search: _Search, full: np.ndarray, turns: list[int], last: int):
     level moved alone can keep a loop that needs both moved (measured on
     agpi_coupled:5 of bench_optimum, the other motor from its first value via the lower
     bound, 1.013 x the truth's cost; the loop's two extremes, its own history, 1.000).
+
+    With three levels (``turns`` two), the grid's best loop is then also tried one
+    turning point back, relaxed at its first extreme, ramping to its second and to a
+    last reversal profiled over the whole range and close to the first input
+    (:func:`_near_first`): a motor still moving when the recording starts came through
+    its last loop and turned a little before the first sample, which a last level on
+    the loop's far side (arriving the other way) cannot stand for (measured on
+    agpi_coupled:7 of bench_optimum: the other motor had turned 19 counts before the
+    recording; from the grid's loop alone the fit ended at 1.0010 x the truth's cost,
+    with the reversal at 0.998).
     """
     c = search.counter
     best = (c.cost(full), np.asarray(full, dtype=float))
@@ -2411,6 +2454,15 @@ def _pair_grid(search: _Search, full: np.ndarray, turns: list[int], last: int):
             cost = c.cost(trial)
             if cost < best[0]:
                 best = (cost, trial)
+    if len(turns) > 1:
+        # the grid's loop, then a last reversal anywhere (close to the first input too:
+        # :func:`_near_first`): the loop's extremes one turning point back
+        trial = best[1].copy()
+        trial[turns[-1]] = trial[last]
+        trial = _refine_level(c, trial, last, lo, hi)
+        cost = c.cost(trial)
+        if cost < best[0]:
+            best = (cost, trial)
     return best
 
 

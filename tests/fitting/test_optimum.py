@@ -111,7 +111,8 @@ _SLOW = pytest.mark.slow  # the coupled cases: ~8 s each; run with -m slow
 STAIRCASE_CASES = [
     ("agpi", 16, "circles_mid"),  # 5 Hz, n=564
     ("maxwell_slip", 4, "circles_mid"),  # 500 Hz, n=6045
-    ("agpi_coupled", 19, "circles_mid"),  # 5 Hz, n=379
+    # ~20 s (slow); coupled mid-loop on the default run: agpi_coupled:2 in CASES
+    pytest.param("agpi_coupled", 19, "circles_mid", marks=_SLOW),  # 5 Hz, n=379
     pytest.param("agpi_coupled", 23, "circles_mid", marks=_SLOW),  # 5 Hz, n=1280
     pytest.param("agpi_coupled", 33, "circles_mid", marks=_SLOW),  # 5 Hz, n=819: other motor
     # the other motor's state: a loop's two extremes and the turn of its current

@@ -460,8 +460,13 @@ def run_case(kind: str, seed: int, config: FitConfig = FitConfig(), levels: bool
 
 
 def _run(task):
+    """One case; its outcome also goes to stderr as it ends (a 200-case run takes tens of
+    minutes: the figures of the cases done so far are then never lost)."""
     kind, seed = task
-    return run_case(kind, seed)
+    r = run_case(kind, seed)
+    ratio = "error" if r["error"] else f"{r['ratio']:.5g}"
+    print(f"case {kind}:{seed} ratio {ratio}", file=sys.stderr, flush=True)
+    return r
 
 
 # ----------------------------------------------------------------------------- report

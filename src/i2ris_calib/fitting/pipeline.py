@@ -26,14 +26,9 @@ from i2ris_calib.data.excursions import Excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.decision import Evidence, decide, decide_fits, output_jump, pooled
-from i2ris_calib.fitting.fit import (
-    LARGE_ROWS,
-    FitResult,
-    fit_cost,
-    fit_model,
-    fit_notices,
-    innermost,
-)
+from i2ris_calib.fitting.fit import LARGE_ROWS, fit_cost, fit_model
+from i2ris_calib.fitting.prehistory import innermost
+from i2ris_calib.fitting.result import FitResult, fit_notices
 from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.registry import (
     COUPLED_DEFAULT,

@@ -55,6 +55,7 @@ from i2ris_calib.fitting.prehistory import (
     prehistory_step,
     signals_start_at_rest,
     state_levels,
+    state_text,
 )
 from i2ris_calib.fitting.prehistory import _head_of as _head_of
 from i2ris_calib.fitting.prehistory import _other_first as _other_first
@@ -1770,9 +1771,6 @@ def _without_level(
     ut2, ut, u = own[0], own[-2], own[-1]
     p = len(model.parameters)
     names = tuple(pp.name for pp in model.parameters)
-    branch = f"a falling branch that turned at {u:.6g}" if u > v[0] else "the loading branch"
-    path = [x for i, x in enumerate((ut2, ut, u)) if i == 0 or x != (ut2, ut, u)[i - 1]]
-    via = "".join(f" via {x:.6g}" for x in path[1:])
     st = _FromLevel(model, v, cycle, v_other, n_own)
     sig = Signals(
         v=np.asarray(v, float), v_other=None if v_other is None else np.asarray(v_other, float)
@@ -1787,20 +1785,15 @@ def _without_level(
             other_v_turn=None if o_turn == o_from else o_turn, other_v_from=o_from, v0_other=vo0,
             other_v_turn2=None if o_turn2 == o_turn else o_turn2,
         )  # fmt: skip
-        o_path = [x for i, x in enumerate((o_turn2, o_turn, o_from, vo0))
-                  if i == 0 or x != (o_turn2, o_turn, o_from, vo0)[i - 1]]  # fmt: skip
-        if len(o_path) > 1:
-            branch += (
-                f"; the other motor from {o_path[0]:.6g}"
-                + "".join(f" via {x:.6g}" for x in o_path[1:-1])
-                + f" to {vo0:.6g}"
-            )
-    replay = (
-        f", then the recording's first {cycle} samples (its first cycle) replayed" if cycle else ""
-    )
-    text = (
-        f"the recording starts mid-range (input {v[0]:.6g}, not at rest): initial state "
-        f"fitted as {branch} (pre-history from {ut2:.6g}{via}{replay}, {n_pre} samples)"
+    state = InitialState(
+        u,
+        int(n_pre),
+        float(v[0]),
+        "",
+        int(cycle),
+        None if ut == u else ut,
+        **other,
+        v_turn2=None if ut2 == ut else ut2,
     )
     return replace(
         result,
@@ -1809,16 +1802,7 @@ def _without_level(
         stderr_reasons={k: r for k, r in result.stderr_reasons.items() if k in names},
         covariance=result.covariance[:p, :p],
         free=tuple(k for k in result.free if k in names),
-        initial_state=InitialState(
-            u,
-            int(n_pre),
-            float(v[0]),
-            text,
-            int(cycle),
-            None if ut == u else ut,
-            **other,
-            v_turn2=None if ut2 == ut else ut2,
-        ),
+        initial_state=replace(state, text=state_text(state)),
     )
 
 

@@ -13,7 +13,7 @@ pre-history; how the levels are searched is the optimiser's
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -124,6 +124,70 @@ class InitialState:
             "text": self.text,
             "cycle_samples": self.cycle_samples,
         }
+
+    def scaled(
+        self, factor: float, v0: float | None = None, v0_other: float | None = None
+    ) -> InitialState:
+        """This state for the input ``v * factor`` (a fit in a rescaled input unit
+        converted back, :func:`~i2ris_calib.fitting.pipeline.input_scale`): every level
+        (``v_from``, ``v_turn``, ``v_turn2``, ``v0`` and the other motor's) multiplied by
+        ``factor``, :attr:`text` made anew from the fields (:func:`state_text`).
+
+        ``v0``, ``v0_other``: the first inputs in the new unit, when known, in place of
+        the products (which may differ from them in the last bit:
+        :meth:`~i2ris_calib.fitting.result.FitResult.predict` knows the fit's own data by
+        its first input). ``n_samples`` and ``cycle_samples`` stay: the pre-history's
+        steps scale with the input."""
+        f = float(factor)
+
+        def times(x: float | None) -> float | None:
+            return None if x is None else float(x) * f
+
+        out = replace(
+            self,
+            v_from=float(self.v_from) * f,
+            v0=float(self.v0) * f if v0 is None else float(v0),
+            v_turn=times(self.v_turn),
+            v_turn2=times(self.v_turn2),
+            other_v_turn=times(self.other_v_turn),
+            other_v_from=times(self.other_v_from),
+            other_v_turn2=times(self.other_v_turn2),
+            v0_other=times(self.v0_other) if v0_other is None else float(v0_other),
+        )
+        return replace(out, text=state_text(out))
+
+
+def state_text(st: InitialState) -> str:
+    """The sentence of :attr:`InitialState.text`, from the state's other fields (its
+    ``text`` is not read): where the recording starts, the branch and the levels of the
+    pre-history (the other motor's too), the replayed cycle and its length."""
+    u = st.v_from
+    ut = u if st.v_turn is None else st.v_turn
+    ut2 = ut if st.v_turn2 is None else st.v_turn2
+    branch = f"a falling branch that turned at {u:.6g}" if u > st.v0 else "the loading branch"
+    path = [x for i, x in enumerate((ut2, ut, u)) if i == 0 or x != (ut2, ut, u)[i - 1]]
+    via = "".join(f" via {x:.6g}" for x in path[1:])
+    if st.other_v_from is not None:
+        o_from = st.other_v_from
+        o_turn = o_from if st.other_v_turn is None else st.other_v_turn
+        o_turn2 = o_turn if st.other_v_turn2 is None else st.other_v_turn2
+        vo0 = st.v0_other
+        o_path = [x for i, x in enumerate((o_turn2, o_turn, o_from, vo0))
+                  if i == 0 or x != (o_turn2, o_turn, o_from, vo0)[i - 1]]  # fmt: skip
+        if len(o_path) > 1:
+            branch += (
+                f"; the other motor from {o_path[0]:.6g}"
+                + "".join(f" via {x:.6g}" for x in o_path[1:-1])
+                + f" to {vo0:.6g}"
+            )
+    cycle = st.cycle_samples
+    replay = (
+        f", then the recording's first {cycle} samples (its first cycle) replayed" if cycle else ""
+    )
+    return (
+        f"the recording starts mid-range (input {st.v0:.6g}, not at rest): initial state "
+        f"fitted as {branch} (pre-history from {ut2:.6g}{via}{replay}, {st.n_samples} samples)"
+    )
 
 
 def starts_at_rest(v: np.ndarray) -> bool:

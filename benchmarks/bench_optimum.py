@@ -21,7 +21,7 @@ it passes them: GPI -> EGPI -> EGPI_C, two-tendon GPI -> coupled). Per case:
 * CPU seconds of the fit (the kind's chain, as the product fits it).
 * mid-loop cases also get the truth's cost with a one-level start state (the truth's
   values, the initial state one level ``v_from`` the input ramped from,
-  ``fitting.fit.prehistory_signals``, best of a grid): when that is above the truth's
+  ``fitting.prehistory.prehistory_signals``, best of a grid): when that is above the truth's
   cost, the real history left a state no single level reproduces. The fitter itself
   also has an earlier turning point ``v_turn`` and the replayed opening cycle (both
   motors), so it can, and should, end below this reference.
@@ -96,13 +96,13 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from i2ris_calib.fitting.config import FitConfig  # noqa: E402
-from i2ris_calib.fitting.fit import prehistory_signals, starts_at_rest  # noqa: E402
 from i2ris_calib.fitting.pipeline import (  # noqa: E402
     deadband_for,
     fit_kind,
     split_masks,
     unfitted_model,
 )
+from i2ris_calib.fitting.prehistory import prehistory_signals, starts_at_rest  # noqa: E402
 from i2ris_calib.hysteresis.presets import (  # noqa: E402
     gpi_values,
     random_i2ris_egpi_params,

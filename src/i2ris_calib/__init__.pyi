@@ -22,10 +22,10 @@ from i2ris_calib.diagnosis.workflow import diagnose as diagnose
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts as diagnose_from_starts
 from i2ris_calib.errors import CalibError as CalibError
 from i2ris_calib.fitting.config import FitConfig as FitConfig
-from i2ris_calib.fitting.fit import FitNote as FitNote
-from i2ris_calib.fitting.fit import FitResult as FitResult
 from i2ris_calib.fitting.fit import fit_model as fit_model
 from i2ris_calib.fitting.pipeline import fit as fit
+from i2ris_calib.fitting.result import FitNote as FitNote
+from i2ris_calib.fitting.result import FitResult as FitResult
 from i2ris_calib.hysteresis.effects import CATALOGUE as CATALOGUE
 from i2ris_calib.hysteresis.effects import add_effect as add_effect
 from i2ris_calib.hysteresis.models import continuous_egpi_model as continuous_egpi_model

@@ -15,8 +15,8 @@ from i2ris_calib.diagnosis.data import (
     start_rule,
 )
 from i2ris_calib.diagnosis.workflow import diagnose, diagnose_from_starts
-from i2ris_calib.fitting.fit import InitialState
 from i2ris_calib.fitting.pipeline import fit_dataset
+from i2ris_calib.fitting.prehistory import InitialState
 from i2ris_calib.model import Signals
 from i2ris_calib.simulation.piezo import bouc_wen_actuator
 

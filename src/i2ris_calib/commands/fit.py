@@ -21,9 +21,10 @@ from rich.table import Table
 from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.decision import decide_fits
-from i2ris_calib.fitting.fit import InitialState, fit_model, lower_optimum
+from i2ris_calib.fitting.fit import fit_model, lower_optimum
 from i2ris_calib.fitting.limits import dataset_limits
 from i2ris_calib.fitting.pipeline import dataset_cost, fit_dataset, pick_after_fit
+from i2ris_calib.fitting.prehistory import InitialState
 from i2ris_calib.hysteresis.kinds import DIAGNOSED
 from i2ris_calib.hysteresis.registry import BUILT_KINDS, fit_order, kind_info, table_order
 from i2ris_calib.io.atomic import write_json
@@ -306,7 +307,7 @@ class LowerCost:
 
 def stored_model(doc: dict, record: dict, kind: str, path: Path):
     """(model, start state) of fit.json ``doc``'s ``kind`` in dataset ``record``: the
-    stored values and the fit's :class:`~i2ris_calib.fitting.fit.InitialState` (None:
+    stored values and the fit's :class:`~i2ris_calib.fitting.prehistory.InitialState` (None:
     the recording starts at rest)."""
     model = load_model(doc, record, kind, path)
     st = record["models"][kind].get("initial_state")

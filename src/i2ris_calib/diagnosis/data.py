@@ -13,7 +13,7 @@ from i2ris_calib.data.dataset import Dataset
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.diagnosis.cycles import dataset_cycles, holdout_units, loading_mask
 from i2ris_calib.errors import CalibError
-from i2ris_calib.fitting.fit import InitialState, prehistory_signals, starts_at_rest
+from i2ris_calib.fitting.prehistory import InitialState, prehistory_signals, starts_at_rest
 from i2ris_calib.model import Signals
 
 
@@ -60,7 +60,7 @@ def _levels_reached(v: np.ndarray) -> int:
 def burn_in_samples(signals: Signals) -> int:
     """Samples at the start of a recording left out of the diagnosis' loss, int.
 
-    A recording that starts at rest (:func:`~i2ris_calib.fitting.fit.starts_at_rest`:
+    A recording that starts at rest (:func:`~i2ris_calib.fitting.prehistory.starts_at_rest`:
     at zero, the lowest or the highest input) has none: the models' relaxed start is
     its state. One that starts mid-loop or moving has an unknown operator state; a
     play operator forgets its start once the input has moved by twice its threshold,

@@ -80,13 +80,13 @@ from i2ris_calib.diagnosis.stats import (
 )
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.fit import InitialState
 from i2ris_calib.fitting.pipeline import (
     ModelChoice,
     checked_fit_config,
     fit_dataset,
     pick_after_fit,
 )
+from i2ris_calib.fitting.prehistory import InitialState
 from i2ris_calib.hysteresis.effects import CATALOGUE, effects_of, model_values
 from i2ris_calib.hysteresis.registry import (
     DIAGNOSIS_STARTS,

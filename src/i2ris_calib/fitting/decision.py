@@ -408,7 +408,7 @@ def _start_ratio(result, data) -> tuple[float, float]:
     held = float(result.holdout_metrics.rmse_deg)
     if getattr(result, "initial_state", None) is None:
         return 1.0, held
-    from i2ris_calib.fitting.fit import prehistory_signals
+    from i2ris_calib.fitting.prehistory import prehistory_signals
 
     mask = np.asarray(data.holdout, bool) & np.isfinite(np.asarray(data.theta_deg, dtype=float))
     if not mask.any() or not (held > 0):

@@ -26,14 +26,9 @@ from i2ris_calib.data.excursions import Excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.fitting.decision import Evidence, decide, decide_fits, output_jump, pooled
-from i2ris_calib.fitting.fit import (
-    LARGE_ROWS,
-    FitResult,
-    fit_cost,
-    fit_model,
-    fit_notices,
-    innermost,
-)
+from i2ris_calib.fitting.fit import LARGE_ROWS, fit_cost, fit_model
+from i2ris_calib.fitting.prehistory import innermost
+from i2ris_calib.fitting.result import FitResult, fit_notices
 from i2ris_calib.hysteresis.models import ParametricModel
 from i2ris_calib.hysteresis.registry import (
     COUPLED_DEFAULT,
@@ -356,14 +351,16 @@ def fit_kind(
     scale = input_scale(v)
     if scale != 1.0:
         v_other = None if s.v_other is None else np.asarray(s.v_other, float) / scale
+        s_in = replace(s, v=v / scale, v_other=v_other)
         res = fit_kind(
-            kind, replace(s, v=v / scale, v_other=v_other), theta, config, holdout,
-            None if gpi_fit is None else _scaled_fit(gpi_fit, 1.0 / scale),
-            deadband=db / scale, related=tuple(_scaled_fit(r, 1.0 / scale) for r in related),
+            kind, s_in, theta, config, holdout,
+            None if gpi_fit is None else _scaled_fit(gpi_fit, 1.0 / scale, signals=s_in),
+            deadband=db / scale,
+            related=tuple(_scaled_fit(r, 1.0 / scale, signals=s_in) for r in related),
             given=tuple(_scaled_params(g, unfitted_model(kind, v, config, db), 1.0 / scale)
                         for g in given),
         )  # fmt: skip
-        return _scaled_fit(res, scale, unfitted_model(kind, v, config, db))
+        return _scaled_fit(res, scale, unfitted_model(kind, v, config, db), signals=s)
     model = unfitted_model(kind, v, config, db)
     info = kind_info(kind)
     rng = np.random.default_rng(config.seed)
@@ -462,10 +459,19 @@ def _scaled_params(params: dict[str, float], model, scale: float) -> dict[str, f
     return {k: float(x * factor.get(unit.get(k, ""), 1.0)) for k, x in params.items()}
 
 
-def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = None) -> FitResult:
+def _scaled_fit(
+    res: FitResult,
+    scale: float,
+    model: ParametricModel | None = None,
+    signals: Signals | None = None,
+) -> FitResult:
     """``res`` with its parameters expressed for the input ``v * scale`` (slopes, in
     deg per input unit, divided by ``scale``; inputs such as the flag point multiplied
-    by it); ``model``: the model to carry the converted values (default: ``res.model``)."""
+    by it), its start state's levels too
+    (:meth:`~i2ris_calib.fitting.prehistory.InitialState.scaled`); ``model``: the model
+    to carry the converted values (default: ``res.model``);
+    ``signals``: the input ``v * scale``, whose first values the start state takes as
+    its ``v0`` and ``v0_other`` exactly (default: the products)."""
     names = tuple(res.params)
     unit = {p.name: p.unit for p in res.model.parameters}
     factor = {"deg/count": 1.0 / scale, "1/count": 1.0 / scale, "count": scale}
@@ -479,9 +485,17 @@ def _scaled_fit(res: FitResult, scale: float, model: ParametricModel | None = No
     )
     base = res.model if model is None else model
     start = {k: float(x * factor.get(unit.get(k, ""), 1.0)) for k, x in res.start.items()}
+    state = res.initial_state
+    if state is not None:
+        v0 = v0_other = None
+        if signals is not None:
+            v0 = float(np.asarray(signals.v, dtype=float)[0])
+            if signals.v_other is not None and state.v0_other is not None:
+                v0_other = float(np.asarray(signals.v_other, dtype=float)[0])
+        state = state.scaled(scale, v0, v0_other)
     return replace(
         res, params=params, stderr=stderr, covariance=cov, model=base.with_values(params),
-        start=start,
+        start=start, initial_state=state,
     )  # fmt: skip
 
 

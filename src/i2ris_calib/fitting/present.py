@@ -1,5 +1,5 @@
 """How a fit is shown: the text report, the one-line repr, the notebook display and
-the figure of a :class:`~i2ris_calib.fitting.fit.FitResult`, apart from the optimiser.
+the figure of a :class:`~i2ris_calib.fitting.result.FitResult`, apart from the optimiser.
 
 As lmfit keeps ``fit_report`` in ``printfuncs`` and ``ModelResult.plot`` delegates to
 its plotting functions, ``FitResult.fit_report``, ``__repr__``, ``_repr_html_`` and

@@ -233,7 +233,7 @@ def predictions_frame(fitted) -> pd.DataFrame:
 
 def prediction_sd(res, d: Dataset) -> np.ndarray:
     """1-sd band of a fit's model curve from its parameter covariance (deg), per sample
-    (:meth:`~i2ris_calib.fitting.fit.FitResult.eval_uncertainty`); NaN where the
+    (:meth:`~i2ris_calib.fitting.result.FitResult.eval_uncertainty`); NaN where the
     covariance is not available (a parameter not identified)."""
     try:
         sd = res.eval_uncertainty(d.signals, sigma=1.0)

@@ -276,7 +276,7 @@ def fig6_data(
 
 def band_column(model_column: str) -> str:
     """predictions.csv column of a model's 1-sigma confidence band: ``egpi_deg`` ->
-    ``egpi_sd_deg`` (deg; :meth:`i2ris_calib.fitting.fit.FitResult.eval_uncertainty`)."""
+    ``egpi_sd_deg`` (deg; :meth:`i2ris_calib.fitting.result.FitResult.eval_uncertainty`)."""
     return model_column.removesuffix("_deg") + "_sd_deg"
 
 

@@ -4,7 +4,7 @@
 parameters by Levenberg-Marquardt (``method="lm"``: Moré's algorithm as MINPACK's
 ``lmder``, :func:`~i2ris_calib.fitting.lm.least_squares_lm`, unbounded, as the paper;
 ``"trf"``: scipy's bounded trust region),
-from several data-driven starts (:mod:`.initial`), keeping the best. A free flag
+from several data-driven starts (:mod:`i2ris_calib.hysteresis.start`), keeping the best. A free flag
 point ``v_f`` is fitted by a profile search (the output is piecewise constant in
 v_f, so finite-difference derivatives are useless): a grid over v_f with the other
 parameters fixed, then LM again, repeated. NaN angles leave the loss but the model
@@ -16,7 +16,10 @@ evaluation per free parameter; one that defines ``flag_point_families`` (the pap
 gives the flag-point profile every candidate v_f from one model run. Both give the
 values ``evaluate`` gives (the profile to the last bit), so the fit is the same search.
 
-The fitted result is a new object; the input model is never changed.
+The fitted result is a new object (:class:`~i2ris_calib.fitting.result.FitResult`); the
+input model is never changed. A recording that does not start at rest gets its start
+state from :mod:`~i2ris_calib.fitting.prehistory`; how a fit is shown (report, HTML,
+plot) is :mod:`~i2ris_calib.fitting.present`.
 """
 
 from __future__ import annotations

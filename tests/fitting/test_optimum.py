@@ -178,3 +178,20 @@ FLAG_POINT_CASES = [
 )
 def test_flag_point_basin_reaches_the_truths_cost(kind, seed, protocol):
     test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)
+
+
+#: A short coupled recording from rest whose coupling is a large share of the angle
+#: (issue 31): the two-tendon GPI fitted without the other motor's input (the base)
+#: ended in a degenerate basin (sigma 0, r1 = rn) that every coupled start carried,
+#: all ~17,500 in cost; now the joint starts (both motors' slopes at once, the own
+#: tendons from the angle less the coupling's straight-line part: ~1,000) reach the
+#: truth's basin (``coupled.coupled_starts``, ``pipeline.JOINT_ROWS``). Fit / truth
+#: cost before: 36,756 (0.87 after). Cheap (~1 s of fitting): on the default run.
+JOINT_START_CASES = [
+    ("agpi_coupled", 112, "circles"),  # 5 Hz, n=362
+]
+
+
+@pytest.mark.parametrize("kind, seed, protocol", JOINT_START_CASES, ids=["agpi_coupled:112"])
+def test_joint_coupling_starts_reach_the_truths_cost(kind, seed, protocol):
+    test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)

@@ -113,3 +113,30 @@ def test_excursions_tell_the_lab_recording_from_the_paper_protocol():
     assert not paper.signed and paper.n_from_rest == paper.n_excursions == 8
     one_side = excursions(v1, input_bands(v1).zero_band, t1)
     assert not one_side.signed and one_side.reason == "the input stays on one side of zero"
+
+
+def test_joint_coupling_starts_come_from_the_angle_not_the_base():
+    """The coupled kind's joint starts (issue 31, agpi_coupled:112): the coupling's
+    straight-line part fitted with this axis's at once, and the coupling signs from it,
+    whatever the base (the fit's regression case: tests/fitting/test_optimum.py)."""
+    from i2ris_calib.hysteresis.coupled import coupled_starts, joint_coupling
+    from i2ris_calib.model import Signals
+
+    k = np.arange(400)
+    v = 4000.0 * np.sin(2 * np.pi * k / 80)
+    vo = 4500.0 * np.cos(2 * np.pi * k / 80)
+    # straight lines on each side of both inputs: the joint fit reads them exactly
+    own = 3.0 + 0.009 * np.maximum(v, 0) - 0.008 * np.maximum(-v, 0)
+    coupling = -0.006 * np.maximum(vo, 0) + 0.004 * np.maximum(-vo, 0)
+    theta = own + coupling
+    np.testing.assert_allclose(joint_coupling(v, vo, theta), coupling, atol=1e-9)
+    model = model_for_kind("agpi_coupled")
+    base = model_for_kind("agpi").value_dict()  # a poor base: the defaults
+    s = Signals(v=v, v_other=vo)
+    _, plain = coupled_starts(model, s, theta, base, 4, np.random.default_rng(0), 2.0, joint=False)
+    signed, both = coupled_starts(model, s, theta, base, 4, np.random.default_rng(0), 2.0)
+    assert len(plain) == 4 + 2 and len(both) == len(plain) + 4
+    # the other motor's positive side lowers the angle, its negative side raises it
+    # (sign_cn -1: -(-1) C_n), as the joint fit reads
+    assert signed.value_dict()["sign_cp"] == -1.0
+    assert signed.value_dict()["sign_cn"] == -1.0

@@ -291,6 +291,20 @@ MIN_AUTO_STARTS = 2
 MAX_AUTO_STARTS = 8
 
 
+#: A coupled fit of at most this many fitted samples also gets the joint starts of
+#: :func:`~i2ris_calib.hysteresis.coupled.coupled_starts` (both motors' parts from the
+#: angle alone, not from the base fit without the other motor's input): a short
+#: recording (a few loops at 5 Hz) leaves that base ill-determined, so when the
+#: coupling is a large share of the angle it ends in a degenerate basin every start
+#: made from it inherits (bench_optimum agpi_coupled:112, n = 362: 36,756 x the truth's
+#: cost, 0.87 x with them). The limit is where a fit gets :data:`MAX_AUTO_STARTS` and
+#: affords every start and its hops: above it each more start takes a polish or a hop
+#: from the others (agpi_coupled:108, 5,986 fitted samples: 1.0008 -> 1.44 x with
+#: them) or, on a long recording, costs a screening over the whole input
+#: (bench_speed's coupled fit: +330 evaluations, +3 s CPU per start).
+JOINT_ROWS = START_ROWS // MAX_AUTO_STARTS
+
+
 def search_starts(n_config: int, n_fitted: int) -> int:
     """Number of data-driven starts of a fit: ``n_config`` when set (> 0), else by the
     number of fitted samples ``n_fitted`` (:data:`START_ROWS`). The one rule, read by
@@ -374,13 +388,18 @@ def fit_kind(
             )
         if gpi_fit is None:
             gpi_fit = fit_kind(info.nested, s, theta, config, holdout, deadband=db)
-        model, starts = info.start(model, s, theta_fit, gpi_fit.params, n_starts, rng, db)
+        model, starts = info.start(
+            model, s, theta_fit, gpi_fit.params, n_starts, rng, db,
+            joint=int(fit_sel.sum()) <= JOINT_ROWS,
+        )  # fmt: skip
         if gpi_fit.initial_state is not None and v.size <= LARGE_ROWS:
             # also from the base's residual without its start-state effect (the silent
             # start, first, is the same); a long recording's start state weighs little
             # against its many loops (and its searches keep their time: bench_speed)
             theta_rest = rested_angle(theta_fit, gpi_fit, s)
-            starts += info.start(model, s, theta_rest, gpi_fit.params, n_starts, rng, db)[1][1:]
+            starts += info.start(
+                model, s, theta_rest, gpi_fit.params, n_starts, rng, db, joint=False
+            )[1][1:]
         starts += [model.vector(g) for g in given]
         starts = [keep_fixed(model, x) for x in starts]
         return _fit_configured(model, s, theta, holdout, starts, config)

@@ -192,40 +192,106 @@ def coupled_starts(
     n_starts: int,
     rng: np.random.Generator,
     deadband: float = 0.0,
+    *,
+    joint: bool = True,
 ) -> tuple[CoupledTwoTendonModel, list[np.ndarray]]:
     """(model with its coupling signs set, start vectors (shape (35,) each)).
 
     ``base``: the fitted two-tendon GPI (its 17 values). Starts: the base with the
     coupling silent (exactly the base's output: the fit is never worse than it), and
     the base with each coupling side from the GPI start recipe on the base's residual
-    against that side of the other input (its sign from the residual's correlation
-    with that side), the residual's mean moved into ``theta0``.
+    against that side of the other input, the residual's mean moved into ``theta0``;
+    then one backfitted start (this axis's tendons restarted on the angle less the
+    first coupling start). ``joint``: also ``n_starts`` joint starts
+    (:func:`joint_coupling`): this axis's tendons from the angle less the coupling's
+    straight-line part, both motors' slopes fitted at once, and the coupling sides
+    from the residual of that. Each side's sign: the joint fit's slope's (``joint``),
+    else the base residual's correlation with that side of the other input.
     """
+    from i2ris_calib.hysteresis.two_tendon import two_tendon_starts
+
     v = np.asarray(signals.v, dtype=float)
     vo = np.asarray(signals.v_other, dtype=float)
     theta = np.asarray(theta, dtype=float)
     x_base = {k: base[k] for k in model.names[:17]}
     agpi = two_tendon_gpi_model(n=model.n)
     resid = theta - agpi.with_values(x_base)(v)
-    ok = np.isfinite(resid)
-    gpi = gpi_model(n=model.n)
-    signs, per_side = {}, {}
-    for cs, (side, sgn) in COUPLING_SIDES.items():
-        u = side_input(vo, side)
-        on = ok & (u > 0)
-        r = resid - np.nanmedian(resid[ok & (u == 0)]) if (ok & (u == 0)).sum() >= 5 else resid
+    lines = _joint_lines(v, vo, theta) if joint else None
+    signs = {}
+    for k, (cs, (side, sgn)) in enumerate(COUPLING_SIDES.items()):
+        u, r = _side_residual(vo, side, resid)
+        on = np.isfinite(r) & (u > 0)
         corr = float(np.sum(u[on] * r[on])) if on.sum() >= 5 else 0.0
+        if lines is not None and lines[3 + k] != 0:
+            # the joint fit's slope: both motors' parts at once, not what the base
+            # left of its own tendons (the base residual correlates with the other
+            # motor through this one's misfit)
+            corr = float(lines[3 + k])
         signs[cs] = 1.0 if sgn * corr >= 0 else -1.0
+    model = model.with_values({f"sign_{cs}": s for cs, s in signs.items()})
+    silent = model.vector(x_base | {f"{k}_{cs}": x for cs in COUPLING_SIDES
+                                   for k, x in SILENT.items()})  # fmt: skip
+    starts = [silent, *_with_coupling(model, x_base, resid, vo, n_starts, rng, deadband)]
+    # backfitting: this axis's tendons restarted on the angle less the coupling start
+    # (the base fitted without coupling has absorbed part of it)
+    for x in starts[1:2]:
+        coupling = model.evaluate(signals, x) - agpi.evaluate(signals, x[:17])
+        own = two_tendon_starts(agpi, v, theta - coupling, 1, rng, deadband)[0]
+        starts.append(np.concatenate([own, x[17:]]))
+    if not joint:
+        return model, starts
+    # joint: both motors' straight-line parts at once, this axis's tendons from the angle
+    # less the other motor's, the coupling sides from the residual of that. When the
+    # coupling is a large share of the angle (both motors at once, circles: the
+    # base without the other input absorbs it into a wrong basin, every start above
+    # from it) these start in the right basin (measured on bench_optimum
+    # agpi_coupled:112, 5 Hz, n = 362: every start above ~17,500 in cost, these ~1,000);
+    # seeds of their own: the draws of the starts above stay as they were
+    joint_rng = rng.spawn(1)[0]
+    coupling = _joint_part(v, vo, lines)
+    own = two_tendon_starts(agpi, v, theta - coupling, 1, joint_rng, deadband)[0]
+    x_own = dict(zip(agpi.names, map(float, own), strict=True))
+    resid = theta - agpi.evaluate(signals, own)
+    starts += _with_coupling(model, x_own, resid, vo, n_starts, joint_rng, deadband)
+    return model, starts
+
+
+def _side_residual(vo: np.ndarray, side: str, resid: np.ndarray):
+    """(that side of the other input, ``resid`` less its median where that side is at
+    rest (when >= 5 samples are), NaN where not finite)."""
+    u = side_input(vo, side)
+    ok = np.isfinite(resid)
+    rest = ok & (u == 0)
+    r = resid - np.nanmedian(resid[rest]) if rest.sum() >= 5 else resid
+    return u, r
+
+
+def _with_coupling(
+    model: CoupledTwoTendonModel,
+    x_base: dict[str, float],
+    resid: np.ndarray,
+    vo: np.ndarray,
+    n_starts: int,
+    rng: np.random.Generator,
+    deadband: float,
+) -> list[np.ndarray]:
+    """``n_starts`` start vectors: this axis's tendons at ``x_base`` (17 values), each
+    coupling side from the GPI start recipe on the residual ``resid`` (of ``x_base``)
+    against that side of the other input, in the model's signs; the residual's mean
+    moved into ``theta0``."""
+    gpi = gpi_model(n=model.n)
+    signs = {cs: model.value_dict()[f"sign_{cs}"] for cs in COUPLING_SIDES}
+    per_side = {}
+    for cs, (side, sgn) in COUPLING_SIDES.items():
+        u, r = _side_residual(vo, side, resid)
+        on = np.isfinite(r) & (u > 0)
         th = np.where(on, sgn * signs[cs] * r, np.nan)
         if on.sum() >= 5 and np.ptp(u[on]) > 0:
             per_side[cs] = start_values(gpi, u, th, n_starts, rng, deadband)
         else:
             per_side[cs] = [np.array([SILENT.get(k, gpi.value_dict()[k]) for k in GPI_NAMES])]
             per_side[cs] *= n_starts
-    model = model.with_values({f"sign_{cs}": s for cs, s in signs.items()})
-    silent = model.vector(x_base | {f"{k}_{cs}": x for cs in COUPLING_SIDES
-                                   for k, x in SILENT.items()})  # fmt: skip
-    starts = [silent]
+    starts = []
     for i in range(n_starts):
         vals = dict(x_base)
         for cs, (_, sgn) in COUPLING_SIDES.items():
@@ -233,15 +299,38 @@ def coupled_starts(
             vals["theta0"] -= sgn * signs[cs] * shift
             vals |= {f"{k}_{cs}": float(t) for k, t in zip(GPI_NAMES, x, strict=True)}
         starts.append(model.vector(vals))
-    # backfitting: this axis's tendons restarted on the angle less the coupling start
-    # (the base fitted without coupling has absorbed part of it)
-    from i2ris_calib.hysteresis.two_tendon import two_tendon_starts
+    return starts
 
-    for x in starts[1:2]:
-        coupling = model.evaluate(signals, x) - agpi.evaluate(signals, x[:17])
-        own = two_tendon_starts(agpi, v, theta - coupling, 1, rng, deadband)[0]
-        starts.append(np.concatenate([own, x[17:]]))
-    return model, starts
+
+def _joint_lines(v: np.ndarray, vo: np.ndarray, theta: np.ndarray) -> np.ndarray | None:
+    """Coefficients (5,) of the angle's least-squares fit by an offset and a slope on
+    each side of both inputs at once (columns: 1, this input's ``p``, ``n`` sides, the
+    other input's ``p``, ``n`` sides; :func:`side_input`), or None (too few finite
+    angles)."""
+    X = _joint_columns(v, vo)
+    ok = np.isfinite(theta)
+    if ok.sum() < 2 * X.shape[1]:
+        return None
+    return np.linalg.lstsq(X[ok], theta[ok], rcond=None)[0]
+
+
+def _joint_columns(v: np.ndarray, vo: np.ndarray) -> np.ndarray:
+    cols = [np.ones(np.size(v))] + [side_input(x, s) for x in (v, vo) for s in SIDES]
+    return np.column_stack(cols)
+
+
+def _joint_part(v: np.ndarray, vo: np.ndarray, lines: np.ndarray | None) -> np.ndarray:
+    """The other input's terms (deg, shape (n,)) of the joint fit ``lines`` (zero for None)."""
+    if lines is None:
+        return np.zeros(np.size(v))
+    return _joint_columns(v, vo)[:, 3:] @ lines[3:]
+
+
+def joint_coupling(v: np.ndarray, vo: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """The coupling's straight-line part (deg, shape (n,)): the angle's least-squares
+    fit by an offset and a slope on each side of both inputs at once, its terms in the
+    other input (zero when too few angles are finite)."""
+    return _joint_part(v, vo, _joint_lines(v, vo, theta))
 
 
 assert set(SIDES) == {s for s, _ in COUPLING_SIDES.values()}

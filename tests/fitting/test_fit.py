@@ -118,6 +118,20 @@ def test_flag_point_from_data(egpi_data):
     assert vf is not None and abs(vf - truth["v_f"]) < 0.03 * 6000
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_flag_point_from_the_stretches_that_come_down_from_the_top(seed):
+    # sparse, noisy unloading stretches that turned below the flag point give spurious
+    # estimates (egpi:153 of bench_optimum); only those from full scale cross it
+    truth, top = paper_like_params("yaw+"), 6000.0
+    peaks = [top, 0.6 * top, 0.55 * top, 0.5 * top, top]
+    v = np.concatenate([np.r_[np.linspace(0, p, 50), np.linspace(p, 0, 50)] for p in peaks])
+    v = v.round()
+    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, truth)
+    theta = y + np.random.default_rng(seed).normal(0, 0.4, v.size)
+    vf = flag_point(v, theta, motion_direction(v, 2.0))
+    assert truth["v_f"] > 0.6 * top and vf > 0.6 * top
+
+
 @pytest.mark.parametrize(
     ("v", "theta", "match"),
     [

@@ -541,7 +541,7 @@ def two_axis(seeds) -> bool:
     return ok
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--figure", default=None, help="write the docs figure here (PNG)")
     ap.add_argument("--no-delay", action="store_true", help="skip the hidden-delay scenario")
@@ -574,7 +574,8 @@ def main() -> None:
     if args.floor_draws > 0:
         fit_floor(config, args.floor_draws)
     print(f"\noverall: {verdict(all(oks))}")
+    return 0 if all(oks) else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

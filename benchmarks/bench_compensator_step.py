@@ -125,12 +125,13 @@ def time_batch(kind, n):
     return time.perf_counter() - t0, time.process_time() - c0
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--kinds", nargs="+", default=list(KINDS), choices=KINDS)
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--batch", type=int, default=1_000_000)
     args = ap.parse_args()
+    ok = True
     for kind in args.kinds:
         per, cmds = time_steps(kind, args.steps)
         med = 1e6 * float(np.median(per))
@@ -146,7 +147,9 @@ def main() -> None:
             "one core)",
             flush=True,
         )
+        ok &= med <= 20 and diff <= 1e-9 and cpu <= 5
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

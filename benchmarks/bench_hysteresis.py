@@ -59,7 +59,7 @@ def best_time(fn, repeat: int) -> float:
     return best
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="20,000 samples instead of 100,000")
     args = ap.parse_args()
@@ -78,7 +78,8 @@ def main() -> None:
     print(f"  max |difference|: {diff:.2e} deg")
     ok = t_numba <= 5e-3 and t_numpy / t_numba >= 100 and diff < 1e-9
     print("ALL TARGETS MET" if ok else "SOME TARGETS MISSED")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

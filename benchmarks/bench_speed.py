@@ -184,7 +184,7 @@ def bench_diagnose(name: str, d, config: FitConfig, repeats: int) -> bool:
     return good
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--only", choices=("fit", "diagnose"))
@@ -216,7 +216,8 @@ def main() -> None:
     if args.only != "fit":
         print(f"diagnose targets (each <= {DIAGNOSE_TARGET_S:.0f} s):",
               "met" if diag_ok else "MISSED")  # fmt: skip
+    return 0 if (args.only == "diagnose" or fits_ok) and (args.only == "fit" or diag_ok) else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

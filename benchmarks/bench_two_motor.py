@@ -83,7 +83,7 @@ def one_draw(seed: int, rate: float, n: int, folder: Path, diagnose: bool):
     return ok, named
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=10)
     ap.add_argument("--no-diagnose", action="store_true")
@@ -104,7 +104,9 @@ def main() -> None:
         need = int(np.ceil(0.9 * len(named)))
         print(f"diagnose names the coupling: {k}/{len(named)} (target >= {need}):",
               "met" if k >= need else "MISSED")  # fmt: skip
+        fits_ok &= k >= need
+    return 0 if fits_ok else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

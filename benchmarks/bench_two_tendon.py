@@ -103,7 +103,7 @@ def speed(config: FitConfig) -> None:
         )
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=8)
     ap.add_argument("--quick", action="store_true")
@@ -113,7 +113,8 @@ def main() -> None:
     print("accuracy targets:", "met" if ok else "MISSED")
     if not args.quick:
         speed(config)
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -761,6 +761,45 @@ def fit_cost(
     return _Counter(fitted, s, theta, used, loss, f_scale_deg).cost(full)
 
 
+def fit_from_state(
+    model: Model,
+    signals: Signals | np.ndarray,
+    theta_deg: np.ndarray,
+    state: InitialState,
+    *,
+    method: str = "lm",
+    max_nfev: int | None = None,
+) -> FitResult:
+    """``model``'s parameters refitted from its own values by local least squares (no
+    global search, no start-state search), run after the start state ``state`` held.
+
+    The pre-history's levels are those of ``state`` (clipped to the level bounds of
+    ``signals``); it ends at the first input of ``signals``, so ``state`` may come from
+    a fit of the same recording on another clock (sync's offset profile, where a start
+    state searched again at every candidate clock made the cost jump between states).
+
+    Returns
+    -------
+    FitResult
+        As :func:`fit_model`'s, ``initial_state`` the held levels on ``signals``.
+    """
+    s = as_signals(signals)
+    v = np.asarray(s.v, dtype=float)
+    v_other = s.v_other if state.other_v_from is not None else None
+    lead = _FromLevel(model, v, state.cycle_samples, v_other)
+    n = len(model.parameters)
+    held = [
+        replace(p, value=float(np.clip(u, p.lower, p.upper)), fixed=True)
+        for p, u in zip(lead.parameters[n:], state_levels(state, lead.levels), strict=True)
+    ]
+    lead.parameters = (*lead.parameters[:n], *held)
+    x0 = np.array([p.value for p in lead.parameters], dtype=float)
+    res = fit_model(lead, s, theta_deg, starts=[x0], method=method, max_nfev=max_nfev,
+                    initial_state="rest", basin_hops=0)  # fmt: skip
+    full = np.append(np.asarray(res.model.values, dtype=float), [p.value for p in held])
+    return _without_level(res, model, v, full, state.cycle_samples, v_other)
+
+
 def _check_loss(loss: str, method: str) -> None:
     """CalibError for an unknown loss or a robust loss with the (plain) LM method."""
     if loss not in ("linear", "soft_l1", "huber"):

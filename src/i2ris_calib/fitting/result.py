@@ -174,6 +174,25 @@ class SearchCertificate:
         )  # fmt: skip
 
 
+def output_after_state(
+    model: Model, state: InitialState | None, signals: Signals | np.ndarray, values: np.ndarray
+) -> np.ndarray:
+    """Output (deg), shape (m,), of ``model`` at ``values`` run after the pre-history of
+    ``state`` (a fit's :attr:`FitResult.initial_state`; None: from relaxed operators).
+
+    The pre-history ends at the first input of ``signals``, so ``signals`` need not be
+    the fitted recording's own: the same state on the input at a shifted clock (sync's
+    offset profile) moves with it instead of dropping back to rest.
+    """
+    s = as_signals(signals)
+    x = np.asarray(values, dtype=float)
+    if state is None:
+        return model.evaluate(s, x)
+    lead = _FromLevel(model, np.asarray(s.v, dtype=float), state.cycle_samples,
+                      s.v_other if state.other_v_from is not None else None)  # fmt: skip
+    return lead.evaluate(s, np.append(x, state_levels(state, lead.levels)))
+
+
 @dataclass(frozen=True)
 class FitResult:
     """Outcome of :func:`~i2ris_calib.fitting.fit.fit_model`: the fitted numbers and
@@ -281,11 +300,7 @@ class FitResult:
         if initial_state is None:
             v = np.asarray(s.v, dtype=float)
             initial_state = st is not None and v.size > 0 and float(v[0]) == st.v0
-        if initial_state and st is not None:
-            lead = _FromLevel(self.model, np.asarray(s.v, dtype=float), st.cycle_samples,
-                              s.v_other if st.other_v_from is not None else None)  # fmt: skip
-            return lead.evaluate(s, np.append(x, state_levels(st, lead.levels)))
-        return self.model.evaluate(s, x)
+        return output_after_state(self.model, st if initial_state else None, s, x)
 
     def eval_uncertainty(
         self, signals: Signals | np.ndarray | None = None, sigma: float = 1.0

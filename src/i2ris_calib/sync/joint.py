@@ -49,8 +49,10 @@ from i2ris_calib.data.dataset import Bands, direction_datasets, direction_input,
 from i2ris_calib.data.excursions import excursions
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.config import FitConfig
-from i2ris_calib.fitting.fit import PROFILE_PARAMS, fit_model
+from i2ris_calib.fitting.fit import PROFILE_PARAMS, fit_from_state, fit_model
 from i2ris_calib.fitting.pipeline import choose_model, fit_kind, unfitted_model
+from i2ris_calib.fitting.prehistory import InitialState
+from i2ris_calib.fitting.result import output_after_state
 from i2ris_calib.hysteresis.registry import kind_info
 from i2ris_calib.model import Signals
 from i2ris_calib.sync.clock import PPM, ClockModel, clock_from_offsets, clock_model
@@ -237,8 +239,14 @@ class OffsetProfile:
     lowest residual wins. A warm-start chain alone can stay in a poor local minimum
     found far from the true offset. Results are cached by offset.
 
-    ``seeds``: ``{block name: parameter vector}`` tried as starts (from an earlier
-    profile); with seeds the profile starts warm.
+    A warm start is refitted twice: with its start state searched again (the fitter's
+    own local search) and with its start state held (:func:`held_state_fit`: the
+    pre-history of a recording that starts mid-loop is the same whatever the clock, so
+    the profile stays a smooth function of the offset; its levels re-searched at every
+    offset made the lab session's profile jump between start states).
+
+    ``seeds``: ``{block name: fit}`` (FitResult or :class:`StartEval`) tried as starts
+    (from an earlier profile); with seeds the profile starts warm.
     """
 
     def __init__(self, blocks, log, t_c_s, drift_ppm, kind, fit_config, seeds=None):
@@ -275,17 +283,19 @@ class OffsetProfile:
         self(offset_c_s)
         return self.cache[round(float(offset_c_s), 9)][1]
 
-    def best_params(self) -> dict:
-        """``{block name: parameter vector}`` of the lowest-RSS evaluation (or the seeds)."""
+    def best_fits(self) -> dict:
+        """``{block name: fit}`` of the lowest-RSS evaluation (or the seeds)."""
         if not self.cache:
             return dict(self.seeds)
         k = min(self.cache, key=lambda x: self.cache[x][0])
-        return {b.name: r.model.values for b, r in zip(self.blocks, self.cache[k][1], strict=True)}
+        return dict(zip((b.name for b in self.blocks), self.cache[k][1], strict=True))
 
     def _starts(self, i: int, offset_c_s: float) -> list:
+        """The warm starts of block ``i`` (fits): at the two nearest evaluated offsets
+        and the best anywhere."""
         near = sorted(self.cache, key=lambda k: abs(k - offset_c_s))[:2]
-        starts = [self.cache[k][1][i].model.values for k in near]
-        best = self.best_params()
+        starts = [self.cache[k][1][i] for k in near]
+        best = self.best_fits()
         if self.blocks[i].name in best:
             starts.append(best[self.blocks[i].name])
         return starts
@@ -298,7 +308,8 @@ class OffsetProfile:
             kind = self.kind_of(b)
             db = b.bands.deadband
             candidates = []
-            starts = self._starts(i, offset_c_s)
+            start_fits = self._starts(i, offset_c_s)
+            starts = [f.model.values for f in start_fits]
             if starts:
                 model = unfitted_model(kind, input_values(v), cfg, db)
                 candidates.append(
@@ -317,8 +328,12 @@ class OffsetProfile:
             if self.cold or not starts:
                 hold = np.zeros(input_values(v).size, bool)
                 candidates.append(fit_kind(kind, v, b.theta_deg, cfg, hold, deadband=db))
-            # never worse than the warm starts themselves (a refit can wander off)
-            candidates += [start_as_fit(kind, v, b.theta_deg, x, cfg, db) for x in starts]
+            # the warm starts refitted with their start state held, and never worse than
+            # the starts themselves (a refit can wander off)
+            candidates += [held_state_fit(f, v, b.theta_deg, cfg) for f in start_fits
+                           if f.initial_state is not None]  # fmt: skip
+            candidates += [start_as_fit(kind, v, b.theta_deg, f.model.values, cfg, db,
+                                        f.initial_state) for f in start_fits]  # fmt: skip
             res = min(candidates, key=lambda r: trimmed_ss(r.residuals))
             total += trimmed_ss(res.residuals)
             results.append(res)
@@ -367,10 +382,33 @@ class StartEval:
     model: object
     residuals: np.ndarray
     free: tuple
+    initial_state: InitialState | None = None  # None: from rest
 
-    def predict(self, v: np.ndarray) -> np.ndarray:
-        """Model output (deg) for input ``v``."""
-        return self.model.evaluate(v, self.model.values)
+
+def held_state_fit(fit, v, theta: np.ndarray, fit_config):
+    """``fit`` (a block's FitResult or :class:`StartEval` with a start state) refitted
+    on the input ``v`` at another clock, its start state held
+    (:func:`~i2ris_calib.fitting.fit.fit_from_state`: local least squares from its own
+    values)."""
+    return fit_from_state(fit.model, v, theta, fit.initial_state, method=fit_config.method,
+                          max_nfev=fit_config.max_nfev)  # fmt: skip
+
+
+def held_output(fit, v, values: np.ndarray | None = None) -> np.ndarray:
+    """Output (deg) of a block's fit (FitResult or :class:`StartEval`) for the input
+    ``v`` at any candidate clock, its parameters ``values`` (default: the fit's) and
+    its fitted start state held (:func:`~i2ris_calib.fitting.result.output_after_state`).
+
+    The start state is the pre-history of a recording that does not start at rest. It
+    must be held, not dropped, when the clock moves: ``FitResult.predict`` runs it only
+    on the fit's own first input, so at ``offset +- eps`` the opening transient would
+    come back and its jump read as the clock's sensitivity (measured on the rendered lab
+    session, both motors mid-loop at the first frame: the drift's Gauss-Newton step went
+    from the event's 68 ppm to -121 ppm and the profile's minimum cost from 1.41 to 6.6
+    deg^2, so the model refinement was refused).
+    """
+    x = np.asarray(fit.model.values if values is None else values, dtype=float)
+    return output_after_state(fit.model, fit.initial_state, v, x)
 
 
 def input_values(v) -> np.ndarray:
@@ -378,12 +416,16 @@ def input_values(v) -> np.ndarray:
     return np.asarray(v.v if isinstance(v, Signals) else v, dtype=float)
 
 
-def start_as_fit(kind: str, v, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None):
-    """:class:`StartEval` of ``values`` on (v, theta): the fallback when a refit is worse
-    (``v``: the input, shape (m,), or :class:`Signals` for a coupled kind)."""
+def start_as_fit(
+    kind: str, v, theta: np.ndarray, values: np.ndarray, fit_config, deadband=None, state=None
+):  # fmt: skip
+    """:class:`StartEval` of ``values`` on (v, theta), run after the start state
+    ``state`` (None: from rest): the fallback when a refit is worse (``v``: the input,
+    shape (m,), or :class:`Signals` for a coupled kind)."""
     model = unfitted_model(kind, input_values(v), fit_config, deadband).with_values(values)
     free = tuple(p.name for p in model.parameters if not p.fixed)
-    return StartEval(model, model.evaluate(v, model.values) - theta, free)
+    y = output_after_state(model, state, v, model.values)
+    return StartEval(model, y - theta, free, state)
 
 
 def scan_profile(
@@ -496,18 +538,19 @@ def noise_sd(residuals: list[np.ndarray]) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
 
 
-def _param_jacobian(model, v: np.ndarray, x: np.ndarray) -> np.ndarray:
+def _param_jacobian(fit, v: np.ndarray, x: np.ndarray) -> np.ndarray:
     """d(model output)/d(free least-squares parameters), shape (m, q), central differences
-    (the profiled flag point ``v_f`` excluded: the output is piecewise constant in it)."""
+    (the profiled flag point ``v_f`` excluded: the output is piecewise constant in it),
+    ``fit``'s start state held (:func:`held_output`)."""
     cols = []
-    for i, p in enumerate(model.parameters):
+    for i, p in enumerate(fit.model.parameters):
         if p.fixed or p.name in PROFILE_PARAMS:
             continue
         h = 1e-5 * max(abs(float(x[i])), 1e-4)
         xp, xm = x.copy(), x.copy()
         xp[i] += h
         xm[i] -= h
-        cols.append((model.evaluate(v, xp) - model.evaluate(v, xm)) / (2 * h))
+        cols.append((held_output(fit, v, xp) - held_output(fit, v, xm)) / (2 * h))
     return np.column_stack(cols) if cols else np.zeros((input_values(v).size, 0))
 
 
@@ -529,12 +572,12 @@ def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3
     """
     out = []
     for b, f in zip(profile.blocks, profile.fits(offset_c_s), strict=True):
-        model, x = f.model, np.asarray(f.model.values, dtype=float)
+        x = np.asarray(f.model.values, dtype=float)
         v = profile.inputs(b, offset_c_s)
         r = np.asarray(f.residuals, dtype=float)
         jo = (
-            model.evaluate(profile.inputs(b, offset_c_s + eps_s), x)
-            - model.evaluate(profile.inputs(b, offset_c_s - eps_s), x)
+            held_output(f, profile.inputs(b, offset_c_s + eps_s))
+            - held_output(f, profile.inputs(b, offset_c_s - eps_s))
         ) / (2 * eps_s)
         use = trim_mask(r) & np.isfinite(jo)
         if use.sum() > 10:
@@ -542,7 +585,7 @@ def offset_scores(profile: OffsetProfile, offset_c_s: float, eps_s: float = 1e-3
         jp = np.zeros(r.size)
         rr = np.zeros(r.size)
         if use.sum() > 2:
-            jt = _param_jacobian(model, v, x)[use]
+            jt = _param_jacobian(f, v, x)[use]
             ok = np.isfinite(jt).all(axis=0)
             jt = jt[:, ok]
             proj = jo[use]
@@ -682,7 +725,8 @@ def drift_gauss_newton(
 
     def predict(o_, d_):
         out = [
-            f.predict(profile.inputs(b, o_, d_)) for b, f in zip(profile.blocks, fits, strict=True)
+            held_output(f, profile.inputs(b, o_, d_))
+            for b, f in zip(profile.blocks, fits, strict=True)
         ]
         return np.concatenate(out)
 
@@ -748,12 +792,11 @@ def cycle_offsets(
     """
     ts, os_, sds, blk = [], [], [], []
     for k, (b, f) in enumerate(zip(profile.blocks, profile.fits(offset_c_s), strict=True)):
-        x = np.asarray(f.model.values, dtype=float)
         v = profile.inputs(b, offset_c_s, drift_ppm)
-        r = b.theta_deg - f.model.evaluate(v, x)
+        r = b.theta_deg - held_output(f, v)
         jo = (
-            f.model.evaluate(profile.inputs(b, offset_c_s + eps_s, drift_ppm), x)
-            - f.model.evaluate(profile.inputs(b, offset_c_s - eps_s, drift_ppm), x)
+            held_output(f, profile.inputs(b, offset_c_s + eps_s, drift_ppm))
+            - held_output(f, profile.inputs(b, offset_c_s - eps_s, drift_ppm))
         ) / (2 * eps_s)
         use = trim_mask(r) & np.isfinite(jo)
         if use.sum() < 10:
@@ -977,7 +1020,7 @@ def profile_minimum(
     best = scan_profile(profile, o_x, halfwidth, step, extend=extend)
     # the direction attribution was made at the coarse offset: redo it at the minimum
     # (same frames, so only frames near a change of direction can change block)
-    seeds = profile.best_params()
+    seeds = profile.best_fits()
     blocks = blocks_at(best)
     if [b.name for b in blocks] != [b.name for b in profile.blocks] or any(
         not np.array_equal(a.in_direction, b.in_direction)
@@ -1029,7 +1072,7 @@ def drift_by_rounds(
             _, new_drift, cov = drift_gauss_newton(profile, best, drift)
             drift_sd = float(np.sqrt(cov[1, 1]))
             change, drift = abs(new_drift - drift), new_drift
-            seeds = profile.best_params()
+            seeds = profile.best_fits()
             profile = OffsetProfile(blocks, log, t_c, drift, cfg.model, fit_config, seeds)
             best = golden_min(profile, best - step, best + step, cfg.profile_tol_s)
             if change < max(DRIFT_TOL_PPM, DRIFT_TOL_SD * drift_sd):

@@ -35,6 +35,7 @@ import dataclasses
 import json
 import os
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -139,10 +140,13 @@ def cross_axis_figures(session: Path, angles: pd.DataFrame) -> dict:
     return out
 
 
-def cross_axis(args) -> None:
+def cross_axis(args) -> int:
     """The reference-roll leak (issue 11): rendered sessions with compound moves, three
     misalignments and focal lengths, each tracked with the pinhole and the
-    weak-perspective camera model; ``--before`` adds the window-only reference."""
+    weak-perspective camera model; ``--before`` adds the window-only reference.
+    1 when a case with the session reference misses RMS <= 0.02 deg overall or
+    <= 0.03 deg while the other axis is beyond 15 deg."""
+    missed = []
 
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench_cross_axis_"))
     print("case | model | reference | yaw RMS / beyond-15 / max | pitch RMS / beyond-15 / max"
@@ -171,13 +175,21 @@ def cross_axis(args) -> None:
                       f" | {y[3] + p[3]} | {fig['measured']:.4f} of {fig['frames']} | "
                       f"{ref['roll_correction_deg']} +- {ref['roll_sd_deg']} | {roll_err:.4f}",
                       flush=True)  # fmt: skip
+                if mode == "session" and not (
+                    max(y[0], p[0]) <= 0.02 and np.nanmax([y[1], p[1]]) <= 0.03
+                ):
+                    missed.append(f"{mis} deg, f {f:.0f}, {model}")
     if args.keep is None:
         shutil.rmtree(root, ignore_errors=True)
+    print("targets (RMS <= 0.02 overall, <= 0.03 beyond 15 deg): "
+          + ("met" if not missed else "MISSED: " + "; ".join(missed)))  # fmt: skip
+    return 1 if missed else 0
 
 
-def issue_session(folder: Path, seed: int, sim: list[str] | None = None) -> None:
+def issue_session(folder: Path, seed: int, sim: list[str] | None = None) -> int:
     """The issue's session (``issue_session.py``): render once, track (written to
-    ``folder/track`` for ``bench_sync.py --issue-session``), print the issue's figures."""
+    ``folder/track`` for ``bench_sync.py --issue-session``), print the issue's figures;
+    1 when the targets over all frames are missed."""
 
     over = {}
     for item in sim or []:  # KEY=VALUE overrides of the issue's [simulate] settings
@@ -216,12 +228,16 @@ def issue_session(folder: Path, seed: int, sim: list[str] | None = None) -> None
         print(f"{axis:5s} | {a['rms']:.4f} | {a['rms_beyond']:.4f} ({a['n_beyond']}) | "
               f"{a['rms_otherwise']:.4f} | {a['bias_beyond']:+.4f} | {a['max']:.3f} | "
               f"{a['over_1deg']}")  # fmt: skip
+    code = 0
     for name, f in (("all frames", fig), ("away from truth steps", fig2)):
         met = all(f[a]["rms"] <= 0.02 and f[a]["rms_beyond"] <= 0.03 for a in ("yaw", "pitch"))
         met &= f["yaw"]["over_1deg"] + f["pitch"]["over_1deg"] == 0
         met &= fig["measured_visible"] >= 0.995 * fig["visible"]
         print(f"targets (RMS <= 0.02 overall, <= 0.03 beyond 15 deg, none > 1 deg, >= 99.5 % "
               f"measured), {name}: {'met' if met else 'MISSED'}")  # fmt: skip
+        if name == "all frames" and not met:
+            code = 1
+    return code
 
 
 def overlap_speed(video: Path, dictionary: str, marker_id: int, frames: int) -> list[dict]:
@@ -242,7 +258,28 @@ def overlap_speed(video: Path, dictionary: str, marker_id: int, frames: int) -> 
     return rows
 
 
-def main() -> None:
+def session_misses(fig: dict) -> list[str]:
+    """The accuracy targets of the module doc that ``fig`` (:func:`evaluate`) misses:
+    fused RMS <= 0.03 deg, max <= 0.15 deg, no error > 1 deg, >= 99 % of the frames
+    with both markers visible measured, every occluded frame flagged (the speed target
+    is printed, not judged: it depends on the machine)."""
+    out = []
+    for axis in ("yaw", "pitch"):
+        if not fig[f"fused_{axis}_rms"] <= 0.03:
+            out.append(f"{axis} RMS {fig[f'fused_{axis}_rms']:.4f} > 0.03 deg")
+        if not fig[f"fused_{axis}_max"] <= 0.15:
+            out.append(f"{axis} max {fig[f'fused_{axis}_max']:.4f} > 0.15 deg")
+        if fig[f"fused_{axis}_over_1deg"]:
+            out.append(f"{axis}: {fig[f'fused_{axis}_over_1deg']} frames > 1 deg")
+    if not fig["measured_of_visible"] >= 0.99:
+        out.append(f"measured {fig['measured_of_visible']:.4f} of visible < 0.99")
+    if fig["occluded_frames"] and not fig["occluded_flagged"] >= 1.0:
+        out.append(f"occluded flagged {fig['occluded_flagged']:.3f} < 1")
+    return out
+
+
+def main() -> int:
+    """Run the benchmark; 1 when an accuracy target is missed."""
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -317,7 +354,7 @@ def main() -> None:
             print(f"  ahead={r['ahead']} {r['fps_wall']:7.1f} frames/s wall  "
                   f"{r['cpu_ms']:6.2f} CPU ms/frame")  # fmt: skip
     if args.no_track:
-        return
+        return 0
     t1 = time.perf_counter()
     res = track(folder, load_session(folder), TrackingConfig(), progress=True)
     track_s = time.perf_counter() - t1
@@ -370,7 +407,11 @@ def main() -> None:
             )
     if args.keep is None:
         shutil.rmtree(folder, ignore_errors=True)
+    missed = session_misses(fig)
+    print("targets (RMS <= 0.03 deg, max <= 0.15 deg, none > 1 deg, >= 99 % measured, "
+          "occluded flagged): " + ("met" if not missed else "MISSED: " + "; ".join(missed)))  # fmt: skip
+    return 1 if missed else 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

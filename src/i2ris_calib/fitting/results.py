@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +32,7 @@ import numpy as np
 
 import i2ris_calib._display as _display
 from i2ris_calib import __version__
+from i2ris_calib._atomic import write_text
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting.metrics import Metrics
 from i2ris_calib.hysteresis.codec import decode_model, encode_model
@@ -441,19 +441,12 @@ def _check_saved_values(model, params: Mapping[str, float], outside: list) -> No
 
 def write_record(path: str | os.PathLike, record: dict) -> Path:
     """Write ``record`` as strict JSON to ``path`` (replacing a file there) through a
-    temporary file beside it, so a crash never leaves half a file; returns the path."""
+    temporary file beside it (:func:`i2ris_calib._atomic.write_text`, the package's one
+    atomic write), so a crash never leaves half a file; returns the path."""
     final = Path(path)
     if final.is_dir():
         raise CalibError(f"{final}: is a folder; give a file name, e.g. {final / 'fit.json'}")
-    text = json.dumps(record, indent=1, allow_nan=False) + "\n"
-    try:
-        final.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, final)
-    except OSError as exc:
-        raise CalibError(f"{final}: cannot write ({exc.strerror or exc})") from None
+    write_text(final, json.dumps(record, indent=1, allow_nan=False) + "\n")
     return final
 
 

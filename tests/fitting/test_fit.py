@@ -20,7 +20,7 @@ from i2ris_calib.fitting.pipeline import (
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.models import as_signals, gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
-from i2ris_calib.hysteresis.start import flag_point
+from i2ris_calib.hysteresis.start import _flat_after_moving, flag_point
 
 NOISE = 0.1  # deg, the noise of the egpi_data fixture (conftest.py)
 
@@ -130,6 +130,35 @@ def test_flag_point_from_the_stretches_that_come_down_from_the_top(seed):
     theta = y + np.random.default_rng(seed).normal(0, 0.4, v.size)
     vf = flag_point(v, theta, motion_direction(v, 2.0))
     assert truth["v_f"] > 0.6 * top and vf > 0.6 * top
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_flag_point_is_not_tripped_by_one_noisy_bin(seed):
+    # full-scale cycles at 0.45 deg noise (egpi_c:4 of bench_optimum): the slope between
+    # neighbouring 2 % bins dipped below 0.2 x the loading slope on one noisy bin above
+    # the flag point (+0.11 to +0.15 of the range off on these seeds); the slope over
+    # three bins reads the flat stretch below the flag point (-0.011)
+    truth, top = paper_like_params("yaw+"), 6000.0
+    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
+    v = v.round()
+    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, truth)
+    theta = y + np.random.default_rng(seed).normal(0, 0.45, v.size)
+    vf = flag_point(v, theta, motion_direction(v, 2.0))
+    assert vf is not None and abs(vf - truth["v_f"]) < 0.03 * top
+
+
+def test_flag_point_reads_a_flat_stretch_not_a_flat_bin():
+    # bin means walking down (slopes x the loading slope between neighbouring bins):
+    # slow after the reversal, moving, ONE flat bin (noise), moving, then flat from c=12
+    step = np.r_[0.3, 0.3, 1.0, 0.1, 1.0, 1.0, 1.0, 1.0, 0, 0, 0, 0, 0, 1.0, 1.0, 1.0, 1.0]
+    c = np.arange(step.size + 1, dtype=float)[::-1] + 3.0
+    m = np.r_[0.0, -np.cumsum(step)]
+    assert _flat_after_moving(c, m, 1.0) == 12.0  # neighbouring bins alone: 17.0
+    # a flat part shorter than three bins is still found (secant over 2 bins)
+    step = np.r_[0.3, 1.0, 1.0, 1.0, 0, 0, 1.0, 1.0, 1.0, 1.0]
+    c = np.arange(step.size + 1, dtype=float)[::-1]
+    m = np.r_[0.0, -np.cumsum(step)]
+    assert _flat_after_moving(c, m, 1.0) == 6.0
 
 
 @pytest.mark.parametrize(

@@ -4,23 +4,11 @@ each axis gets the model `fit` would choose (choose_model), not the paper's spli
 from __future__ import annotations
 
 import numpy as np
+from two_motor_log import series_and_log as _series_and_log
 
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.simulation.two_motor import simulate_two_motor
 from i2ris_calib.sync.joint import model_blocks
-from i2ris_calib.sync.log import make_encoder_log
-from i2ris_calib.sync.xcorr import AxisSeries
-
-
-def _series_and_log(rec, offset_s=3.0):
-    t = rec.t_s
-    log = make_encoder_log(
-        {"enc_yaw": (t + offset_s, rec.enc_yaw), "enc_pitch": (t + offset_s, rec.enc_pitch)},
-        None, "two-motor", max_gap_s=1.0,
-    )  # fmt: skip
-    series = [AxisSeries("yaw", "enc_yaw", t, rec.yaw_deg),
-              AxisSeries("pitch", "enc_pitch", t, rec.pitch_deg)]  # fmt: skip
-    return series, log
 
 
 def test_lab_recording_gets_the_signed_coupled_model():

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from two_motor_log import series_and_log
 
 from i2ris_calib.fitting.config import FitConfig
 from i2ris_calib.simulation.two_motor import simulate_two_motor
@@ -18,8 +19,6 @@ from i2ris_calib.sync.joint import (
     profile_fit_config,
     trimmed_ss,
 )
-from i2ris_calib.sync.log import make_encoder_log
-from i2ris_calib.sync.xcorr import AxisSeries
 
 OFFSET_S = 3.0
 
@@ -29,14 +28,8 @@ def profile_at_truth():
     """A mid-loop two-motor recording (30 Hz, 0.05 deg noise) on an exact clock (offset
     3 s, no drift) and its profile evaluated at the true offset."""
     rec = simulate_two_motor(2, n_samples=600, rate_hz=30.0, noise_deg=0.05)
-    t = rec.t_s
-    log = make_encoder_log(
-        {"enc_yaw": (t + OFFSET_S, rec.enc_yaw), "enc_pitch": (t + OFFSET_S, rec.enc_pitch)},
-        None, "two-motor", max_gap_s=1.0,
-    )  # fmt: skip
-    series = [AxisSeries("yaw", "enc_yaw", t, rec.yaw_deg),
-              AxisSeries("pitch", "enc_pitch", t, rec.pitch_deg)]  # fmt: skip
-    t_c = float(t.mean())
+    series, log = series_and_log(rec, OFFSET_S)
+    t_c = float(rec.t_s.mean())
     cfg = profile_fit_config(FitConfig())
     blocks = model_blocks(series, log, OFFSET_S, t_c, 0.05, cfg, 50.0)
     profile = OffsetProfile(blocks, log, t_c, 0.0, "egpi", cfg)

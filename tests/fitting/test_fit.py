@@ -20,7 +20,12 @@ from i2ris_calib.fitting.pipeline import (
 from i2ris_calib.hysteresis.kernel import motion_direction
 from i2ris_calib.hysteresis.models import as_signals, gpi_model, i2ris_egpi_model
 from i2ris_calib.hysteresis.presets import GPI_NAMES, loading_trajectory, paper_like_params
-from i2ris_calib.hysteresis.start import _flat_after_moving, flag_point
+from i2ris_calib.hysteresis.start import (
+    FLAG_CANDIDATE_GAP,
+    _flat_after_moving,
+    flag_point,
+    flag_point_candidates,
+)
 
 NOISE = 0.1  # deg, the noise of the egpi_data fixture (conftest.py)
 
@@ -145,6 +150,24 @@ def test_flag_point_is_not_tripped_by_one_noisy_bin(seed):
     theta = y + np.random.default_rng(seed).normal(0, 0.45, v.size)
     vf = flag_point(v, theta, motion_direction(v, 2.0))
     assert vf is not None and abs(vf - truth["v_f"]) < 0.03 * top
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_flag_point_candidates_are_both_readings(seed):
+    # the same noisy full-scale cycles: the secant's reading first, then the
+    # neighbouring-bin reading (tripped by a noisy bin) as a second start; on clean data
+    # the two agree and one candidate is left
+    truth, top = paper_like_params("yaw+"), 6000.0
+    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
+    v = v.round()
+    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, truth)
+    theta = y + np.random.default_rng(seed).normal(0, 0.45, v.size)
+    d = motion_direction(v, 2.0)
+    got = flag_point_candidates(v, theta, 2.0)
+    assert got[0] == flag_point(v, theta, d)
+    assert len(got) == 2 and got[1] == flag_point(v, theta, d, runs=(1,))
+    assert abs(got[1] - got[0]) > FLAG_CANDIDATE_GAP * top
+    assert len(flag_point_candidates(v, y, 2.0)) == 1
 
 
 def test_flag_point_reads_a_flat_stretch_not_a_flat_bin():

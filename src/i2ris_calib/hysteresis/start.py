@@ -126,10 +126,16 @@ FLAG_TOP_SHARE = 0.9
 #: :func:`flag_point` reads the slope from each input bin over this many bins (2 % of
 #: the range each) further down.
 FLAG_RUN = 3
+#: The secant lengths :func:`flag_point` tries in turn (bins).
+FLAG_RUNS = tuple(range(FLAG_RUN, 0, -1))
 
 
 def flag_point(
-    v: np.ndarray, theta: np.ndarray, direction: np.ndarray, loading_slope: float | None = None
+    v: np.ndarray,
+    theta: np.ndarray,
+    direction: np.ndarray,
+    loading_slope: float | None = None,
+    runs: tuple[int, ...] = FLAG_RUNS,
 ) -> float | None:
     """Flag point v_f (counts) estimated from the unloading stretches, or None.
 
@@ -156,6 +162,9 @@ def flag_point(
     from 1,836 and 1,253 counts gave 1,623 and 1,133, the two from full scale 2,603
     and 1,868; the median of all 1,745 against the truth's 2,107, the fit ended at
     9.8x the truth's cost; from the two, 2,235 and 0.976x).
+
+    ``runs``: the secant lengths (bins) tried in turn; ``(1,)`` reads the slope between
+    neighbouring bins only (the second candidate of :func:`flag_point_candidates`).
     """
     v = np.asarray(v, dtype=float)
     theta = np.asarray(theta, dtype=float)
@@ -185,7 +194,7 @@ def flag_point(
         means = np.array([_trimmed_mean(th_sel[vb == b]) for b in np.flatnonzero(keep)])
         # walk from high v to low v
         c, m = centres[::-1], means[::-1]
-        vf = _flat_after_moving(c, m, s_ref)
+        vf = _flat_after_moving(c, m, s_ref, runs)
         if vf is not None:
             found.append(vf)
             if high:
@@ -194,12 +203,15 @@ def flag_point(
     return float(np.median(found)) if found else None
 
 
-def _flat_after_moving(c: np.ndarray, m: np.ndarray, s_ref: float) -> float | None:
+def _flat_after_moving(
+    c: np.ndarray, m: np.ndarray, s_ref: float, runs: tuple[int, ...] = FLAG_RUNS
+) -> float | None:
     """The first bin centre ``c`` (descending, counts) from which the angle ``m`` (bin
     means) stays flat, |slope| < 0.2 ``s_ref``, after it has moved, |slope| > 0.5
     ``s_ref``; None when it never does. The slope is read from each bin to the bin
-    :data:`FLAG_RUN` further down, or fewer when no flat stretch is that long."""
-    for k in range(FLAG_RUN, 0, -1):
+    ``runs[0]`` further down, then the next of ``runs`` when no flat stretch is that
+    long."""
+    for k in runs:
         if c.size <= k:
             continue
         slope = np.abs((m[k:] - m[:-k]) / (c[k:] - c[:-k]))
@@ -210,6 +222,37 @@ def _flat_after_moving(c: np.ndarray, m: np.ndarray, s_ref: float) -> float | No
         if after.size:
             return float(c[after[0]])
     return None
+
+
+#: A second flag-point start (:func:`flag_point_candidates`) is made when the two
+#: readings differ by more than this share of the input range.
+FLAG_CANDIDATE_GAP = 0.02
+
+
+def flag_point_candidates(v: np.ndarray, theta: np.ndarray, deadband: float = 0.0) -> list[float]:
+    """Flag points (counts) to start an EGPI fit from: :func:`flag_point` (the slope
+    over :data:`FLAG_RUN` bins), then the reading with the slope between neighbouring
+    bins when it differs by more than :data:`FLAG_CANDIDATE_GAP` of the range; empty
+    when neither finds one.
+
+    The more accurate reading is not always the start of the better basin: on few,
+    noisy samples the fit's basin depends on the flag point it starts from as much as
+    on how close that is (measured on bench_optimum, paper protocol mid-loop at 5 Hz:
+    egpi:49 and egpi:63 ended at 0.958x and 0.995x the truth's cost from the
+    neighbouring-bin reading, 2,403 and 8,183 counts, and at 3.42x and 8.79x from the
+    secant's 2,553 and 5,819, though the truth's are 2,637 and 6,474; egpi_c:4 the
+    other way round, 1.082x and 0.9991x). Both are started from.
+    """
+    v = np.asarray(v, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    direction = motion_direction(np.ascontiguousarray(v), float(deadband))
+    out = []
+    for runs in (FLAG_RUNS, (1,)):
+        vf = flag_point(v, theta, direction, runs=runs)
+        gap = FLAG_CANDIDATE_GAP * float(np.ptp(v))
+        if vf is not None and all(abs(vf - x) > gap for x in out):
+            out.append(vf)
+    return out
 
 
 def shape_defaults(theta: np.ndarray) -> dict[str, float]:
@@ -317,6 +360,11 @@ def start_values(
     base = shape_defaults(np.asarray(theta, dtype=float))
     starts = [initial_values(model, v, theta, deadband, base, v_f)]
     if recipe_of(model) == "egpi":
+        if v_f is None:
+            # the other flag-point reading: one more data-driven start
+            # (:func:`flag_point_candidates`)
+            others = flag_point_candidates(v, theta, deadband)[1:]
+            starts += [initial_values(model, v, theta, deadband, base, x) for x in others]
         v_f = float(starts[0][EGPI_PARAMETERS.index("v_f")])
     if n_starts <= 1:
         return starts

@@ -25,6 +25,7 @@ from i2ris_calib.hysteresis.start import (
     _flat_after_moving,
     flag_point,
     flag_point_candidates,
+    start_values,
 )
 
 NOISE = 0.1  # deg, the noise of the egpi_data fixture (conftest.py)
@@ -154,9 +155,9 @@ def test_flag_point_is_not_tripped_by_one_noisy_bin(seed):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_flag_point_candidates_are_both_readings(seed):
-    # the same noisy full-scale cycles: the secant's reading first, then the
-    # neighbouring-bin reading (tripped by a noisy bin) as a second start; on clean data
-    # the two agree and one candidate is left
+    # the same noisy full-scale cycles: the neighbouring-bin reading first (tripped by a
+    # noisy bin: the start every earlier fit had), then the secant's (near the truth's)
+    # as one more start; on clean data the two agree and one candidate is left
     truth, top = paper_like_params("yaw+"), 6000.0
     v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
     v = v.round()
@@ -164,10 +165,26 @@ def test_flag_point_candidates_are_both_readings(seed):
     theta = y + np.random.default_rng(seed).normal(0, 0.45, v.size)
     d = motion_direction(v, 2.0)
     got = flag_point_candidates(v, theta, 2.0)
-    assert got[0] == flag_point(v, theta, d)
-    assert len(got) == 2 and got[1] == flag_point(v, theta, d, runs=(1,))
+    assert len(got) == 2
+    assert got[0] == flag_point(v, theta, d, runs=(1,))
+    assert got[1] == flag_point(v, theta, d) and abs(got[1] - truth["v_f"]) < 0.03 * top
     assert abs(got[1] - got[0]) > FLAG_CANDIDATE_GAP * top
     assert len(flag_point_candidates(v, y, 2.0)) == 1
+
+
+def test_egpi_starts_hold_both_flag_point_readings():
+    """start_values: the data-driven start and the shape spread at the first reading,
+    one more data-driven start at the second, last."""
+    truth, top = paper_like_params("yaw+"), 6000.0
+    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
+    v = v.round()
+    model = i2ris_egpi_model(deadband_counts=2.0)
+    theta = model.evaluate_dict(v, truth) + np.random.default_rng(0).normal(0, 0.45, v.size)
+    first, second = flag_point_candidates(v, theta, 2.0)
+    starts = start_values(model, v, theta, 5, np.random.default_rng(1), 2.0)
+    i = model.names.index("v_f")
+    assert len(starts) == 6
+    assert [x[i] for x in starts] == [first] * 5 + [second]
 
 
 def test_flag_point_reads_a_flat_stretch_not_a_flat_bin():

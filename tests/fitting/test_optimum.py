@@ -173,10 +173,10 @@ def test_last_reversal_before_the_recording_reaches_the_truths_cost(kind, seed, 
 #: the range (start.py ``flag_point``). Before: 9.80. egpi_c:4: a noisy bin just below
 #: the top of both full-scale unloading stretches read flat between neighbouring bins
 #: (4,916, the truth's 3,558); now the slope is read over three bins (start.py
-#: ``flag_point``: 3,619). Before: 1.082 (0.9991 after). egpi:49 and egpi:63: the
-#: three-bin reading alone started them in a worse basin (3.42 and 8.79, though closer
-#: to the truth's flag point); both readings are started from now (start.py
-#: ``flag_point_candidates``).
+#: ``flag_point``: 3,619) for one more start. Before: 1.082 (0.9991 after). egpi:49,
+#: egpi:63 and egpi:100: the three-bin reading as the first start put them in a worse
+#: basin (3.42, 8.79 and 2.77, though closer to the truth's flag point); the neighbouring-bin
+#: reading stays the first start (start.py ``flag_point_candidates``).
 FLAG_POINT_CASES = [
     ("egpi", 5, "paper"),  # 5 Hz, n=640: starts at v_f 3,923, the truth's 3,003
     ("egpi", 153, "paper"),  # 5 Hz, n=489: starts at v_f 1,745, the truth's 2,107
@@ -184,6 +184,7 @@ FLAG_POINT_CASES = [
     pytest.param("egpi_c", 4, "paper", marks=_SLOW),
     ("egpi", 63, "paper_mid"),  # 5 Hz, n=663, ~5 s: 8.79 from the three-bin reading alone
     pytest.param("egpi", 49, "paper_mid", marks=_SLOW),  # 5 Hz, n=305: 3.42 from it alone
+    ("egpi", 100, "paper_mid"),  # 5 Hz, n=433, ~3 s: 2.77 with the three-bin reading first
 ]
 
 

@@ -18,7 +18,9 @@ Recipe (docs/fit.md):
    loading slope, read over the next 6 % of the range) after it has followed it - the
    paper's "first point where the derivative is approximately zero" (Lee et al. 2021),
    read as the derivative of the output with respect to the input, since the commanded
-   input itself keeps moving.
+   input itself keeps moving. Two readings are started from
+   (:func:`flag_point_candidates`): the slope between neighbouring bins (the start and
+   the spread below), and over 6 % of the range (one more data-driven start).
 4. Further starts: the shape parameters spread by a seeded scrambled Halton design
    (:func:`start_values`), the envelope lines refitted for each.
 
@@ -230,24 +232,27 @@ FLAG_CANDIDATE_GAP = 0.02
 
 
 def flag_point_candidates(v: np.ndarray, theta: np.ndarray, deadband: float = 0.0) -> list[float]:
-    """Flag points (counts) to start an EGPI fit from: :func:`flag_point` (the slope
-    over :data:`FLAG_RUN` bins), then the reading with the slope between neighbouring
-    bins when it differs by more than :data:`FLAG_CANDIDATE_GAP` of the range; empty
-    when neither finds one.
+    """Flag points (counts) an EGPI fit starts from: the reading with the slope between
+    neighbouring bins (:func:`flag_point` with ``runs=(1,)``: the data-driven start and
+    the spread of shape starts around it), then the secant's over :data:`FLAG_RUN` bins
+    (:func:`flag_point`'s default: one more data-driven start) when it differs by more
+    than :data:`FLAG_CANDIDATE_GAP` of the range; empty when neither finds one.
 
-    The more accurate reading is not always the start of the better basin: on few,
-    noisy samples the fit's basin depends on the flag point it starts from as much as
-    on how close that is (measured on bench_optimum, paper protocol mid-loop at 5 Hz:
-    egpi:49 and egpi:63 ended at 0.958x and 0.995x the truth's cost from the
-    neighbouring-bin reading, 2,403 and 8,183 counts, and at 3.42x and 8.79x from the
-    secant's 2,553 and 5,819, though the truth's are 2,637 and 6,474; egpi_c:4 the
-    other way round, 1.082x and 0.9991x). Both are started from.
+    The secant is the better estimate (over bench_optimum's egpi and egpi_c seeds
+    0-199 more than 10 % of the range off on 4 of 400 cases, against 56), yet the
+    better basin is not always reached from the nearer flag point: with the secant
+    as the first start, egpi:49, egpi:63 and egpi:100 (paper protocol mid-loop, 5 Hz,
+    n = 305-663, noise 0.36-0.46 deg) ended at 3.42x, 8.79x and 2.77x the truth's cost
+    against 0.958x, 0.995x and 0.949x with the neighbouring-bin reading first; egpi_c:4 the
+    other way round (1.082x from the neighbouring-bin reading, 0.9991x with the secant
+    as one more start). Both are started from, the neighbouring-bin reading first so
+    that every start it had is kept.
     """
     v = np.asarray(v, dtype=float)
     theta = np.asarray(theta, dtype=float)
     direction = motion_direction(np.ascontiguousarray(v), float(deadband))
     out = []
-    for runs in (FLAG_RUNS, (1,)):
+    for runs in ((1,), FLAG_RUNS):
         vf = flag_point(v, theta, direction, runs=runs)
         gap = FLAG_CANDIDATE_GAP * float(np.ptp(v))
         if vf is not None and all(abs(vf - x) > gap for x in out):
@@ -323,7 +328,8 @@ def initial_values(
     vals = {k: sh[k] for k in ("sigma", "r1", "rn")}
     if recipe == "egpi":
         if v_f is None:
-            v_f = flag_point(v, theta, direction)
+            found = flag_point_candidates(v, theta, deadband)
+            v_f = found[0] if found else None
         if v_f is None:
             v_f = float(np.min(v) + 0.6 * np.ptp(v))
         vals.update(kappa=sh["kappa"], v_f=v_f)
@@ -358,16 +364,30 @@ def start_values(
     best EGPI basin, 12x lower in cost than the data-driven start's, is reached from
     about one start in five)."""
     base = shape_defaults(np.asarray(theta, dtype=float))
+    extra = []
+    if recipe_of(model) == "egpi" and v_f is None:
+        found = flag_point_candidates(v, theta, deadband)
+        if found:
+            v_f, extra = found[0], found[1:]
     starts = [initial_values(model, v, theta, deadband, base, v_f)]
     if recipe_of(model) == "egpi":
-        if v_f is None:
-            # the other flag-point reading: one more data-driven start
-            # (:func:`flag_point_candidates`)
-            others = flag_point_candidates(v, theta, deadband)[1:]
-            starts += [initial_values(model, v, theta, deadband, base, x) for x in others]
         v_f = float(starts[0][EGPI_PARAMETERS.index("v_f")])
-    if n_starts <= 1:
-        return starts
+    if n_starts > 1:
+        u = qmc.Halton(d=4, scramble=True, rng=rng).random(n_starts - 1)
+        f = np.exp(np.log(SHAPE_SPREAD) * (2.0 * u[:, :3] - 1.0))
+        kappa = np.exp(np.log(KAPPA_RANGE[0]) + u[:, 3] * np.log(KAPPA_RANGE[1] / KAPPA_RANGE[0]))
+        for fi, ki in zip(f, kappa, strict=True):
+            shape = {
+                "rn": base["rn"] * fi[0],
+                "r1": base["r1"] * fi[1],
+                "sigma": base["sigma"] * fi[2],
+                "kappa": float(ki),
+            }
+            starts.append(initial_values(model, v, theta, deadband, shape, v_f))
+    # the other flag-point reading: one more data-driven start, last
+    # (:func:`flag_point_candidates`)
+    starts += [initial_values(model, v, theta, deadband, base, x) for x in extra]
+    return starts
     u = qmc.Halton(d=4, scramble=True, rng=rng).random(n_starts - 1)
     f = np.exp(np.log(SHAPE_SPREAD) * (2.0 * u[:, :3] - 1.0))
     kappa = np.exp(np.log(KAPPA_RANGE[0]) + u[:, 3] * np.log(KAPPA_RANGE[1] / KAPPA_RANGE[0]))

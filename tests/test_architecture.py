@@ -20,7 +20,8 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "i2ris_calib"
 
 #: bottom to top; a unit may import its own layer's units and lower ones, never higher
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "interrupts", "session", "_display", "_atomic"),  # plain types, no i2ris_calib import
+    # plain types, no i2ris_calib import (but errors)
+    ("errors", "interrupts", "session", "_display", "_atomic"),
     ("model",),  # Signals, Parameter, Model: what models and data share
     ("_validate",),  # argument checks of the public functions (one-line CalibError)
     ("hysteresis",),  # the models: kernels, GPI/EGPI, registry, starts, effects, the codec

@@ -138,17 +138,23 @@ def test_flag_point_from_the_stretches_that_come_down_from_the_top(seed):
     assert truth["v_f"] > 0.6 * top and vf > 0.6 * top
 
 
+def noisy_full_scale_cycles(seed: int):
+    """(truth, top, v, clean angle, noisy angle): three full-scale EGPI cycles of a
+    paper-like truth, 0.45 deg noise (egpi_c:4 of bench_optimum), dead band 2 counts."""
+    truth, top = paper_like_params("yaw+"), 6000.0
+    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
+    v = v.round()
+    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, truth)
+    return truth, top, v, y, y + np.random.default_rng(seed).normal(0, 0.45, v.size)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_flag_point_is_not_tripped_by_one_noisy_bin(seed):
     # full-scale cycles at 0.45 deg noise (egpi_c:4 of bench_optimum): the slope between
     # neighbouring 2 % bins dipped below 0.2 x the loading slope on one noisy bin above
     # the flag point (+0.11 to +0.15 of the range off on these seeds); the slope over
     # three bins reads the flat stretch below the flag point (-0.011)
-    truth, top = paper_like_params("yaw+"), 6000.0
-    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
-    v = v.round()
-    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, truth)
-    theta = y + np.random.default_rng(seed).normal(0, 0.45, v.size)
+    truth, top, v, _, theta = noisy_full_scale_cycles(seed)
     vf = flag_point(v, theta, motion_direction(v, 2.0))
     assert vf is not None and abs(vf - truth["v_f"]) < 0.03 * top
 
@@ -158,11 +164,7 @@ def test_flag_point_candidates_are_both_readings(seed):
     # the same noisy full-scale cycles: the neighbouring-bin reading first (tripped by a
     # noisy bin: the start every earlier fit had), then the secant's (near the truth's)
     # as one more start; on clean data the two agree and one candidate is left
-    truth, top = paper_like_params("yaw+"), 6000.0
-    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
-    v = v.round()
-    y = i2ris_egpi_model(deadband_counts=2.0).evaluate_dict(v, truth)
-    theta = y + np.random.default_rng(seed).normal(0, 0.45, v.size)
+    truth, top, v, y, theta = noisy_full_scale_cycles(seed)
     d = motion_direction(v, 2.0)
     got = flag_point_candidates(v, theta, 2.0)
     assert len(got) == 2
@@ -175,11 +177,8 @@ def test_flag_point_candidates_are_both_readings(seed):
 def test_egpi_starts_hold_both_flag_point_readings():
     """start_values: the data-driven start and the shape spread at the first reading,
     one more data-driven start at the second, last."""
-    truth, top = paper_like_params("yaw+"), 6000.0
-    v = np.concatenate([np.r_[np.linspace(0, top, 500), np.linspace(top, 0, 500)]] * 3)
-    v = v.round()
+    _, _, v, _, theta = noisy_full_scale_cycles(0)
     model = i2ris_egpi_model(deadband_counts=2.0)
-    theta = model.evaluate_dict(v, truth) + np.random.default_rng(0).normal(0, 0.45, v.size)
     first, second = flag_point_candidates(v, theta, 2.0)
     starts = start_values(model, v, theta, 5, np.random.default_rng(1), 2.0)
     i = model.names.index("v_f")

@@ -388,15 +388,3 @@ def start_values(
     # (:func:`flag_point_candidates`)
     starts += [initial_values(model, v, theta, deadband, base, x) for x in extra]
     return starts
-    u = qmc.Halton(d=4, scramble=True, rng=rng).random(n_starts - 1)
-    f = np.exp(np.log(SHAPE_SPREAD) * (2.0 * u[:, :3] - 1.0))
-    kappa = np.exp(np.log(KAPPA_RANGE[0]) + u[:, 3] * np.log(KAPPA_RANGE[1] / KAPPA_RANGE[0]))
-    for fi, ki in zip(f, kappa, strict=True):
-        shape = {
-            "rn": base["rn"] * fi[0],
-            "r1": base["r1"] * fi[1],
-            "sigma": base["sigma"] * fi[2],
-            "kappa": float(ki),
-        }
-        starts.append(initial_values(model, v, theta, deadband, shape, v_f))
-    return starts

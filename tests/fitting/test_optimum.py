@@ -79,6 +79,11 @@ def test_subset_covers_every_kind_and_protocol():
     assert covered == wanted
 
 
+def case_ids(cases) -> list[str]:
+    """``kind:seed`` of each case, a (kind, seed, protocol) tuple or its pytest.param."""
+    return [":".join(map(str, getattr(c, "values", c)[:2])) for c in cases]
+
+
 @pytest.mark.parametrize("kind, seed, protocol", CASES, ids=[f"{k}:{s}" for k, s, _ in CASES])
 def test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol):
     r = run_case(kind, seed)
@@ -125,10 +130,7 @@ STAIRCASE_CASES = [
 @pytest.mark.parametrize(
     "kind, seed, protocol",
     STAIRCASE_CASES,
-    ids=[
-        f"{c[0]}:{c[1]}" if isinstance(c, tuple) else f"{c.values[0]}:{c.values[1]}"
-        for c in STAIRCASE_CASES
-    ],  # fmt: skip
+    ids=case_ids(STAIRCASE_CASES),
 )
 def test_staircase_start_state_reaches_the_truths_cost(kind, seed, protocol):
     test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)
@@ -191,7 +193,7 @@ FLAG_POINT_CASES = [
 @pytest.mark.parametrize(
     "kind, seed, protocol",
     FLAG_POINT_CASES,
-    ids=[":".join(map(str, getattr(c, "values", c)[:2])) for c in FLAG_POINT_CASES],
+    ids=case_ids(FLAG_POINT_CASES),
 )
 def test_flag_point_basin_reaches_the_truths_cost(kind, seed, protocol):
     test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)
@@ -216,7 +218,7 @@ JOINT_START_CASES = [
 @pytest.mark.parametrize(
     "kind, seed, protocol",
     JOINT_START_CASES,
-    ids=[":".join(map(str, getattr(c, "values", c)[:2])) for c in JOINT_START_CASES],
+    ids=case_ids(JOINT_START_CASES),
 )
 def test_joint_coupling_starts_reach_the_truths_cost(kind, seed, protocol):
     test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol)

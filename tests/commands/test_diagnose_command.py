@@ -307,6 +307,8 @@ def _two_direction_csv(path, seed=4, tau_s=0.15, noise_deg=0.1):
     pd.DataFrame({"time_s": time, "enc_yaw": enc, "yaw_deg": theta}).to_csv(path, index=False)
 
 
+# ~14 s: slow (the default run's 5-minute budget)
+@pytest.mark.slow
 def test_fit_model_file_refits_on_exactly_the_diagnosed_samples(tmp_path):
     """diagnose and fit build the same Dataset: the "-" dataset diagnosed over the
     whole history is the one `fit --model-file` refits the final model on (same rows,

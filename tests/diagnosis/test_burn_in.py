@@ -105,6 +105,9 @@ def _mid_loop_bouc_wen():
     return _dataset(t[cut:] - t[cut], u[cut:], theta), sd
 
 
+# ~17 s: slow (the default run's 5-minute budget); the default run keeps the burn-in
+# test below and the mid-loop fits of tests/fitting/test_optimum.py
+@pytest.mark.slow
 def test_mid_loop_start_is_not_diagnosed_as_an_effect():
     # before: the relaxed start was fitted into the start model (held-out 1.08 -> 3.2 x
     # noise on a like case) and saturation named to absorb it

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from i2ris_calib.data.dataset import direction_datasets
 from i2ris_calib.diagnosis.config import DiagnosisConfig
 from i2ris_calib.diagnosis.workflow import diagnose_from_starts
@@ -27,6 +29,9 @@ def test_diagnose_names_coupling_when_both_motors_move_and_starts_from_agpi():
     assert any(n.startswith("coupling to the yaw motor") for n in auto.diagnosis.notes)
 
 
+# ~9 s: slow (the default run's 5-minute budget); the coupling named when both motors
+# move stays on the default run (above)
+@pytest.mark.slow
 def test_diagnose_says_lockstep_motors_cannot_separate_coupling():
     rec = simulate_two_motor(22, n_samples=900, rate_hz=30.0, coupling=0.6, lockstep=0.7)
     auto = diagnose_from_starts(pitch_dataset(rec), CONFIG)

@@ -124,6 +124,14 @@ STAIRCASE_CASES = [
     # excursion (three levels), held through this motor's replayed cycle, started from
     # a grid over two of them (fit / truth cost 1.62 before)
     pytest.param("agpi_coupled", 29, "circles_mid", marks=_SLOW),  # 5 Hz, n=825
+    # a whole staircase searched at the end (fit._staircases): each missed before with its
+    # history's state within the three levels (fit / truth cost 5.91, 1.035, 1.024,
+    # 1.146; agpi_coupled:166, a miss of the 200-case run before, 0.929 after)
+    ("maxwell_slip", 170, "circles_mid"),  # 5 Hz, n=303
+    ("agpi", 149, "circles_mid"),  # 500 Hz, n=3129
+    pytest.param("maxwell_slip", 103, "circles_mid", marks=_SLOW),  # 5 Hz, n=1068
+    pytest.param("maxwell_slip", 146, "circles_mid", marks=_SLOW),  # 500 Hz, n=13,387
+    pytest.param("agpi_coupled", 166, "circles_mid", marks=_SLOW),  # 5 Hz, n=656
 ]
 
 

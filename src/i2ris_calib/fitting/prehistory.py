@@ -345,6 +345,10 @@ def level_bounds(v: np.ndarray) -> tuple[float, float]:
     return (lo - pad if float(v.min()) < 0 else lo), hi + pad
 
 
+#: The input at rest (every operator relaxed): where a history of turning points begins.
+ORIGIN = 0.0
+
+
 def prehistory_step(v: np.ndarray) -> float:
     """Input step of the synthetic pre-history (:class:`InitialState`): the median
     non-zero step of ``v`` (its typical speed), or 1 % of its range."""
@@ -357,7 +361,12 @@ def prehistory_step(v: np.ndarray) -> float:
 def _ramped(v: np.ndarray, levels, step: float) -> tuple[np.ndarray, int]:
     """(the input ``v`` after ramps through ``levels`` (a level or a sequence of them,
     the operators relaxed at the first) to ``v[0]`` in steps of about ``step``,
-    read-only; the ramps' length). Equal consecutive levels add nothing."""
+    read-only; the ramps' length). Equal consecutive levels add nothing.
+
+    Relaxed at the first level is the state of an input that came there from rest
+    (:data:`ORIGIN`) in one ramp: every play operator and slip element starts at its
+    rest value clamped into its band there. The levels are so the turning points of a
+    history from rest, and a first level at the rest adds nothing."""
     path = [float(u) for u in np.atleast_1d(levels)]
     path = [u for i, u in enumerate(path) if i == len(path) - 1 or u != path[i + 1]]
     parts = []

@@ -50,6 +50,8 @@ def test_speed_as_a_function_of_level_is_detected():
     assert np.isnan(speed_level_spread(Signals(v=sig.v), mask))
 
 
+# ~6 s: slow (the default run's 5-minute budget)
+@pytest.mark.slow
 def test_one_frequency_sine_names_no_rate_effect_and_lists_both():
     """A sine through an EGPI with rate-dependent thresholds: the static shape fits
     it as well, so no rate effect is named; the note lists both and the separating

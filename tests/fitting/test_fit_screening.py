@@ -78,6 +78,8 @@ def _two_tendon_data(n=4000, seed=3):
     return v[start:], y + rng.normal(0.0, 0.25, y.size)
 
 
+# ~6 s: slow since the default run reached its 5-minute budget
+@pytest.mark.slow
 def test_subsampled_screening_reaches_the_optimum_of_the_full_one(monkeypatch):
     """Synthetic two-tendon truth (0.25 deg noise, starting mid-loop: the initial
     state is fitted too): the fit screened on every 4th fitted sample ends within

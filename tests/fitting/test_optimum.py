@@ -55,7 +55,9 @@ CASES = [
     ("egpi", 1, "paper"),
     ("egpi", 4, "paper_mid"),
     ("egpi_c", 5, "paper"),
-    ("egpi_c", 1, "paper_mid"),
+    # ~14 s: slow since the default run reached its 5-minute budget (egpi_c on the
+    # default run: egpi_c:5 here; egpi paper_mid: egpi:4)
+    pytest.param("egpi_c", 1, "paper_mid", marks=pytest.mark.slow),
     ("agpi", 25, "ramps"),
     ("agpi", 39, "circles"),
     ("agpi", 2, "circles_mid"),
@@ -74,7 +76,7 @@ CASES = [
 
 
 def test_subset_covers_every_kind_and_protocol():
-    covered = {(k, p) for k, _, p in CASES}
+    covered = {(k, p) for k, _, p in (getattr(c, "values", c) for c in CASES)}
     wanted = {(k, p) for k, ps in bench_optimum.PROTOCOLS.items() for p in ps}
     assert covered == wanted
 
@@ -84,7 +86,7 @@ def case_ids(cases) -> list[str]:
     return [":".join(map(str, getattr(c, "values", c)[:2])) for c in cases]
 
 
-@pytest.mark.parametrize("kind, seed, protocol", CASES, ids=[f"{k}:{s}" for k, s, _ in CASES])
+@pytest.mark.parametrize("kind, seed, protocol", CASES, ids=case_ids(CASES))
 def test_fit_ends_at_or_below_the_truths_cost(kind, seed, protocol):
     r = run_case(kind, seed)
     assert r["protocol"] == protocol, "the benchmark's draws changed: pick the seeds again"

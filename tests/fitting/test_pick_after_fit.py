@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
+import pytest
 from through_zero import yaw_recording
 
 from i2ris_calib.cli import main
@@ -33,6 +34,8 @@ def piezo_like_frame(seed: int, n: int = 2400, rate_hz: float = 30.0) -> pd.Data
     return yaw_recording(rng, t, v, y, NOISE)
 
 
+# ~7 s: slow (the default run's 5-minute budget; bench_piezo measures the pick)
+@pytest.mark.slow
 def test_piezo_like_loop_through_zero_picks_one_gpi_and_says_why(tmp_path, capsys):
     piezo_like_frame(31).to_csv(tmp_path / "s.csv", index=False)
     out = tmp_path / "o"

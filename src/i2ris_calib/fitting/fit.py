@@ -1438,17 +1438,17 @@ def _staircases(search: _Search, x0: np.ndarray, cost0: float) -> list[np.ndarra
     fitted to another state the right staircase can score worse than that state
     (measured on maxwell_slip:95 of bench_optimum: the truth's turning points 1.7x the
     best end's cost, the parameters held; 0.89x after 5 LM evaluations), so the
-    staircases are judged after a short LM run, not by their held cost alone. On the 64
-    mid-loop maxwell_slip cases of seeds 0-199 the misses went from 7 to 4, on the 98
-    agpi_coupled ones from 9 to 6."""
+    staircases are judged after a short LM run, not by their held cost alone. On the
+    mid-loop cases of seeds 0-199 the misses went from 7 to 3 of 64 (maxwell_slip), 1 to
+    0 of 72 (agpi) and 9 to 7 of 98 (agpi_coupled)."""
     c = search.counter
     model = c.model
     head, m = model._opening(c.signals)
     hc = _Counter(model, head, c.theta[:m], c.used[:m], c.loss, c.f_scale)
     x = np.asarray(x0, dtype=float)
     points = []
-    for idx, own in _motors_staircases(search):
-        found = _best_staircases(search, hc, x, idx, own)
+    for i, (turns, last) in enumerate(_motors_levels(search)):
+        found = _best_staircases(search, hc, x, [*turns, last], own=i == 0)
         points += found
         if found:
             x = found[0]
@@ -1462,16 +1462,6 @@ def _staircases(search: _Search, x0: np.ndarray, cost0: float) -> list[np.ndarra
     for cost, e in ends:
         if len(out) < STAIRCASE_BEST and cost < STATE_POLISH_RATIO * cost0:
             out.append(e)
-    return out
-
-
-def _motors_staircases(search: _Search) -> list[tuple[list[int], bool]]:
-    """([indices of a motor's levels, earliest first], whether they are this motor's)
-    of each motor whose pre-history is fitted."""
-    model = search.counter.model
-    out = [(list(search.level_idx[-model.n_own :]), True)]
-    if model.n_other:
-        out.append((list(search.level_idx[: model.n_other]), False))
     return out
 
 

@@ -653,7 +653,9 @@ def own_levels(v: np.ndarray, global_search: bool = True) -> int:
 #: A recording of more samples than this tries one start state (with or without its
 #: first cycle replayed), chosen by the starts' costs (:func:`_fit_model`); shorter
 #: ones search both and keep the lower (measured on a 50,000-sample coupled recording:
-#: both searches took the coupled two-tendon GPI from 2.5 to 5.9 s).
+#: both searches took the coupled two-tendon GPI from 2.5 to 5.9 s); shorter ones also
+#: get three own levels (:func:`own_levels`) and the start state's re-search at the end
+#: of every global search (:func:`_global_search`, step 5).
 LARGE_ROWS = 20_000
 
 
@@ -1227,6 +1229,20 @@ def _global_search(search: _Search, starts, max_nfev, steps, hops: int, spent=0.
        fitted), each screened, then polished
        unless it ends above :data:`POLISH_STOP_RATIO` x the best; at most ``hops``
        restarts in all (steps 3 and 4), within :data:`WORK_BUDGET`.
+    5. A fitted start state: the best end's levels searched again
+       (:func:`_levels_researched`) on every recording of at most :data:`LARGE_ROWS`
+       samples, and on a longer one when a polish is cheap (1/20 of
+       :data:`WORK_BUDGET`) and fits in the budget. Not by the budget alone: a 500 Hz
+       two-motor recording of 6,500-20,000 samples spends it on its first polishes, and
+       its two motors' staircases are what a coupled fit there misses (bench_optimum's
+       mid-loop agpi_coupled cases at 500 Hz, 44 of seeds 0-199: 7 misses, up to 3.0x
+       the truth's cost, with the budget's gate; 2 without it, 1.008x and 1.010x, none
+       new; their chains' CPU 920 -> 1953 s). Lifted for the coupled kind alone, its
+       chain's uncoupled fit moved and two coupled fits failed (agpi_coupled:108 1.025x,
+       :156 1.086x). On 216 mid-loop cases at 500 Hz of gpi, egpi, egpi_c, agpi,
+       bouc_wen and maxwell_slip no fit ended 0.1 % lower or higher, at 1.2-2.0x their
+       CPU. Longer recordings keep the budget's gate (bench_speed's 50,000-sample fits:
+       their start state weighs little against their many loops).
     """
     screen = _screening(search)
     ends = _screened_ends(screen, starts, steps)
@@ -1275,8 +1291,10 @@ def _global_search(search: _Search, starts, max_nfev, steps, hops: int, spent=0.
     if (
         search.uidx is not None
         and hops > 0
-        and one <= WORK_BUDGET / 20  # a cheap polish: up to ~10,000 samples
-        and _affordable(search, screen, one, spent)
+        and (  # step 5
+            search.v.size <= LARGE_ROWS
+            or (one <= WORK_BUDGET / 20 and _affordable(search, screen, one, spent))
+        )
     ):
         _levels_researched(search, found, cap)
     best = found.best()

@@ -134,6 +134,9 @@ def refit_globally(c: Candidate, d: SearchData, cfg: DiagnosisConfig) -> Candida
             # profiled from neutral; a further nested refit of the base would cost a
             # base fit per candidate and, on a tie, hide an effect the base absorbs
             nested=False,
+            # after the fit's pre-history the models start relaxed, as every other
+            # evaluation of the diagnosis runs them: no second start state on top
+            initial_state="rest" if d.relaxed else "auto",
         )
         x_new = model_values(res.model)
     except CalibError:

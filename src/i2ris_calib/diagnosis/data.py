@@ -20,7 +20,10 @@ from i2ris_calib.model import Signals
 @dataclass(frozen=True)
 class SearchData:
     """Search data: decimated signals, angle (0 where not counted), the fitted and
-    held-out masks, held-out units and the loading branch."""
+    held-out masks, held-out units and the loading branch. ``relaxed``: the signals
+    begin with the fit's pre-history (:func:`_after_prehistory`), whose first sample is
+    relaxed by construction (the models' own start): a refit starts them at rest, not
+    after a start state of its own (the fit's is the one answer)."""
 
     signals: Signals
     theta: np.ndarray
@@ -28,6 +31,7 @@ class SearchData:
     hold: np.ndarray
     units: np.ndarray
     loading: np.ndarray
+    relaxed: bool = False
 
 
 #: Least fitted / held-out samples (angle measured, on the search signal) the
@@ -235,4 +239,5 @@ def _after_prehistory(d: SearchData, st: InitialState) -> SearchData:
         pad(d.hold, False),
         pad(d.units, -1),
         pad(d.loading, False),
+        relaxed=True,
     )

@@ -140,6 +140,10 @@ STAIRCASE_CASES = [
     # the grid's staircases short-run by LM as found, not only refined with the
     # parameters held (fit._best_staircases; fit / truth cost 1.046 before)
     ("maxwell_slip", 95, "circles_mid"),  # 5 Hz, n=540
+    # histories of four turning points: a fourth own level on a recording of up to
+    # fit.FOUR_LEVEL_ROWS samples (fit / truth cost 1.353 and 1.026 with three)
+    ("maxwell_slip", 67, "circles_mid"),  # 5 Hz, n=457
+    pytest.param("maxwell_slip", 65, "circles_mid", marks=_SLOW),  # 500 Hz, n=3,123
 ]
 
 

@@ -50,6 +50,29 @@ def test_levels_are_the_turning_points_of_a_history_from_rest():
         np.testing.assert_allclose(fitted, full, rtol=0, atol=1e-9)
 
 
+def test_four_levels_hold_a_staircase_that_three_cannot():
+    """A history of four turning points of shrinking loops (-6,000, 5,000, -3,000,
+    2,500, then the recording from 1,500): four levels (``v_turn3`` first) give exactly the
+    output of the model run over the whole history from rest; three of them, any one
+    dropped, do not (each element remembers the loops it is narrower than)."""
+    model = _slip()
+    recording = _through([1500.0, 6000.0, -6000.0, 2000.0])[1:]
+    turns = [-6000.0, 5000.0, -3000.0, 2500.0]
+    history = _through([F.ORIGIN, *turns, 1500.0])
+    full = np.asarray(model.evaluate(Signals(v=np.concatenate([history, recording])),
+                                     model.values))[history.size :]  # fmt: skip
+    four = _FromLevel(model, recording, 0, None, 4)
+    assert [p.name for p in four.parameters[-4:]] == [
+        four.TURN3, four.TURN2, four.TURN, four.PARAM]  # fmt: skip
+    fitted = four.evaluate(Signals(v=recording), np.append(model.values, turns))
+    np.testing.assert_allclose(fitted, full, rtol=0, atol=1e-9)
+    three = _FromLevel(model, recording, 0, None, 3)
+    for k in range(4):
+        fewer = turns[:k] + turns[k + 1 :]
+        y = three.evaluate(Signals(v=recording), np.append(model.values, fewer))
+        assert np.max(np.abs(y - full)) > 0.05, k  # deg (0.11-7.3 measured; range 87)
+
+
 def test_wiped_keeps_the_turning_points_a_play_operator_remembers():
     """A reversal pair is wiped out by a later point beyond its first; the rest is never
     wiped; and two pre-histories with one key leave one state (the model's output)."""
@@ -103,3 +126,43 @@ def test_staircase_grid_keeps_distinct_reversing_staircases():
     assert min(costs[:r]) <= min(costs[r:])
     # the true staircase's state is found: the lowest kept costs (almost) nothing
     assert min(costs) < 1e-3 * float(np.sum((theta[:m] - theta[:m].mean()) ** 2))
+
+
+def test_four_level_grid_extends_the_three_level_one():
+    """With four levels the grid (``_best_staircases``: the three latest's, then its
+    lowest one turning point back) keeps distinct staircases that reverse at every
+    level, four-turn ones among them, and its lowest costs no more than the three-level
+    grid's on the same history (four shrinking loops). The grid alone need not reach a
+    four-turn state: the short LM runs and polishes of ``_staircases`` do that
+    (maxwell_slip:65 and :67 in tests/fitting/test_optimum.py)."""
+    model = _slip()
+    turns = [-6000.0, 5000.0, -3000.0, 2500.0]
+    recording = _through([1500.0, 6000.0, -6000.0, 2000.0])[1:]
+    history = _through([F.ORIGIN, *turns, 1500.0])
+    theta = np.asarray(
+        model.evaluate(Signals(v=np.concatenate([history, recording])), model.values)
+    )[history.size :]
+    lowest = {}
+    for n in (3, 4):
+        fl = _FromLevel(model, recording, 0, None, n)
+        search = F._Search.of(fl, Signals(v=recording), theta, np.ones(recording.size, bool),
+                              "linear", 1.0, "lm", 1e-10, 20)  # fmt: skip
+        x = np.append(model.values, [recording[0]] * n)
+        head, m = fl._opening(search.counter.signals)
+        hc = F._Counter(fl, head, theta[:m], np.ones(m, bool))
+        idx = list(search.level_idx)
+        kept = F._best_staircases(search, hc, x, idx, True)
+        lowest[n] = min(hc.cost(t) for t in kept)
+        r = F.STAIRCASE_REFINED
+        keys = set()
+        for t in kept[r:]:
+            levels = list(t[idx])
+            while levels and levels[0] == F.ORIGIN:
+                levels.pop(0)  # a leading level at the rest: fewer turning points
+            path = [F.ORIGIN, *levels, float(recording[0])]
+            steps = np.diff(path)
+            assert np.all(steps[:-1] * steps[1:] < 0)  # a reversal at every level
+            keys.add(F._wiped(path))
+        assert len(keys) == len(kept) - r
+    assert len(idx) == 4 and any(t[idx[0]] != F.ORIGIN for t in kept[r:])  # four turns too
+    assert lowest[4] <= lowest[3]

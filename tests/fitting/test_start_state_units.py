@@ -33,8 +33,8 @@ K0 = 560
 
 
 def _levels(st: InitialState) -> list[float]:
-    fields = (st.v_from, st.v_turn, st.v_turn2, st.v0, st.other_v_from, st.other_v_turn,
-              st.other_v_turn2, st.v0_other)  # fmt: skip
+    fields = (st.v_from, st.v_turn, st.v_turn2, st.v_turn3, st.v0, st.other_v_from,
+              st.other_v_turn, st.other_v_turn2, st.v0_other)  # fmt: skip
     return [x for x in fields if x is not None]
 
 
@@ -91,7 +91,7 @@ def test_a_coupled_start_state_converts_with_the_other_motors_levels():
     s_volts = Signals(v=s_counts.v * VOLTS, t_s=s_counts.t_s, v_other=s_counts.v_other * VOLTS)
     st = InitialState(
         4100.0, 0, float(s_counts.v[0]), "", 0, v_turn=-2500.0, v_turn2=3900.0,
-        other_v_turn=-3100.0, other_v_from=-1200.0, v0_other=float(s_counts.v_other[0]),
+        v_turn3=-4400.0, other_v_turn=-3100.0, other_v_from=-1200.0, v0_other=float(s_counts.v_other[0]),
         other_v_turn2=2800.0,
     )  # fmt: skip
     st = InitialState(**st.as_dict() | {"text": state_text(st)})
@@ -102,6 +102,7 @@ def test_a_coupled_start_state_converts_with_the_other_motors_levels():
     assert sv.v0 == s_volts.v[0] and sv.v0_other == s_volts.v_other[0]
     assert _levels(sv) == pytest.approx([x * VOLTS for x in _levels(st)], rel=1e-15)
     assert sv.text == state_text(sv) and "input 3.464," in sv.text and "to -1.5 " in sv.text
+    assert "pre-history from -4.4 via 3.9 via -2.5 via 4.1," in sv.text  # four own levels
 
     y = counts.predict(s_counts)
     assert not np.allclose(y, counts.predict(s_counts, initial_state=False))  # it matters

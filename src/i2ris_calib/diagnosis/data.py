@@ -212,7 +212,7 @@ def search_data(
 
 
 def _after_prehistory(d: SearchData, st: InitialState) -> SearchData:
-    """``d`` with the fit's pre-history ``st`` (the ramps from ``v_turn2`` via ``v_turn``
+    """``d`` with the fit's pre-history ``st`` (the ramps from ``v_turn3`` via ``v_turn2``, ``v_turn``
     and ``v_from``, the other motor's first when estimated, the replayed first cycle)
     prepended (nothing counted there)."""
     other = None
@@ -226,7 +226,8 @@ def _after_prehistory(d: SearchData, st: InitialState) -> SearchData:
         cycle=st.cycle_samples,
         v_turn=st.v_turn,
         other_levels=other,
-        v_turn2=getattr(st, "v_turn2", None),
+        v_turn2=st.v_turn2,
+        v_turn3=st.v_turn3,
     )
 
     def pad(a: np.ndarray, value) -> np.ndarray:

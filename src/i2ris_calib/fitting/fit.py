@@ -27,7 +27,7 @@ from __future__ import annotations
 import functools
 import inspect
 import itertools
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
@@ -60,6 +60,7 @@ from i2ris_calib.fitting.prehistory import (
     prehistory_step,
     signals_start_at_rest,
     state_levels,
+    state_own_levels,
     state_text,
 )
 from i2ris_calib.fitting.prehistory import _head_of as _head_of
@@ -620,8 +621,7 @@ def _fit_model(
             out = other
     if not level:
         return out.result
-    return _without_level(out.result, model, v, out.full, out.cycle, s.v_other,
-                          own_levels(v, basin_hops != 0))  # fmt: skip
+    return _without_level(out.result, model, v, out.full, out.cycle, s.v_other, out.n_own)
 
 
 @dataclass(frozen=True)
@@ -635,19 +635,39 @@ class _Searched:
     names: tuple[str, ...]
     work: float
     cycle: int
+    n_own: int = 0
 
 
 def own_levels(v: np.ndarray, global_search: bool = True) -> int:
-    """Own levels of the fitted pre-history (:class:`InitialState`): three (``v_turn2``,
-    ``v_turn``, ``v_from``) up to :data:`LARGE_ROWS` samples, two (no ``v_turn2``)
-    beyond: a long recording's start state weighs little against its many loops, and
-    the third level's profiles and Jacobian column cost time (measured on
-    bench_speed's 50,000-sample coupled recording: the coupled two-tendon GPI 3.8 -> 4.8 s
-    CPU, its diagnose 10.8 -> 19.3 s). Two for a local search (``global_search``
-    False: ``basin_hops = 0``, e.g. sync's clock-offset profile): the third level makes
-    the cost a rougher function of the other settings (measured on the rendered lab
-    session: sync's offset profile lost its curvature, and its model refinement)."""
-    return 3 if global_search and np.asarray(v).size <= LARGE_ROWS else 2
+    """Own levels of the fitted pre-history (:class:`InitialState`) at most: four
+    (``v_turn3``, ``v_turn2``, ``v_turn``, ``v_from``) up to :data:`FOUR_LEVEL_ROWS`
+    samples, three up to :data:`LARGE_ROWS`, two (no ``v_turn2``) beyond: a long
+    recording's start state weighs little against its many loops, and each level's
+    profiles and Jacobian column cost time (measured on bench_speed's 50,000-sample
+    coupled recording: the coupled two-tendon GPI 3.8 -> 4.8 s CPU with the third, its
+    diagnose 10.8 -> 19.3 s). Two for a local search (``global_search`` False:
+    ``basin_hops = 0``, e.g. sync's clock-offset profile): the third level makes the cost
+    a rougher function of the other settings (measured on the rendered lab session:
+    sync's offset profile lost its curvature, and its model refinement).
+
+    The search itself runs with three; the fourth is tried at its end, over whole
+    staircases from its best end (:func:`_one_level_back`), and kept when lower. A short
+    recording that starts after loops of shrinking amplitude begins in a staircase of
+    as many turning points as the loops its elements still remember, and there that
+    opening is a large share of the cost (measured on bench_optimum's maxwell_slip:67,
+    mid-loop at 5 Hz, 457 samples, and :65, 500 Hz, 3,123 samples, whose histories need
+    four: 1.353x and 1.026x the truth's cost with three levels, 0.945x and 0.994x with
+    the fourth).
+    """
+    n = np.asarray(v).size
+    if not global_search or n > LARGE_ROWS:
+        return 2
+    return 4 if n <= FOUR_LEVEL_ROWS else 3
+
+
+#: Recordings of up to this many samples get a fourth own level (``v_turn3``,
+#: :func:`own_levels`).
+FOUR_LEVEL_ROWS = 5_000
 
 
 #: A recording of more samples than this tries one start state (with or without its
@@ -670,9 +690,8 @@ def _searched(
     v = np.asarray(s.v, dtype=float)
     loss, method = opts["loss"], opts["method"]
     max_nfev, basin_hops = opts["max_nfev"], opts["basin_hops"]
-    fitted_model: Model = (
-        _FromLevel(model, v, cycle, s.v_other, own_levels(v, basin_hops != 0)) if level else model
-    )
+    n_own = own_levels(v, basin_hops != 0)
+    fitted_model: Model = _FromLevel(model, v, cycle, s.v_other, min(n_own, 3)) if level else model
     search = _Search.of(
         fitted_model, s, theta, used, loss, opts["f_scale_deg"], method, opts["ftol"],
         opts["screen_nfev"],
@@ -693,6 +712,11 @@ def _searched(
     hops = MAX_HOPS if basin_hops is None else int(basin_hops)
     found = _global_search(search, starts, max_nfev, steps, hops, spent)
     known += found.screened
+    if level and n_own > 3 and hops > 0:
+        fourth = _one_level_back(search, found, known, max_nfev)
+        if fourth is not None:
+            search, found, known = fourth
+            fitted_model = search.counter.model
     (cost, full, res), floor, notes = _floor_checked(search, found, known, max_nfev)
     result = _result(
         fitted_model, s, theta, used, hold, full, res, search.names, search.is_free, search.pidx,
@@ -700,7 +724,57 @@ def _searched(
     )  # fmt: skip
     result = _with_notes(result, search, cost, full, floor, notes)
     result = replace(result, certificate=found.certificate(cost, len(starts)))
-    return _Searched(result, cost, full, search.names, _work(search, search), cycle)
+    n_lv = fitted_model.n_own if level else 0
+    return _Searched(result, cost, full, search.names, _work(search, search), cycle, n_lv)
+
+
+def _with_level_back(x: np.ndarray, n_own: int) -> np.ndarray:
+    """The point ``x`` of a search with ``n_own`` own levels (the last values) with one
+    more, earliest, equal to its earliest one: the same pre-history (equal levels add
+    nothing, :func:`_ramped`), the same cost to the last bit."""
+    x = np.asarray(x, dtype=float)
+    at = x.size - n_own
+    return np.insert(x, at, x[at])
+
+
+def _one_level_back(search: _Search, found: _Found, known: list, max_nfev):
+    """(the search with a fourth own level (``v_turn3``), what it found, the points
+    reached) when this motor's whole staircases (:func:`_staircases`) with four levels,
+    from the three-level search's best end, end lower than it; None otherwise.
+
+    A short recording that starts after loops of shrinking amplitude can need a fourth
+    turning point (:func:`own_levels`). Searched with four levels from the start, the
+    larger space sent other fits astray (measured: bench_optimum's maxwell_slip:119, 0.955
+    -> 1.131x the truth's cost); from the three-level search's ends, where the fourth
+    level equals the third (the same state, the same cost), the result is never worse
+    than theirs. Only this motor's staircases are searched again (the other motor's keep
+    three levels: its grid would repeat the three-level search's; measured on
+    agpi_coupled:2 of bench_optimum, its chain 14.5 -> 12.9 s CPU, the same end)."""
+    fl = search.counter.model
+    four = _FromLevel(fl.inner, search.v, fl.cycle, search.counter.signals.v_other, 4)
+    c = search.counter
+    search4 = _Search.of(four, c.signals, c.theta, c.used, c.loss, c.f_scale, search.method,
+                         search.ftol, search.screen_nfev)  # fmt: skip
+    n = fl.n_own
+    up = functools.partial(_with_level_back, n_own=n)
+    found4 = _Found(
+        [(e[0], up(e[1]), *e[2:]) for e in found.polished],
+        [(cst, up(x)) for cst, x in found.screened],
+        list(found.reached),
+        found.hops,
+        found.cap,
+    )
+    best, x0 = found4.best()[:2]
+    for x in _staircases(search4, x0, best, motors=1, heads=found.heads):
+        found4.polished.append(_polished_end(search4, x, found.cap))
+    search4.counter.n += c.n
+    if not found4.best()[0] < best * (1 - SAME_MINIMUM):
+        c.n = search4.counter.n  # its work counted, its ends left
+        return None
+    b = found4.best()
+    if found.cap != max_nfev and b[2] is not None and b[2].status == 0:
+        found4.polished.append(_polished_end(search4, b[1], max_nfev))  # run it out
+    return search4, found4, [(cst, up(x)) for cst, x in known]
 
 
 #: Search steps of every start: fine v_f grid, LM, wide v_f grid, LM (short when several
@@ -759,8 +833,9 @@ def fit_cost(
     if initial_state is not None:
         st = initial_state
         fitted = _FromLevel(model, np.asarray(s.v, dtype=float), st.cycle_samples,
-                            s.v_other if st.other_v_from is not None else None)  # fmt: skip
-        full = np.append(x, state_levels(st, fitted.levels))
+                            s.v_other if st.other_v_from is not None else None,
+                            state_own_levels(st))  # fmt: skip
+        full = np.append(x, state_levels(st, fitted.levels, fitted.n_own))
     return _Counter(fitted, s, theta, used, loss, f_scale_deg).cost(full)
 
 
@@ -789,11 +864,12 @@ def fit_from_state(
     s = as_signals(signals)
     v = np.asarray(s.v, dtype=float)
     v_other = s.v_other if state.other_v_from is not None else None
-    lead = _FromLevel(model, v, state.cycle_samples, v_other)
+    lead = _FromLevel(model, v, state.cycle_samples, v_other, state_own_levels(state))
     n = len(model.parameters)
+    levels = state_levels(state, lead.levels, lead.n_own)
     held = [
         replace(p, value=float(np.clip(u, p.lower, p.upper)), fixed=True)
-        for p, u in zip(lead.parameters[n:], state_levels(state, lead.levels), strict=True)
+        for p, u in zip(lead.parameters[n:], levels, strict=True)
     ]
     lead.parameters = (*lead.parameters[:n], *held)
     x0 = np.array([p.value for p in lead.parameters], dtype=float)
@@ -840,9 +916,9 @@ class _Search:
     pidx : list of int
         Free profiled parameters (v_f).
     uidx : int or None
-        Index of the initial-state level ``v_from`` (profiled; ``uidx - 1`` and
-        ``uidx - 2`` are the earlier turning points ``v_turn`` and ``v_turn2``), None
-        when it is not fitted.
+        Index of the initial-state level ``v_from`` (profiled; ``uidx - 1``, ``uidx - 2``
+        and ``uidx - 3`` are the earlier turning points ``v_turn``, ``v_turn2`` and
+        ``v_turn3``, as many as :func:`own_levels`), None when it is not fitted.
     lsq_free : ndarray of int
         Free parameters moved by LM / trf (free, neither profiled nor the level).
     method : str
@@ -911,6 +987,8 @@ class _Search:
             elif step in ("wide", "fine"):
                 full = _refine_profiled(c, full, self.pidx, self.v, lo, hi, wide=step == "wide")
                 for i in reversed(self.level_idx):  # v_from, v_turn(2), the other motor's
+                    if i == self.uidx - 3 and self.counter.model.n_own > 3:
+                        continue  # v_turn3: LM's, the sweeps' and the staircases' only
                     if step == "wide" or i > self.uidx - self.counter.model.n_own:  # other's: wide
                         full = _refine_level(c, full, i, lo, hi, wide=step == "wide")
             elif step == "reopt" and self.lsq_free.size and self.pidx:
@@ -928,7 +1006,7 @@ class _Search:
 
     @property
     def level_idx(self) -> tuple[int, ...]:
-        """Indices of the initial-state levels (the other motor's two, v_turn2, v_turn, v_from;
+        """Indices of the initial-state levels (the other motor's, (v_turn3,) v_turn2, v_turn, v_from;
         empty when the start state is not fitted)."""
         if self.uidx is None:
             return ()
@@ -1172,6 +1250,10 @@ class _Found:
     screened: list
     reached: list
     hops: int
+    cap: int | None = None  # the later polishes' LM limit
+    #: this motor's lowest three-level staircases (:func:`_best_staircases`), which a
+    #: search with a fourth level extends one turning point back (:func:`_one_level_back`)
+    heads: list = field(default_factory=list)
 
     def best(self):
         """(cost, end, result, notes) of the lowest polished end (of equal costs, to
@@ -1297,6 +1379,7 @@ def _global_search(search: _Search, starts, max_nfev, steps, hops: int, spent=0.
         )
     ):
         _levels_researched(search, found, cap)
+    found.cap = cap
     best = found.best()
     if cap is not None and cap != max_nfev and best[2] is not None and best[2].status == 0:
         # the best end came from a polish cut at the later ones' limit: run it out
@@ -1414,7 +1497,7 @@ def _levels_researched(search: _Search, found: _Found, cap) -> None:
         if cost < STATE_POLISH_RATIO * cost0 and not any(np.array_equal(x, t) for t in tried):
             tried.append(x)
             found.polished.append(_polished_end(search, x, cap))
-    for x in _staircases(search, x0, cost0):
+    for x in _staircases(search, x0, cost0, heads=found.heads):
         if not any(np.array_equal(x, t) for t in tried):
             tried.append(x)
             found.polished.append(_polished_end(search, x, cap))
@@ -1439,7 +1522,9 @@ STAIRCASE_NFEV = 8
 STAIRCASE_BEST = 3
 
 
-def _staircases(search: _Search, x0: np.ndarray, cost0: float) -> list[np.ndarray]:
+def _staircases(
+    search: _Search, x0: np.ndarray, cost0: float, motors: int | None = None, heads=None
+) -> list[np.ndarray]:
     """Start states to polish found over whole staircases (up to :data:`STAIRCASE_BEST`;
     ``x0``: the best end, ``cost0`` its cost): the lowest of the grid's staircases with
     the model's parameters held at ``x0``, then the lowest ends of short LM runs
@@ -1465,8 +1550,8 @@ def _staircases(search: _Search, x0: np.ndarray, cost0: float) -> list[np.ndarra
     hc = _Counter(model, head, c.theta[:m], c.used[:m], c.loss, c.f_scale)
     x = np.asarray(x0, dtype=float)
     points = []
-    for i, (turns, last) in enumerate(_motors_levels(search)):
-        found = _best_staircases(search, hc, x, [*turns, last], own=i == 0)
+    for i, (turns, last) in enumerate(_motors_levels(search)[:motors]):
+        found = _best_staircases(search, hc, x, [*turns, last], i == 0, heads if i == 0 else None)
         points += found
         if found:
             x = found[0]
@@ -1483,7 +1568,9 @@ def _staircases(search: _Search, x0: np.ndarray, cost0: float) -> list[np.ndarra
     return out
 
 
-def _best_staircases(search: _Search, hc: _Counter, x: np.ndarray, idx: list[int], own: bool):
+def _best_staircases(
+    search: _Search, hc: _Counter, x: np.ndarray, idx: list[int], own: bool, heads=None
+):
     """Up to :data:`STAIRCASE_SCREENED` distinct staircases of lowest cost on ``hc``'s
     samples, lowest first: ``x`` with the levels ``idx`` (one motor's, earliest first)
     set to a pre-history from rest that reverses at each level on its way to the
@@ -1492,7 +1579,12 @@ def _best_staircases(search: _Search, hc: _Counter, x: np.ndarray, idx: list[int
     The earlier levels take :data:`STAIRCASE_GRID` values over their bounds, the motor's
     lowest and highest input and the rest (a level at the rest drops a turning point);
     the last (the innermost reversal, to which the cost is most sensitive) the wide
-    profile's grid (:data:`INITIAL_STATE_GRID` and :func:`_near_first`). Pre-histories
+    profile's grid (:data:`INITIAL_STATE_GRID` and :func:`_near_first`). With four levels
+    the grid is the three latest's, then each of its :data:`STAIRCASE_HEADS` lowest
+    staircases one turning point back (the earliest level over the coarse values; the
+    whole product would be 16x the three-level grid's evaluations); given ``heads`` (a
+    three-level search's lowest, which it fills in when given an empty list), only those
+    one turning point back. Pre-histories
     that leave the same state (:func:`_wiped`) are scored once; a staircase is kept
     only when its cost differs from every kept one's (an equal cost: the same state, a
     turn the model's sides wiped out) and it lies at least a grid step from each in some
@@ -1518,24 +1610,20 @@ def _best_staircases(search: _Search, hc: _Counter, x: np.ndarray, idx: list[int
     fine = np.unique(np.concatenate([
         np.linspace(lo, hi, INITIAL_STATE_GRID), _near_first(hc.model, s, idx[-1], lo, hi),
         coarse]))  # fmt: skip
-    scored, seen = [], set()
-    for combo in itertools.product(*[coarse] * (len(idx) - 1), fine):
-        path = list(combo)
-        while path and path[0] == ORIGIN:
-            path.pop(0)  # fewer turning points: the rest held longer
-        turns = [ORIGIN, *path, v0]
-        if any(
-            (b - a) * (c_ - b) >= 0 for a, b, c_ in zip(turns, turns[1:], turns[2:], strict=False)
-        ):
-            continue  # not a reversal at every level (from the rest on)
-        key = _wiped(turns)
-        if key in seen:
-            continue
-        seen.add(key)
-        trial = np.asarray(x, dtype=float).copy()
-        trial[idx] = [ORIGIN] * (len(idx) - len(path)) + path
-        scored.append((hc.cost(trial), trial))
-    scored.sort(key=lambda e: e[0])
+    seen: set = set()
+    if len(idx) <= 3:
+        scored = _grid_scored(hc, x, idx, itertools.product(*[coarse] * (len(idx) - 1), fine),
+                              v0, seen)  # fmt: skip
+        if heads is not None and len(idx) == 3:  # for a search with a fourth level
+            heads[:] = [t[idx].copy() for _, t in scored[:STAIRCASE_HEADS]]
+    elif heads:  # a three-level search's lowest staircases one turning point back
+        scored = _grid_scored(hc, x, idx, ((a, *h) for h in heads for a in coarse), v0, seen)
+    else:  # the three latest on the grid, then the lowest of them one turning point back
+        scored = _grid_scored(hc, x, idx, ((ORIGIN, *c_) for c_ in itertools.product(
+            *[coarse] * (len(idx) - 2), fine)), v0, seen)  # fmt: skip
+        found = [t[idx[1:]] for _, t in scored[:STAIRCASE_HEADS]]
+        scored += _grid_scored(hc, x, idx, ((a, *h) for h in found for a in coarse), v0, seen)
+        scored.sort(key=lambda e: e[0])
     # the lowest of distinct staircases: each at least a grid step from those taken in
     # some level (the cost is sharp in the levels: near copies of one staircase would
     # fill the list)
@@ -1552,6 +1640,37 @@ def _best_staircases(search: _Search, hc: _Counter, x: np.ndarray, idx: list[int
     return refined + taken  # the refined ones and, each as found, every one kept
 
 
+#: Staircases of a three-level grid extended one turning point back, for four levels
+#: (:func:`_best_staircases`).
+STAIRCASE_HEADS = 48
+
+
+def _grid_scored(hc: _Counter, x: np.ndarray, idx: list[int], combos, v0: float, seen: set):
+    """[(cost on ``hc``'s samples, point)] lowest first: ``x`` with the levels ``idx``
+    at every staircase of ``combos`` (earliest first; leading :data:`ORIGIN` values drop
+    turning points) that reverses at every level from the rest to ``v0``, one per state
+    left (:func:`_wiped`; ``seen`` the states already scored, updated)."""
+    scored = []
+    for combo in combos:
+        path = list(combo)
+        while path and path[0] == ORIGIN:
+            path.pop(0)  # fewer turning points: the rest held longer
+        turns = [ORIGIN, *path, v0]
+        if any(
+            (b - a) * (c_ - b) >= 0 for a, b, c_ in zip(turns, turns[1:], turns[2:], strict=False)
+        ):
+            continue  # not a reversal at every level (from the rest on)
+        key = _wiped(turns)
+        if key in seen:
+            continue
+        seen.add(key)
+        trial = np.asarray(x, dtype=float).copy()
+        trial[idx] = [ORIGIN] * (len(idx) - len(path)) + path
+        scored.append((hc.cost(trial), trial))
+    scored.sort(key=lambda e: e[0])
+    return scored
+
+
 #: Staircases of the grid refined together (:func:`_refined_staircase`), and its rounds.
 STAIRCASE_REFINED = 4
 STAIRCASE_ROUNDS = 3
@@ -1562,13 +1681,15 @@ def _refined_staircase(search, hc: _Counter, x: np.ndarray, idx: list[int], gap:
     ``hc``'s samples: each level at -1/2, -1/4, 0, 1/4, 1/2 of ``gap`` from where it is,
     the step halved each round that finds nothing lower (:data:`STAIRCASE_ROUNDS`
     rounds). The grid's staircases lie up to half a step from a sharp minimum; the
-    levels of a staircase interact, so they move together."""
+    levels of a staircase interact, so they move together: the three latest on the
+    whole grid, an earlier one alone (:func:`_staircase_moves`)."""
     lo, hi = search.lower[idx], search.upper[idx]
     best = (hc.cost(x), np.asarray(x, dtype=float))
     h = gap / 2
+    moves = _staircase_moves(len(idx))
     for _ in range(STAIRCASE_ROUNDS):
         centre = best[1]
-        for d in itertools.product((-1.0, -0.5, 0.0, 0.5, 1.0), repeat=len(idx)):
+        for d in moves:
             if any(d):
                 trial = centre.copy()
                 trial[idx] = np.clip(centre[idx] + h * np.asarray(d), lo, hi)
@@ -1578,6 +1699,19 @@ def _refined_staircase(search, hc: _Counter, x: np.ndarray, idx: list[int], gap:
         if best[1] is centre:
             h /= 2
     return best[1]
+
+
+def _staircase_moves(k: int) -> list[tuple[float, ...]]:
+    """Moves (in half-steps of :func:`_refined_staircase`'s grid, earliest level first)
+    of ``k`` levels: every combination of -1, -1/2, 0, 1/2, 1 of the three latest (the
+    turning points the cost is sharpest in), each earlier one alone (a fourth level on
+    the whole grid would take 625 evaluations a round instead of 125)."""
+    steps = (-1.0, -0.5, 0.0, 0.5, 1.0)
+    late = min(k, 3)
+    moves = [(0.0,) * (k - late) + d for d in itertools.product(steps, repeat=late)]
+    for i in range(k - late):
+        moves += [tuple(u if j == i else 0.0 for j in range(k)) for u in steps if u]
+    return moves
 
 
 def _wiped(turns: list[float]) -> tuple[float, ...]:
@@ -1998,7 +2132,7 @@ def _without_level(
     (v_turn2, v_turn, v_from, the other motor's) and the replayed ``cycle`` leave the parameters
     for :attr:`FitResult.initial_state`."""
     own = [float(x) for x in full[-n_own:]]
-    ut2, ut, u = own[0], own[-2], own[-1]
+    ut3, ut2, ut, u = own[0], own[max(-3, -n_own)], own[-2], own[-1]
     p = len(model.parameters)
     names = tuple(pp.name for pp in model.parameters)
     st = _FromLevel(model, v, cycle, v_other, n_own)
@@ -2024,6 +2158,7 @@ def _without_level(
         None if ut == u else ut,
         **other,
         v_turn2=None if ut2 == ut else ut2,
+        v_turn3=None if ut3 == ut2 else ut3,
     )
     return replace(
         result,

@@ -89,6 +89,11 @@ class InitialState:
         end at the turning points the other motor came from).
     v0_other : float or None
         The other motor's first input value (with its levels).
+    v_turn3 : float or None
+        A turning point before ``v_turn2`` (relaxed there, ramping to ``v_turn2``; None:
+        as without it): four levels, a staircase of the last four reversals, for a
+        short recording that starts after loops of shrinking amplitude
+        (:func:`~i2ris_calib.fitting.fit.own_levels`).
     other_v_turn2 : float or None
         A turning point of the other motor before ``other_v_turn`` (relaxed there;
         None: as without it). Each side of the other input is a GPI of its own that
@@ -108,10 +113,13 @@ class InitialState:
     v0_other: float | None = None
     v_turn2: float | None = None
     other_v_turn2: float | None = None
+    v_turn3: float | None = None
 
     def as_dict(self) -> dict:
-        """JSON-ready form."""
-        return {
+        """JSON-ready form (``v_turn3`` only when set: a state of three own levels
+        reads as it did)."""
+        extra = {} if self.v_turn3 is None else {"v_turn3": self.v_turn3}
+        return extra | {
             "v_turn2": self.v_turn2,
             "other_v_turn2": self.other_v_turn2,
             "other_v_turn": self.other_v_turn,
@@ -130,7 +138,7 @@ class InitialState:
     ) -> InitialState:
         """This state for the input ``v * factor`` (a fit in a rescaled input unit
         converted back, :func:`~i2ris_calib.fitting.pipeline.input_scale`): every level
-        (``v_from``, ``v_turn``, ``v_turn2``, ``v0`` and the other motor's) multiplied by
+        (``v_from``, ``v_turn``, ``v_turn2``, ``v_turn3``, ``v0`` and the other motor's) multiplied by
         ``factor``, :attr:`text` made anew from the fields (:func:`state_text`).
 
         ``v0``, ``v0_other``: the first inputs in the new unit, when known, in place of
@@ -149,6 +157,7 @@ class InitialState:
             v0=float(self.v0) * f if v0 is None else float(v0),
             v_turn=times(self.v_turn),
             v_turn2=times(self.v_turn2),
+            v_turn3=times(self.v_turn3),
             other_v_turn=times(self.other_v_turn),
             other_v_from=times(self.other_v_from),
             other_v_turn2=times(self.other_v_turn2),
@@ -164,8 +173,10 @@ def state_text(st: InitialState) -> str:
     u = st.v_from
     ut = u if st.v_turn is None else st.v_turn
     ut2 = ut if st.v_turn2 is None else st.v_turn2
+    ut3 = ut2 if st.v_turn3 is None else st.v_turn3
     branch = f"a falling branch that turned at {u:.6g}" if u > st.v0 else "the loading branch"
-    path = [x for i, x in enumerate((ut2, ut, u)) if i == 0 or x != (ut2, ut, u)[i - 1]]
+    lv = (ut3, ut2, ut, u)
+    path = [x for i, x in enumerate(lv) if i == 0 or x != lv[i - 1]]
     via = "".join(f" via {x:.6g}" for x in path[1:])
     if st.other_v_from is not None:
         o_from = st.other_v_from
@@ -186,7 +197,7 @@ def state_text(st: InitialState) -> str:
     )
     return (
         f"the recording starts mid-range (input {st.v0:.6g}, not at rest): initial state "
-        f"fitted as {branch} (pre-history from {ut2:.6g}{via}{replay}, {st.n_samples} samples)"
+        f"fitted as {branch} (pre-history from {ut3:.6g}{via}{replay}, {st.n_samples} samples)"
     )
 
 
@@ -389,6 +400,7 @@ def prehistory_signals(
     other_levels: tuple[float, ...] | None = None,
     other_step: float | None = None,
     v_turn2: float | None = None,
+    v_turn3: float | None = None,
 ) -> tuple[Signals, int]:
     """(``signals`` with the synthetic pre-history of :class:`InitialState` prepended,
     its length): the input ramps from ``v_from`` to ``v[0]`` in steps of ``step``
@@ -405,13 +417,13 @@ def prehistory_signals(
     steps of
     ``other_step``; without them it holds its first value (relaxed there).
     ``v_turn2``: a turning point before ``v_turn`` (relaxed there, ramping to
-    ``v_turn``, or to ``v_from`` when ``v_turn`` is None)."""
+    ``v_turn``, or to ``v_from`` when ``v_turn`` is None); ``v_turn3`` one before it."""
     v0 = np.asarray(signals.v, dtype=float)
     step = prehistory_step(v0) if step is None else step
     cycle = min(int(cycle), v0.size)
     signals = _with_cycle(signals, cycle)
     v = np.asarray(signals.v, dtype=float)
-    levels = tuple(float(u) for u in (v_turn2, v_turn, v_from) if u is not None)
+    levels = tuple(float(u) for u in (v_turn3, v_turn2, v_turn, v_from) if u is not None)
     vv, n_ramp = _ramped(v, levels, step)
     sig, n_pre = _ramp_padded(signals, vv, n_ramp)
     if other_levels is not None and signals.v_other is not None:
@@ -496,6 +508,7 @@ class _FromLevel:
     protocol, plus the inner model's exact Jacobian and flag-point families when it has
     them."""
 
+    TURN3 = "initial_state.v_turn3"
     TURN2 = "initial_state.v_turn2"
     TURN = "initial_state.v_turn"
     PARAM = "initial_state.v_from"
@@ -505,7 +518,7 @@ class _FromLevel:
 
     def __init__(self, model: Model, v: np.ndarray, cycle: int = 0, v_other=None, n_own=3):
         self.inner = model
-        #: Own levels at the end of the vector: (v_turn2,) v_turn, v_from.
+        #: Own levels at the end of the vector: ((v_turn3,) v_turn2,) v_turn, v_from.
         self.n_own = int(n_own)
         self.cycle = int(cycle)
         self.name = model.name
@@ -525,7 +538,7 @@ class _FromLevel:
                               doc="an earlier turning point of the other motor's input"),
                     Parameter(self.OTHER_FROM, value=float(vo[0]), lower=olo, upper=ohi, unit="input",
                               doc="level the other motor's input came from"),
-                )[3 - self.n_own :]  # as many as this motor's  # fmt: skip
+                )[max(3 - self.n_own, 0) :]  # as many as this motor's, at most three  # fmt: skip
                 self.other_step = prehistory_step(vo)
         #: Number of level parameters at the end of the vector: (the other motor's
         #: as many as this one's,) then (v_turn2,) v_turn, v_from.
@@ -534,8 +547,10 @@ class _FromLevel:
         self.parameters = (
             *model.parameters,
             *other,
-            *[Parameter(self.TURN2, value=float(v[0]), lower=lo, upper=hi, unit="input",
-                        doc="a turning point of the input before v_turn")][: self.n_own - 2],
+            *[Parameter(self.TURN3, value=float(v[0]), lower=lo, upper=hi, unit="input",
+                        doc="a turning point of the input before v_turn2"),
+              Parameter(self.TURN2, value=float(v[0]), lower=lo, upper=hi, unit="input",
+                        doc="a turning point of the input before v_turn")][4 - self.n_own :],
             Parameter(self.TURN, value=float(v[0]), lower=lo, upper=hi, unit="input",
                       doc="an earlier turning point of the input before the recording"),
             Parameter(self.PARAM, value=float(v[0]), lower=lo, upper=hi, unit="input",
@@ -553,14 +568,15 @@ class _FromLevel:
         prepended, its length)."""
         lv = tuple(float(x) for x in levels)
         own = lv[-self.n_own :]
-        ut2, ut, u = own[0], own[-2], own[-1]
+        ut3, ut2, ut, u = own[0], own[-3] if self.n_own > 2 else own[0], own[-2], own[-1]
         other = lv[: self.n_other] if self.n_other else None
         key = (id(signals.v), *lv)
         hit = self._cache.get(key)
         if hit is not None and hit[0] is signals.v:  # the same array, not a reused id
             return hit[1]
+        turn3 = ut3 if self.n_own > 3 else None
         out = prehistory_signals(
-            signals, u, self.step, self.cycle, ut, other, self.other_step, v_turn2=ut2
+            signals, u, self.step, self.cycle, ut, other, self.other_step, ut2, turn3
         )
         if len(self._cache) > 4:
             self._cache.pop(next(iter(self._cache)))
@@ -675,19 +691,28 @@ class _FromLevel:
 def state_levels(st: InitialState, k: int, n_own: int = 3) -> list[float]:
     """The ``k`` level values of :class:`_FromLevel` (of ``n_own`` own levels and
     ``k - n_own`` of the other motor's) for the start state ``st`` ((the other motor's
-    (other_v_turn2,) other_v_turn, other_v_from,) (v_turn2,) v_turn, v_from)."""
-    own = _staircase(st.v_turn2, st.v_turn, st.v_from)[-n_own:]
+    (other_v_turn2,) other_v_turn, other_v_from,) ((v_turn3,) v_turn2,) v_turn, v_from)."""
+    own = _staircase(st.v_turn3, st.v_turn2, st.v_turn, st.v_from)[-n_own:]
     if k == n_own:
         return own
     o_from = st.v0_other if st.other_v_from is None else st.other_v_from
     other = _staircase(st.other_v_turn2, st.other_v_turn, o_from)
-    return [*other[3 - (k - n_own) :], *own]
+    return [*other[len(other) - (k - n_own) :], *own]
 
 
-def _staircase(turn2: float | None, turn: float | None, last: float) -> list[float]:
-    """[turn2, turn, last] of a pre-history, a missing turning point equal to the next."""
-    turn = last if turn is None else turn
-    return [turn if turn2 is None else turn2, turn, last]
+def state_own_levels(st: InitialState) -> int:
+    """Own levels of the :class:`_FromLevel` that runs the start state ``st``: four
+    when it has ``v_turn3``, else three (fewer turning points are equal levels)."""
+    return 4 if st.v_turn3 is not None else 3
+
+
+def _staircase(*levels: float | None) -> list[float]:
+    """The levels (earliest first, the last set) of a pre-history, a missing turning
+    point equal to the next."""
+    out = [float(levels[-1])]
+    for u in reversed(levels[:-1]):
+        out.insert(0, out[0] if u is None else float(u))
+    return out
 
 
 def innermost(model: Model) -> Model:

@@ -20,7 +20,7 @@ from i2ris_calib._validate import describe
 from i2ris_calib.errors import CalibError
 from i2ris_calib.fitting import present, results
 from i2ris_calib.fitting.metrics import Metrics
-from i2ris_calib.fitting.prehistory import InitialState, _FromLevel, state_levels
+from i2ris_calib.fitting.prehistory import InitialState, _FromLevel, state_levels, state_own_levels
 from i2ris_calib.fitting.results import ParamTable
 from i2ris_calib.hysteresis.models import as_signals
 from i2ris_calib.model import Model, Signals
@@ -189,8 +189,9 @@ def output_after_state(
     if state is None:
         return model.evaluate(s, x)
     lead = _FromLevel(model, np.asarray(s.v, dtype=float), state.cycle_samples,
-                      s.v_other if state.other_v_from is not None else None)  # fmt: skip
-    return lead.evaluate(s, np.append(x, state_levels(state, lead.levels)))
+                      s.v_other if state.other_v_from is not None else None,
+                      state_own_levels(state))  # fmt: skip
+    return lead.evaluate(s, np.append(x, state_levels(state, lead.levels, lead.n_own)))
 
 
 @dataclass(frozen=True)

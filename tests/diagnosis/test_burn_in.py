@@ -119,6 +119,9 @@ def test_mid_loop_start_is_not_diagnosed_as_an_effect():
     assert diag.baseline.holdout_rmse_deg < 1.2 * sd
 
 
+# ~9 s: slow since the default run neared its 5-minute budget (diagnose after a fitted
+# mid-loop start state stays on it: the global-refit test below)
+@pytest.mark.slow
 def test_diagnose_without_the_start_state_leaves_a_burn_in_out():
     data, sd = _mid_loop_bouc_wen()
     start = fit_dataset("bouc_wen", data).model

@@ -56,9 +56,11 @@ def _default(truth, seed=0, noise=0.05):
 @pytest.mark.parametrize(
     ("truth", "kind"),
     [
-        (_bouc_wen, "bouc_wen"),
-        # ~17 s; the signed physical kinds on the default run: bouc_wen here, maxwell_slip
-        # in test_one_path
+        # ~17 s each: slow since the default run neared its 5-minute budget (on it: the
+        # default fit through zero picking its physical kind at the noise,
+        # tests/fitting/test_two_tendon_fit.py; bouc_wen and maxwell_slip fitted by the API
+        # and the CLI alike, tests/fitting/test_one_path.py)
+        pytest.param(_bouc_wen, "bouc_wen", marks=pytest.mark.slow),
         pytest.param(_maxwell_slip, "maxwell_slip", marks=pytest.mark.slow),
     ],
 )
@@ -79,7 +81,7 @@ def test_one_loop_through_zero_gets_its_physical_kind_at_the_noise(truth, kind):
     assert f"picked after fitting: {kind}" in choice.why
 
 
-@pytest.mark.slow  # ~8 s; bouc_wen on the default run: the one-loop-through-zero test
+@pytest.mark.slow  # ~8 s; bouc_wen on the default run: test_one_path, test_optimum (CASES)
 def test_bouc_wen_fitted_in_volts_recovers_the_classic_parameters():
     """The fit divides a volt input by 0.01 (``input_scale``) and converts back:
     ``k`` (1/count) as a slope; the classic values are recovered."""

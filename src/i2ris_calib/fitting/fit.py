@@ -1579,12 +1579,11 @@ def _best_staircases(
     The earlier levels take :data:`STAIRCASE_GRID` values over their bounds, the motor's
     lowest and highest input and the rest (a level at the rest drops a turning point);
     the last (the innermost reversal, to which the cost is most sensitive) the wide
-    profile's grid (:data:`INITIAL_STATE_GRID` and :func:`_near_first`). With four levels
-    the grid is the three latest's, then each of its :data:`STAIRCASE_HEADS` lowest
-    staircases one turning point back (the earliest level over the coarse values; the
-    whole product would be 16x the three-level grid's evaluations); given ``heads`` (a
-    three-level search's lowest, which it fills in when given an empty list), only those
-    one turning point back. Pre-histories
+    profile's grid (:data:`INITIAL_STATE_GRID` and :func:`_near_first`). ``heads``: a
+    list that a three-level grid fills with its :data:`STAIRCASE_HEADS` lowest
+    staircases and that a four-level one extends one turning point back, the earliest
+    level over the coarse values (the whole product would be 16x the three-level grid's
+    evaluations; the three-turn staircases are the three-level search's). Pre-histories
     that leave the same state (:func:`_wiped`) are scored once; a staircase is kept
     only when its cost differs from every kept one's (an equal cost: the same state, a
     turn the model's sides wiped out) and it lies at least a grid step from each in some
@@ -1616,14 +1615,9 @@ def _best_staircases(
                               v0, seen)  # fmt: skip
         if heads is not None and len(idx) == 3:  # for a search with a fourth level
             heads[:] = [t[idx].copy() for _, t in scored[:STAIRCASE_HEADS]]
-    elif heads:  # a three-level search's lowest staircases one turning point back
-        scored = _grid_scored(hc, x, idx, ((a, *h) for h in heads for a in coarse), v0, seen)
-    else:  # the three latest on the grid, then the lowest of them one turning point back
-        scored = _grid_scored(hc, x, idx, ((ORIGIN, *c_) for c_ in itertools.product(
-            *[coarse] * (len(idx) - 2), fine)), v0, seen)  # fmt: skip
-        found = [t[idx[1:]] for _, t in scored[:STAIRCASE_HEADS]]
-        scored += _grid_scored(hc, x, idx, ((a, *h) for h in found for a in coarse), v0, seen)
-        scored.sort(key=lambda e: e[0])
+    else:  # a three-level search's lowest staircases one turning point back
+        earlier = coarse[coarse != ORIGIN]  # at the rest: a three-turn staircase again
+        scored = _grid_scored(hc, x, idx, ((a, *h) for h in heads or () for a in earlier), v0, seen)
     # the lowest of distinct staircases: each at least a grid step from those taken in
     # some level (the cost is sharp in the levels: near copies of one staircase would
     # fill the list)
